@@ -1,0 +1,307 @@
+"""From a validated case to a mesh and to the algebraic contact problem of each method.
+
+Refusals of ill-posed cases that need the mesh to be seen (a contact part facing away
+from the obstacle, supports that leave a rigid motion free, a boundary name a mesh file
+lacks, loads that are not finite) are raised here as :class:`CaseError` naming the key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from contactfem.assembly import (
+    Elasticity,
+    body_force_vector,
+    boundary_mass,
+    edge_geometry,
+    stiffness_matrix,
+    traction_vector,
+)
+from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.errors import CaseError
+from contactfem.expressions import Expression
+from contactfem.kernel import ContactSystem
+from contactfem.mesh import Mesh, check_mesh, read_gmsh, refine_uniform, structured_rectangle, triangulate_domain
+from contactfem.methods import ContactBoundaryMasses, ContactMethod
+
+
+def build_mesh(case: Case, refine: int | None = None) -> Mesh:
+    """Mesh the case's geometry, refine it ``refine`` times (default: the case's), and check it."""
+    geometry = case.geometry
+    settings = case.mesh
+    if isinstance(geometry, RectangleGeometry):
+        mesh = structured_rectangle(
+            geometry.lower, geometry.upper, *settings.divisions,
+            diagonal=settings.diagonal, side_names=geometry.side_names,
+        )
+    elif isinstance(geometry, PolygonGeometry):
+        mesh = triangulate_domain(
+            geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle
+        )
+    else:
+        assert isinstance(geometry, MeshFileGeometry)
+        mesh = read_gmsh(geometry.path)
+        missing = [p.name for p in case.parts if p.name not in mesh.part_names]
+        if missing:
+            raise CaseError(
+                f"{case.source.name}: boundary.{missing[0]}: the mesh file {geometry.path.name} has no "
+                f"physical line named {missing[0]!r}; it has {', '.join(mesh.part_names)}"
+            )
+    times = settings.refine if refine is None else refine
+    if times:
+        mesh = refine_uniform(mesh, times)
+    check_mesh(mesh)
+    return mesh
+
+
+@dataclass(frozen=True, eq=False)
+class ContactBoundary:
+    """The contact nodes and what the methods need of them.
+
+    ``nodes`` (m,) sorted by ``abscissa`` (coordinate along the obstacle's tangent),
+    ``edges`` (k, 2) the ΓC edges, ``gap`` (m,), ``masses`` the two boundary masses.
+    """
+
+    nodes: np.ndarray
+    edges: np.ndarray
+    gap: np.ndarray
+    abscissa: np.ndarray
+    normal: np.ndarray
+    tangent: np.ndarray
+    masses: ContactBoundaryMasses
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteProblem:
+    """The assembled linear elastic system with its supports and contact boundary.
+
+    ``stiffness`` (2n, 2n) and ``load`` (2n,) carry no boundary condition;
+    ``dirichlet_dofs`` (k,) sorted, with ``dirichlet_values`` (k,).
+    """
+
+    mesh: Mesh
+    law: Elasticity
+    stiffness: sp.csr_matrix
+    load: np.ndarray
+    dirichlet_dofs: np.ndarray
+    dirichlet_values: np.ndarray
+    contact: ContactBoundary
+
+    @property
+    def n_unknowns(self) -> int:
+        """Displacement unknowns once the supports are eliminated."""
+        return 2 * self.mesh.n_points - len(self.dirichlet_dofs)
+
+    def contact_system(self, method: ContactMethod) -> "ReducedSystem":
+        """The kernel's view: supports eliminated, contact nodes in (normal, tangent) unknowns."""
+        return ReducedSystem.build(self, method)
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedSystem:
+    """A :class:`ContactSystem` and the map back to mesh displacements."""
+
+    system: ContactSystem
+    free_dofs: np.ndarray
+    rotation: sp.csr_matrix
+    problem: DiscreteProblem
+
+    @classmethod
+    def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
+        n_dof = 2 * problem.mesh.n_points
+        free = np.ones(n_dof, dtype=bool)
+        free[problem.dirichlet_dofs] = False
+        free_dofs = np.flatnonzero(free)
+        position = np.full(n_dof, -1, dtype=np.int64)
+        position[free_dofs] = np.arange(len(free_dofs))
+
+        k = problem.stiffness
+        k_ff = k[free_dofs][:, free_dofs]
+        lifted = k[free_dofs][:, problem.dirichlet_dofs] @ problem.dirichlet_values
+        load = problem.load[free_dofs] - lifted
+
+        # At a contact node, (u_x, u_y) = u_n n + u_t t: its x slot becomes u_n, its y slot u_t.
+        contact = problem.contact
+        px = position[2 * contact.nodes]
+        py = position[2 * contact.nodes + 1]
+        n, t = contact.normal, contact.tangent
+        size = len(free_dofs)
+        plain = np.ones(size, dtype=bool)
+        plain[px] = False
+        plain[py] = False
+        plain_idx = np.flatnonzero(plain)
+        rows = np.concatenate([plain_idx, px, px, py, py])
+        cols = np.concatenate([plain_idx, px, py, px, py])
+        m = len(px)
+        vals = np.concatenate([np.ones(len(plain_idx)), np.full(m, n[0]), np.full(m, t[0]),
+                               np.full(m, n[1]), np.full(m, t[1])])
+        rotation = sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
+        stiffness = (rotation.T @ k_ff @ rotation).tocsr()
+        stiffness.sum_duplicates()
+        system = ContactSystem(
+            stiffness=stiffness,
+            load=rotation.T @ load,
+            normal_dofs=px,
+            gap=contact.gap,
+            multiplier_mass=method.multiplier_mass(contact.masses),
+        )
+        return cls(system=system, free_dofs=free_dofs, rotation=rotation, problem=problem)
+
+    def displacement(self, reduced: np.ndarray) -> np.ndarray:
+        """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
+        u = np.zeros(2 * self.problem.mesh.n_points)
+        u[self.free_dofs] = self.rotation @ reduced
+        u[self.problem.dirichlet_dofs] = self.problem.dirichlet_values
+        return u.reshape(-1, 2)
+
+
+def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:
+    """Assemble stiffness and loads, impose the supports and find the contact nodes."""
+    material = case.material
+    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
+    points = mesh.points
+    stiffness = stiffness_matrix(points, mesh.triangles, law)
+
+    load = np.zeros(2 * mesh.n_points)
+    if case.body_force is not None:
+        _check_finite(case, "body_force", case.body_force, _centroids(mesh))
+        load += body_force_vector(points, mesh.triangles, case.body_force)
+    for part in case.parts:
+        edges = mesh.edges_of(part.name)
+        if part.kind in ("traction", "pressure") and len(edges):
+            key = f"boundary.{part.name}.{part.kind}"
+            _check_finite(case, key, part.values, _edge_samples(points, edges))
+            if part.kind == "traction":
+                load += traction_vector(points, edges, traction=part.values)
+            else:
+                load += traction_vector(points, edges, pressure=part.values[0])
+
+    dirichlet_dofs, dirichlet_values = _supports(case, mesh)
+    contact = _contact_boundary(case, mesh, dirichlet_dofs)
+    return DiscreteProblem(
+        mesh=mesh, law=law, stiffness=stiffness, load=load,
+        dirichlet_dofs=dirichlet_dofs, dirichlet_values=dirichlet_values, contact=contact,
+    )
+
+
+def _supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Prescribed unknowns and their values; refuses conflicts and supports that allow rigid motion."""
+    values = np.full(2 * mesh.n_points, np.nan)
+    owner = np.full(2 * mesh.n_points, -1)
+    for index, part in enumerate(case.parts):
+        if not part.is_dirichlet:
+            continue
+        nodes = mesh.nodes_of(part.name)
+        components = part.values if part.kind == "displacement" else (None, None)
+        for component in range(2):
+            if part.kind == "displacement" and components[component] is None:
+                continue
+            if part.kind == "clamped":
+                prescribed = np.zeros(len(nodes))
+            else:
+                key = f"boundary.{part.name}.displacement[{component}]"
+                x, y = mesh.points[nodes].T
+                prescribed = np.broadcast_to(components[component](x, y), x.shape)
+                _refuse_non_finite(case, key, components[component], prescribed, mesh.points[nodes])
+            dofs = 2 * nodes + component
+            clash = (owner[dofs] >= 0) & ~np.isclose(values[dofs], prescribed, rtol=1e-9, atol=0)
+            if clash.any():
+                other = case.parts[owner[dofs][clash][0]].name
+                where = mesh.points[nodes[clash][0]]
+                raise CaseError(
+                    f"{case.source.name}: boundary.{part.name}: prescribes a displacement that "
+                    f"conflicts with boundary.{other} at the shared node ({where[0]:g}, {where[1]:g})"
+                )
+            values[dofs] = prescribed
+            owner[dofs] = index
+    dofs = np.flatnonzero(owner >= 0)
+    _refuse_rigid_motion(case, mesh, dofs)
+    return dofs, values[dofs]
+
+
+def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray) -> None:
+    """The supports must pin the three rigid motions: translations along x and y, rotation."""
+    nodes, components = dofs // 2, dofs % 2
+    p = mesh.points[nodes]
+    centre = p.mean(axis=0) if len(p) else np.zeros(2)
+    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc), restricted to the prescribed unknowns.
+    modes = np.zeros((len(dofs), 3))
+    modes[components == 0, 0] = 1.0
+    modes[components == 1, 1] = 1.0
+    modes[:, 2] = np.where(components == 0, -(p[:, 1] - centre[1]), p[:, 0] - centre[0])
+    scale = np.ptp(mesh.points, axis=0).max()
+    modes[:, 2] /= scale
+    singular = np.linalg.svd(modes, compute_uv=False) if len(dofs) else np.zeros(0)
+    rank = int((singular > 1e-8 * max(singular.max(initial=0.0), 1.0)).sum())
+    if rank < 3:
+        names = ", ".join(case.dirichlet_parts)
+        raise CaseError(
+            f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body "
+            "free, so the problem is ill-posed; prescribe both components on a part of positive length"
+        )
+
+
+def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray) -> ContactBoundary:
+    normal = np.asarray(case.obstacle.normal, dtype=float)
+    tangent = np.array([-normal[1], normal[0]])
+    edges = mesh.edges_of(list(case.contact_parts))
+    for name in case.contact_parts:
+        part_edges = mesh.edges_of(name)
+        if len(part_edges) == 0:
+            raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
+        _, outward = edge_geometry(mesh.points, part_edges)
+        facing = outward @ normal
+        if (facing <= 1e-9).any():
+            bad = part_edges[np.argmin(facing)]
+            a, b = mesh.points[bad[0]], mesh.points[bad[1]]
+            raise CaseError(
+                f"{case.source.name}: boundary.{name} = contact: the edge from ({a[0]:g}, {a[1]:g}) to "
+                f"({b[0]:g}, {b[1]:g}) faces away from the obstacle (outward normal · obstacle normal = "
+                f"{facing.min():.3g}); a contact part must face the obstacle"
+            )
+    on_support = np.zeros(mesh.n_points, dtype=bool)
+    on_support[dirichlet_dofs // 2] = True
+    gamma_nodes = np.unique(edges)
+    nodes = gamma_nodes[~on_support[gamma_nodes]]
+    abscissa = mesh.points[nodes] @ tangent
+    order = np.argsort(abscissa, kind="stable")
+    nodes, abscissa = nodes[order], abscissa[order]
+
+    full_mass = boundary_mass(mesh.points, edges, mesh.n_points)
+    lumped = np.asarray(full_mass.sum(axis=1)).ravel()[nodes]
+    consistent = full_mass[nodes][:, nodes].tocsr()
+    gap = (np.asarray(case.obstacle.point) - mesh.points[nodes]) @ normal
+    return ContactBoundary(
+        nodes=nodes, edges=edges, gap=gap, abscissa=abscissa, normal=normal, tangent=tangent,
+        masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent),
+    )
+
+
+def _centroids(mesh: Mesh) -> np.ndarray:
+    return mesh.points[mesh.triangles].mean(axis=1)
+
+
+def _edge_samples(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    a, b = points[edges[:, 0]], points[edges[:, 1]]
+    return np.concatenate([a, 0.5 * (a + b), b])
+
+
+def _check_finite(case: Case, key: str, fields: tuple[Expression | None, ...], where: np.ndarray) -> None:
+    for i, field in enumerate(fields):
+        if field is None:
+            continue
+        values = np.broadcast_to(field(where[:, 0], where[:, 1]), len(where))
+        _refuse_non_finite(case, f"{key}[{i}]" if len(fields) > 1 else key, field, values, where)
+
+
+def _refuse_non_finite(case: Case, key: str, field: Expression, values: np.ndarray, where: np.ndarray) -> None:
+    bad = ~np.isfinite(values)
+    if bad.any():
+        x, y = where[np.argmax(bad)]
+        raise CaseError(
+            f"{case.source.name}: {key} = {field.text!r}: not finite at ({x:g}, {y:g}); "
+            "expected finite values on the whole part"
+        )

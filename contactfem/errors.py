@@ -1,0 +1,24 @@
+"""The one error family of contactfem; only the command line turns these into messages and exit codes."""
+
+
+class ContactFemError(Exception):
+    """Base class of every error contactfem raises on purpose."""
+
+
+class CaseError(ContactFemError):
+    """The case file is unreadable, malformed or describes an ill-posed problem.
+
+    The message names the file, the key, the offending value and what was expected.
+    """
+
+
+class MeshError(ContactFemError):
+    """The mesh cannot be built, read or is unusable (degenerate, wrong boundary names)."""
+
+
+class SolverError(ContactFemError):
+    """The discrete problem cannot be solved (singular system, no convergence)."""
+
+
+class OutputError(ContactFemError):
+    """An output file cannot be written."""

@@ -1,0 +1,270 @@
+"""Safe evaluation of the numbers and x, y expressions that case files give for loads and displacements."""
+
+from __future__ import annotations
+
+import ast
+import math
+import warnings
+from dataclasses import dataclass, field
+from itertools import accumulate
+from typing import Any, Callable
+
+import numpy as np
+
+from contactfem.errors import ContactFemError
+
+__all__ = ["ExpressionError", "Expression", "compile_expression"]
+
+#: Refused before evaluation: longer text, more expression nodes, deeper nesting.
+MAX_LENGTH = 1000
+MAX_NODES = 500
+MAX_DEPTH = 50
+
+_Fn = Callable[[np.ndarray, np.ndarray], Any]
+
+_VARIABLES = ("x", "y")
+_CONSTANTS = {"pi": np.pi, "e": np.e}
+_ONE_ARG = ("sin cos tan arcsin arccos arctan sinh cosh tanh exp log log10 log2 sqrt abs sign floor ceil").split()
+_FUNCTIONS: dict[str, tuple[Callable[..., Any], int]] = {
+    **{name: (getattr(np, name), 1) for name in _ONE_ARG},
+    **{name: (getattr(np, name), 2) for name in ("arctan2", "hypot", "minimum", "maximum")},
+    "where": (np.where, 3),
+}
+_CANONICAL = ", ".join(_FUNCTIONS)
+_ALIASES = {"asin": "arcsin", "acos": "arccos", "atan": "arctan", "atan2": "arctan2", "min": "minimum", "max": "maximum"}
+_FUNCTIONS.update({alias: _FUNCTIONS[name] for alias, name in _ALIASES.items()})
+
+_BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply,
+           ast.Div: np.true_divide, ast.Pow: np.power, ast.Mod: np.mod}
+_UNARY = {ast.UAdd: np.positive, ast.USub: np.negative}
+_COMPARE = {ast.Lt: np.less, ast.LtE: np.less_equal, ast.Gt: np.greater,
+            ast.GtE: np.greater_equal, ast.Eq: np.equal, ast.NotEq: np.not_equal}
+_SYMBOLS = {ast.FloorDiv: "//", ast.MatMult: "@", ast.BitAnd: "&", ast.BitOr: "|", ast.BitXor: "^",
+            ast.LShift: "<<", ast.RShift: ">>", ast.Invert: "~", ast.Not: "not",
+            ast.In: "in", ast.NotIn: "not in", ast.Is: "is", ast.IsNot: "is not"}
+_REFUSED = {
+    ast.Attribute: "attribute access is not allowed", ast.Subscript: "subscripts (indexing) are not allowed",
+    ast.Slice: "slices are not allowed", ast.Lambda: "lambda is not allowed",
+    **dict.fromkeys((ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp), "comprehensions are not allowed"),
+    **dict.fromkeys((ast.JoinedStr, ast.FormattedValue), "f-strings are not allowed"),
+    ast.BoolOp: "'and'/'or' are not allowed; use where(cond, a, b)",
+    ast.IfExp: "if-expressions are not allowed; use where(cond, a, b)",
+    ast.NamedExpr: "':=' assignments are not allowed", ast.Starred: "starred arguments are not allowed",
+    ast.List: "lists are not allowed", ast.Tuple: "tuples are not allowed",
+    ast.Set: "sets are not allowed", ast.Dict: "dicts are not allowed",
+}
+
+
+class ExpressionError(ContactFemError):
+    """A number or expression from a case file is refused.
+
+    The message says, in one short line, what is wrong with the text; the
+    caller adds the file and the YAML key.
+    """
+
+
+@dataclass(frozen=True)
+class Expression:
+    """A checked expression in x and y, callable on numpy arrays.
+
+    Attributes
+    ----------
+    text : str
+        The normalised source text (whitespace runs collapsed to one space;
+        ``str(value)`` for numbers).
+    is_constant : bool
+        True if the expression uses neither x nor y.
+    variables : frozenset of str
+        The subset of ``{"x", "y"}`` the expression uses.
+    """
+
+    text: str
+    is_constant: bool
+    variables: frozenset[str]
+    _fn: _Fn = field(repr=False, compare=False)
+
+    def __call__(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Evaluate at the points (x, y).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Coordinates; must broadcast against each other.
+
+        Returns
+        -------
+        numpy.ndarray
+            float64 values of shape ``np.broadcast(x, y).shape`` (also for
+            constants). Computed under ``np.errstate(all="ignore")``, so
+            overflow, division by zero or domain errors give inf or nan: the
+            caller checks finiteness.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        shape = np.broadcast_shapes(x.shape, y.shape)
+        with np.errstate(all="ignore"):
+            value = np.asarray(self._fn(x, y), dtype=np.float64)
+        return np.array(np.broadcast_to(value, shape), dtype=np.float64)
+
+
+def compile_expression(value: int | float | str) -> Expression:
+    """Check a case-file value and turn it into an :class:`Expression`.
+
+    The text is parsed with :func:`ast.parse`, every node is checked against a
+    whitelist and the tree becomes nested closures over numpy ufuncs; the text
+    never reaches Python's own evaluation.
+
+    Parameters
+    ----------
+    value : int, float or str
+        A finite number, or an expression in x and y using numbers, ``pi``,
+        ``e``, ``+ - * / ** %``, unary ``+ -``, comparisons (1.0 if true, 0.0
+        if false) and the functions sin cos tan arcsin arccos arctan sinh cosh
+        tanh exp log log10 log2 sqrt abs sign floor ceil (one argument),
+        arctan2 hypot minimum maximum (two), where (three), plus the aliases
+        asin acos atan atan2 min max.
+
+    Returns
+    -------
+    Expression
+
+    Raises
+    ------
+    ExpressionError
+        For a boolean or other non-number non-string, a non-finite number, an
+        empty, invalid, too long (> 1000 characters), too large (> 500 nodes)
+        or too deeply nested (> 50 levels) text, or any construct outside the
+        whitelist.
+    """
+    if isinstance(value, (bool, np.bool_)):
+        raise ExpressionError("expected a number or an expression string, got a boolean")
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        fn = _constant(value)
+        return Expression(str(value), True, frozenset(), fn)
+    if not isinstance(value, str):
+        got = "None" if value is None else type(value).__name__
+        raise ExpressionError(f"expected a number or an expression string, got {got}")
+    text = " ".join(value.split())
+    if not text:
+        raise ExpressionError("empty expression")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expression is too long ({len(text)} characters, at most {MAX_LENGTH})")
+    brackets = accumulate((c in "([{") - (c in ")]}") for c in text)
+    if max(brackets) > MAX_DEPTH:
+        raise ExpressionError(f"expression is nested too deeply (more than {MAX_DEPTH} levels)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tree = ast.parse(text, mode="eval")
+    except SyntaxError as exc:
+        raise ExpressionError(f"not a valid expression: {exc.msg}") from None
+    except (RecursionError, ValueError, MemoryError, OverflowError) as exc:
+        raise ExpressionError(f"not a valid expression: {exc or type(exc).__name__}") from None
+    _check_size(tree.body)
+    variables: set[str] = set()
+    fn = _build(tree.body, variables)
+    return Expression(text, not variables, frozenset(variables), fn)
+
+
+def _check_size(root: ast.AST) -> None:
+    """Refuse trees with too many expression nodes or too deep nesting (iteratively)."""
+    count, stack = 0, [(root, 1)]
+    while stack:
+        node, depth = stack.pop()
+        count += isinstance(node, ast.expr)
+        if count > MAX_NODES:
+            raise ExpressionError(f"expression is too large (more than {MAX_NODES} terms and operations)")
+        if depth > MAX_DEPTH:
+            raise ExpressionError(f"expression is nested too deeply (more than {MAX_DEPTH} levels)")
+        stack.extend((child, depth + isinstance(child, ast.expr)) for child in ast.iter_child_nodes(node))
+
+
+def _constant(value: Any) -> _Fn:
+    """A closure returning a finite float64 constant; refuse any other literal."""
+    if isinstance(value, (bool, np.bool_)) or value is None:
+        raise ExpressionError(f"{value} is not allowed; use a number")
+    if isinstance(value, complex):
+        raise ExpressionError("complex numbers are not allowed")
+    if isinstance(value, (str, bytes)):
+        raise ExpressionError("string literals are not allowed")
+    if not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ExpressionError(f"constant {value!r} is not allowed")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if math.isnan(number):
+        raise ExpressionError("nan is not allowed; use a finite number")
+    if math.isinf(number):
+        raise ExpressionError("number is infinite or too large for float64")
+    constant = np.float64(number)
+    return lambda x, y: constant
+
+
+def _build(node: ast.AST, variables: set[str]) -> _Fn:
+    """Check one node against the whitelist and return its closure ``f(x, y)``."""
+    if isinstance(node, ast.Constant):
+        return _constant(node.value)
+    if isinstance(node, ast.Name):
+        name = node.id
+        if name in _VARIABLES:
+            variables.add(name)
+            return (lambda x, y: x) if name == "x" else (lambda x, y: y)
+        if name in _CONSTANTS:
+            return _constant(_CONSTANTS[name])
+        if name in _FUNCTIONS:
+            raise ExpressionError(f"'{name}' is a function; call it as {name}(...)")
+        raise ExpressionError(f"name {name!r} is not allowed; use x, y, pi, e")
+    if isinstance(node, ast.BinOp):
+        op = _operator(node.op, _BINARY)
+        left, right = _build(node.left, variables), _build(node.right, variables)
+        return lambda x, y: op(left(x, y), right(x, y))
+    if isinstance(node, ast.UnaryOp):
+        op = _operator(node.op, _UNARY)
+        operand = _build(node.operand, variables)
+        return lambda x, y: op(operand(x, y))
+    if isinstance(node, ast.Compare):
+        ops = [_operator(op, _COMPARE) for op in node.ops]
+        first = _build(node.left, variables)
+        rest = [_build(child, variables) for child in node.comparators]
+
+        def compare(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+            left, result = first(x, y), np.True_
+            for op, fn in zip(ops, rest):
+                right = fn(x, y)
+                result, left = np.logical_and(result, op(left, right)), right
+            return np.asarray(result, dtype=np.float64)
+
+        return compare
+    if isinstance(node, ast.Call):
+        return _call(node, variables)
+    raise ExpressionError(_REFUSED.get(type(node), f"{type(node).__name__} is not allowed"))
+
+
+def _operator(op: ast.AST, allowed: dict[type, Callable[..., Any]]) -> Callable[..., Any]:
+    """The numpy ufunc for an allowed operator."""
+    if type(op) not in allowed:
+        raise ExpressionError(f"operator '{_SYMBOLS.get(type(op), type(op).__name__)}' is not allowed")
+    return allowed[type(op)]
+
+
+def _call(node: ast.Call, variables: set[str]) -> _Fn:
+    """Check a call of a whitelisted function with the right number of positional arguments."""
+    if not isinstance(node.func, ast.Name):
+        _build(node.func, variables)  # raises for attributes, subscripts, ...
+        raise ExpressionError("only named functions can be called, e.g. sin(x)")
+    name = node.func.id
+    if name not in _FUNCTIONS:
+        if name in _VARIABLES or name in _CONSTANTS:
+            raise ExpressionError(f"'{name}' is not a function")
+        raise ExpressionError(f"function {name!r} is not allowed; use {_CANONICAL}")
+    if node.keywords:
+        raise ExpressionError(f"keyword arguments are not allowed (in {name}())")
+    if any(isinstance(arg, ast.Starred) for arg in node.args):
+        raise ExpressionError(f"starred arguments are not allowed (in {name}())")
+    function, arity = _FUNCTIONS[name]
+    if len(node.args) != arity:
+        plural = "s" if arity > 1 else ""
+        raise ExpressionError(f"{name}() takes {arity} argument{plural}, got {len(node.args)}")
+    args = [_build(arg, variables) for arg in node.args]
+    return lambda x, y: function(*[arg(x, y) for arg in args])

@@ -1,0 +1,250 @@
+"""Semismooth Newton (primal–dual active set) kernel for a linear elastic system with nodal unilateral constraints.
+
+The kernel sees arrays only. The discrete problem, in coordinates where each contact
+node's normal displacement is one unknown (``normal_dofs``), is
+
+    K u + P B μ = F,     B μ ≥ 0,   d − G ≤ 0,   (B μ)ᵀ (d − G) = 0   (row by row)
+
+with d = u[normal_dofs], P the injection of the contact rows into the unknowns, and B
+the multiplier mass of the method: the lumped D for the positive method, the consistent
+M for the standard one. Newton's method on C(Bμ, d) = Bμ − max(0, Bμ + c (d − G)) is the
+active set iteration: on A, d = G (a Dirichlet condition on one unknown); on I, (Bμ) = 0,
+so each step is one SPD solve of the size of the linear problem, after which Bμ on A is
+the reaction of the fixed normal unknowns and μ = B⁻¹(Bμ).
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from contactfem.linalg import factorize
+
+# Nodes whose active-set indicator lies within this fraction of the problem's force
+# scale of zero are degenerate (no force and no gap, to round-off): they keep their
+# current state, so that round-off cannot make the active set flicker.
+DEGENERACY_TOLERANCE = 1e-12
+
+
+class Status(enum.Enum):
+    CONVERGED = "converged"
+    MAX_ITERATIONS = "max_iterations"
+    CYCLING = "cycling"
+    INACCURATE = "inaccurate"
+
+
+@dataclass(frozen=True, eq=False)
+class ContactSystem:
+    """The algebraic contact problem handed to the kernel.
+
+    Attributes
+    ----------
+    stiffness : (n, n) sparse SPD
+        Stiffness with Dirichlet unknowns eliminated and contact nodes in normal/tangent
+        coordinates.
+    load : (n,)
+    normal_dofs : (m,) int
+        Index of the normal unknown of each contact node.
+    gap : (m,)
+        Initial gap G of each contact node (negative: the body starts inside the obstacle).
+    multiplier_mass : (m, m) sparse SPD
+        B: how the method's multiplier μ becomes nodal forces Bμ.
+    """
+
+    stiffness: sp.spmatrix
+    load: np.ndarray
+    normal_dofs: np.ndarray
+    gap: np.ndarray
+    multiplier_mass: sp.spmatrix
+
+
+@dataclass
+class Iteration:
+    active: int
+    added: int
+    removed: int
+    equilibrium_residual: float
+    complementarity_residual: float
+    seconds: float
+
+
+@dataclass(eq=False)
+class KernelResult:
+    """What the kernel returns; it never raises on non-convergence, the caller decides.
+
+    ``displacement`` (n,), ``multiplier`` μ (m,), ``nodal_force`` Bμ (m,), ``active`` (m,) bool.
+    """
+
+    status: Status
+    message: str
+    displacement: np.ndarray
+    multiplier: np.ndarray
+    nodal_force: np.ndarray
+    active: np.ndarray
+    c: float
+    history: list[Iteration] = field(default_factory=list)
+
+    @property
+    def iterations(self) -> int:
+        return len(self.history)
+
+
+def default_c(system: ContactSystem) -> float:
+    """c of the order of the normal nodal stiffness, so that c (d − G) is a force like Bμ.
+
+    Scaling K by any factor scales c with it, which keeps the iteration unit-free.
+    """
+    if len(system.normal_dofs) == 0:
+        return 1.0
+    return float(np.mean(system.stiffness.diagonal()[system.normal_dofs]))
+
+
+def solve_contact(
+    system: ContactSystem,
+    *,
+    c: float | None = None,
+    tolerance: float = 1e-10,
+    max_iterations: int = 50,
+    backend: str = "auto",
+    initial_active: np.ndarray | None = None,
+    on_iteration: Callable[[Iteration], None] | None = None,
+) -> KernelResult:
+    """Run the primal–dual active set iteration until the active set repeats.
+
+    Parameters
+    ----------
+    system : ContactSystem
+    c : float, optional
+        Weight of the gap against the force in the active set indicator; default
+        :func:`default_c`.
+    tolerance : float
+        Bound on the relative equilibrium and complementarity residuals at convergence.
+    max_iterations : int
+    backend : str
+        Sparse direct solver backend (see :mod:`contactfem.linalg`).
+    initial_active : (m,) bool, optional
+        Starting active set; default: the nodes that touch or overlap the obstacle (G ≤ 0).
+    on_iteration : callable, optional
+        Called with each :class:`Iteration` record (progress reporting).
+    """
+    stiffness = sp.csr_matrix(system.stiffness)
+    load = np.asarray(system.load, dtype=float)
+    normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
+    gap = np.asarray(system.gap, dtype=float)
+    mass = sp.csc_matrix(system.multiplier_mass)
+    m = len(normal_dofs)
+    c = default_c(system) if c is None else float(c)
+    mass_solver = _mass_solver(mass) if m else None
+
+    active = (gap <= 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
+    seen: dict[bytes, int] = {}
+    history: list[Iteration] = []
+    displacement = np.zeros(len(load))
+    multiplier = np.zeros(m)
+    nodal_force = np.zeros(m)
+    status, message = Status.MAX_ITERATIONS, f"no convergence in {max_iterations} iterations"
+
+    for iteration in range(1, max_iterations + 1):
+        started = time.perf_counter()
+        seen[np.packbits(active).tobytes()] = iteration
+        displacement, reaction = _solve_with_fixed_normals(
+            stiffness, load, normal_dofs[active], gap[active], backend
+        )
+        reaction_at_contact = np.zeros(m)
+        reaction_at_contact[active] = reaction
+        multiplier = mass_solver(reaction_at_contact) if m else multiplier
+        # The method's own complementarity rows: its multiplier times its mass.
+        nodal_force = mass @ multiplier if m else nodal_force
+        normal = displacement[normal_dofs]
+        indicator = nodal_force + c * (normal - gap)
+
+        force_scale = max(np.abs(load).max(initial=0.0), np.abs(nodal_force).max(initial=0.0),
+                          np.abs(stiffness @ displacement).max(initial=0.0), np.finfo(float).tiny)
+        threshold = DEGENERACY_TOLERANCE * max(force_scale, np.abs(indicator).max(initial=0.0))
+        new_active = (indicator > threshold) | (active & (indicator >= -threshold))
+
+        contact_load = np.zeros(len(load))
+        np.add.at(contact_load, normal_dofs, nodal_force)
+        equilibrium = np.abs(stiffness @ displacement + contact_load - load).max(initial=0.0) / force_scale
+        complementarity = (
+            np.abs(nodal_force - np.maximum(0.0, indicator)).max(initial=0.0) / force_scale
+        )
+        record = Iteration(
+            active=int(active.sum()),
+            added=int((new_active & ~active).sum()),
+            removed=int((active & ~new_active).sum()),
+            equilibrium_residual=float(equilibrium),
+            complementarity_residual=float(complementarity),
+            seconds=time.perf_counter() - started,
+        )
+        history.append(record)
+        if on_iteration is not None:
+            on_iteration(record)
+
+        if np.array_equal(new_active, active):
+            if equilibrium <= tolerance and complementarity <= tolerance:
+                status = Status.CONVERGED
+                message = f"converged in {iteration} iterations, {int(active.sum())} active nodes"
+            else:
+                status = Status.INACCURATE
+                message = (
+                    f"active set settled after {iteration} iterations but the residuals "
+                    f"(equilibrium {equilibrium:.1e}, complementarity {complementarity:.1e}) "
+                    f"exceed the tolerance {tolerance:.0e}: the linear solves are inaccurate"
+                )
+            break
+        key = np.packbits(new_active).tobytes()
+        if key in seen:
+            status = Status.CYCLING
+            message = (
+                f"the active set cycles: iteration {iteration + 1} would repeat the set of "
+                f"iteration {seen[key]}"
+            )
+            break
+        active = new_active
+
+    return KernelResult(
+        status=status,
+        message=message,
+        displacement=displacement,
+        multiplier=multiplier,
+        nodal_force=nodal_force,
+        active=active,
+        c=c,
+        history=history,
+    )
+
+
+def _solve_with_fixed_normals(
+    stiffness: sp.csr_matrix, load: np.ndarray, fixed: np.ndarray, values: np.ndarray, backend: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Solve K u = F with u[fixed] = values; return u and r = (F − K u)[fixed].
+
+    r is the force each constraint carries: K u + r = F holds on the fixed rows.
+    """
+    n = stiffness.shape[0]
+    free = np.ones(n, dtype=bool)
+    free[fixed] = False
+    displacement = np.zeros(n)
+    displacement[fixed] = values
+    rhs = load[free] - stiffness[free][:, fixed] @ values
+    if free.any():
+        displacement[free] = factorize(stiffness[free][:, free], backend).solve(rhs)
+    reaction = load[fixed] - stiffness[fixed] @ displacement
+    return displacement, reaction
+
+
+def _mass_solver(mass: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:
+    """Solve B μ = Λ: a division for a diagonal B, a sparse LU otherwise (B is small)."""
+    off_diagonal = mass - sp.diags(mass.diagonal())
+    if off_diagonal.count_nonzero() == 0:
+        diagonal = mass.diagonal()
+        return lambda rhs: rhs / diagonal
+    lu = spla.splu(mass)
+    return lu.solve

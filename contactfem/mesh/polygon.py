@@ -1,0 +1,564 @@
+"""Unstructured meshes of polygons with circular-arc edges and holes, via Shewchuk's Triangle."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+import triangle
+
+from contactfem.errors import MeshError
+from contactfem.mesh.core import Circle, Mesh
+from contactfem.mesh.refine import _undirected_keys, boundary_edges
+
+__all__ = ["Arc", "Loop", "circle_loop", "polygon_problems", "triangulate_domain"]
+
+#: Relative tolerance on the radius of an arc's end vertex.
+RADIUS_TOLERANCE = 1e-9
+#: Largest minimum angle for which Triangle's refinement is known to terminate.
+MAX_MIN_ANGLE = 34.0
+#: Largest angle one chord of an arc may span, whatever max_edge is, so that coarse
+#: meshes of small circles are still recognisably round (8 chords per full circle).
+MAX_CHORD_ANGLE = math.pi / 4
+#: Triangle gives marker 1 to boundary edges on no input segment and 0 to interior
+#: edges, so input segment s is given marker s + MARKER_OFFSET.
+MARKER_OFFSET = 2
+#: Relative mismatch between the meshed area and the area enclosed by the loops that
+#: reveals crossing loops or a hole outside the domain.
+AREA_TOLERANCE = 1e-9
+#: Relative error bound of the floating-point orientation determinant
+#: (Shewchuk's ccwerrboundA is (3 + 16 eps) eps = 3.3e-16; rounded up for safety).
+_ORIENT_ERROR_BOUND = 1e-15
+
+
+@dataclass(frozen=True)
+class Arc:
+    """Marks a loop edge as the circular arc around ``center`` from its start to its end vertex.
+
+    Attributes
+    ----------
+    center : (2,) tuple of float
+        Centre of the circle; the radius is the distance to the edge's start vertex.
+    ccw : bool
+        True for the counter-clockwise arc from start to end, False for the clockwise one.
+    """
+
+    center: tuple[float, float]
+    ccw: bool = True
+
+    def __post_init__(self) -> None:
+        try:
+            center = tuple(float(c) for c in self.center)
+        except (TypeError, ValueError):
+            raise MeshError(f"arc centre must be a pair of numbers, got {self.center!r}") from None
+        if len(center) != 2 or not all(math.isfinite(c) for c in center):
+            raise MeshError(f"arc centre must be a pair of finite numbers, got {self.center!r}")
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "ccw", bool(self.ccw))
+
+
+@dataclass(frozen=True, eq=False)
+class Loop:
+    """A closed boundary curve: vertices joined by straight edges or circular arcs.
+
+    Attributes
+    ----------
+    vertices : (k, 2) float64
+        Corner points; edge ``i`` runs from vertex ``i`` to vertex ``(i + 1) % k``.
+    edge_names : tuple of str
+        ``k`` boundary part names, one per edge.
+    edge_arcs : tuple of (Arc or None)
+        ``k`` entries: the arc edge ``i`` follows, or None for a straight edge.
+        Omitted means all edges are straight.
+
+    Either orientation is accepted; :func:`triangulate_domain` orients the mesh's
+    boundary itself.
+    """
+
+    vertices: np.ndarray
+    edge_names: tuple[str, ...]
+    edge_arcs: tuple[Arc | None, ...] = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        try:
+            vertices = np.array(self.vertices, dtype=float)
+        except (TypeError, ValueError):
+            raise MeshError("loop vertices must be a (k, 2) array of numbers") from None
+        if vertices.ndim != 2 or vertices.shape[1] != 2 or len(vertices) < 2:
+            raise MeshError(f"loop vertices must be a (k, 2) array with k >= 2, got shape {vertices.shape}")
+        if not np.all(np.isfinite(vertices)):
+            raise MeshError("loop vertices must be finite")
+        vertices.setflags(write=False)
+        k = len(vertices)
+        names = tuple(self.edge_names)
+        arcs = (None,) * k if self.edge_arcs is None else tuple(self.edge_arcs)
+        if len(names) != k:
+            raise MeshError(f"a loop with {k} vertices needs {k} edge names, got {len(names)}")
+        if len(arcs) != k:
+            raise MeshError(f"a loop with {k} vertices needs {k} edge_arcs entries, got {len(arcs)}")
+        for i, name in enumerate(names):
+            if not isinstance(name, str) or not name:
+                raise MeshError(f"name of loop edge {i} must be a non-empty string, got {name!r}")
+        for i, arc in enumerate(arcs):
+            if arc is not None and not isinstance(arc, Arc):
+                raise MeshError(f"edge_arcs[{i}] must be an Arc or None, got {arc!r}")
+            start, end = vertices[i], vertices[(i + 1) % k]
+            if np.array_equal(start, end):
+                raise MeshError(f"loop edge {i} starts and ends at the same point {tuple(start)}")
+            if arc is not None:
+                center = np.asarray(arc.center)
+                r_start = float(np.linalg.norm(start - center))
+                r_end = float(np.linalg.norm(end - center))
+                if r_start == 0.0 or abs(r_end - r_start) > RADIUS_TOLERANCE * r_start:
+                    raise MeshError(
+                        f"arc edge {i} ({names[i]!r}): end vertex {tuple(end)} is at distance "
+                        f"{r_end:.12g} from centre {arc.center}, start vertex at {r_start:.12g}"
+                    )
+        object.__setattr__(self, "vertices", vertices)
+        object.__setattr__(self, "edge_names", names)
+        object.__setattr__(self, "edge_arcs", arcs)
+
+
+def circle_loop(center: tuple[float, float], radius: float, name: str) -> Loop:
+    """A full circle as four counter-clockwise quarter arcs, all named ``name``.
+
+    Parameters
+    ----------
+    center : (2,) float
+    radius : float
+        Positive.
+    name : str
+        Part name of the whole circle.
+
+    Returns
+    -------
+    Loop
+        Vertices at angles 0, 90, 180 and 270 degrees.
+    """
+    if not (isinstance(radius, (int, float, np.floating, np.integer)) and math.isfinite(radius) and radius > 0):
+        raise MeshError(f"circle radius must be a positive number, got {radius!r}")
+    cx, cy = (float(c) for c in center)
+    r = float(radius)
+    # Exact axis points (no cos/sin rounding) so all four vertices are at distance r.
+    vertices = np.array([[cx + r, cy], [cx, cy + r], [cx - r, cy], [cx, cy - r]])
+    arc = Arc((cx, cy), ccw=True)
+    return Loop(vertices, (name,) * 4, (arc,) * 4)
+
+
+# --------------------------------------------------------------------------------------
+# Exact-ish predicates on the straight polygon
+# --------------------------------------------------------------------------------------
+
+
+def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Sign of the turn p -> q -> r: +1 left, -1 right, 0 collinear, exact for float input.
+
+    Parameters
+    ----------
+    p, q, r : (m, 2) float64
+
+    Returns
+    -------
+    (m,) int8
+    """
+    left = (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1])
+    right = (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+    det = left - right
+    sign = np.sign(det).astype(np.int8)
+    # Floating point decides unless the determinant is within its rounding error
+    # bound; those few near-collinear triples are redone in exact rational arithmetic.
+    bound = _ORIENT_ERROR_BOUND * (np.abs(left) + np.abs(right))
+    for m in np.flatnonzero((np.abs(det) <= bound) & (bound > 0)):
+        px, py, qx, qy, rx, ry = (Fraction(float(v)) for v in (*p[m], *q[m], *r[m]))
+        exact = (qx - px) * (ry - py) - (qy - py) * (rx - px)
+        sign[m] = (exact > 0) - (exact < 0)
+    return sign
+
+
+def _on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Whether point c, known to be collinear with segment ab, lies on the closed segment."""
+    return (
+        (np.minimum(a[:, 0], b[:, 0]) <= c[:, 0])
+        & (c[:, 0] <= np.maximum(a[:, 0], b[:, 0]))
+        & (np.minimum(a[:, 1], b[:, 1]) <= c[:, 1])
+        & (c[:, 1] <= np.maximum(a[:, 1], b[:, 1]))
+    )
+
+
+def _segments_intersect(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Whether closed segments ab and cd share a point (touching counts).
+
+    Parameters
+    ----------
+    a, b, c, d : (m, 2) float64
+
+    Returns
+    -------
+    (m,) bool
+    """
+    o1 = _orientation(a, b, c)
+    o2 = _orientation(a, b, d)
+    o3 = _orientation(c, d, a)
+    o4 = _orientation(c, d, b)
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
+    touching = (
+        ((o1 == 0) & _on_segment(a, b, c))
+        | ((o2 == 0) & _on_segment(a, b, d))
+        | ((o3 == 0) & _on_segment(c, d, a))
+        | ((o4 == 0) & _on_segment(c, d, b))
+    )
+    return proper | touching
+
+
+def polygon_problems(vertices: np.ndarray) -> str | None:
+    """Why the straight polygon through ``vertices`` is not a valid counter-clockwise boundary.
+
+    Indices in the messages are 0-based; edge ``i`` runs from vertex ``i`` to vertex
+    ``(i + 1) % k``. Intersection tests use exact orientation predicates, so touching
+    counts as intersecting; adjacent edges may share only their common vertex.
+
+    Parameters
+    ----------
+    vertices : (k, 2) float
+        The polygon's corners in order.
+
+    Returns
+    -------
+    str or None
+        A short reason ("fewer than 3 vertices", "repeated vertex 3", "edges 1 and 4
+        intersect", "zero area", "vertices are clockwise; list them counter-clockwise",
+        or a shape / finiteness complaint), or None if the polygon is simple, has
+        positive area and is counter-clockwise.
+    """
+    try:
+        v = np.array(vertices, dtype=float)
+    except (TypeError, ValueError):
+        return "vertices must be a (k, 2) array of numbers"
+    if v.ndim != 2 or v.shape[1] != 2:
+        return f"vertices must be a (k, 2) array, got shape {v.shape}"
+    nonfinite = np.flatnonzero(~np.all(np.isfinite(v), axis=1))
+    if nonfinite.size:
+        return f"vertex {nonfinite[0]} is not finite"
+    k = len(v)
+    if k < 3:
+        return "fewer than 3 vertices"
+    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    repeats = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(k))
+    if repeats.size:
+        return f"repeated vertex {repeats[0]}"
+
+    # All vertices on the line through vertices 0 and 1 (distinct, see above).
+    line = _orientation(np.broadcast_to(v[0], v.shape), np.broadcast_to(v[1], v.shape), v)
+    if np.all(line == 0):
+        return "zero area"
+
+    nxt = np.roll(v, -1, axis=0)
+    # Adjacent edges i and i+1 meet at vertex i+1; they overlap elsewhere only if they
+    # are collinear and the second doubles back along the first.
+    after = np.roll(v, -2, axis=0)
+    turn = _orientation(v, nxt, after)
+    back = np.einsum("ij,ij->i", nxt - v, after - nxt) < 0
+    folded = np.flatnonzero((turn == 0) & back)
+    if folded.size:
+        i = int(folded[0])
+        j = (i + 1) % k
+        return f"edges {min(i, j)} and {max(i, j)} intersect"
+
+    i, j = np.triu_indices(k, 2)
+    keep = ~((i == 0) & (j == k - 1))  # edges 0 and k-1 are adjacent too
+    i, j = i[keep], j[keep]
+    if i.size:
+        hit = np.flatnonzero(_segments_intersect(v[i], nxt[i], v[j], nxt[j]))
+        if hit.size:
+            return f"edges {i[hit[0]]} and {j[hit[0]]} intersect"
+
+    area2 = float(np.sum(v[:, 0] * nxt[:, 1] - v[:, 1] * nxt[:, 0]))
+    if area2 == 0.0:
+        return "zero area"
+    if area2 < 0.0:
+        return "vertices are clockwise; list them counter-clockwise"
+    return None
+
+
+# --------------------------------------------------------------------------------------
+# Triangulation
+# --------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Boundary:
+    """The discretised loops: the planar straight line graph handed to Triangle."""
+
+    points: list[np.ndarray] = field(default_factory=list)  # per loop, (n_l, 2)
+    segment_part: list[np.ndarray] = field(default_factory=list)  # per loop, (n_l,)
+    segment_curve: list[np.ndarray] = field(default_factory=list)  # per loop, (n_l,)
+    part_names: list[str] = field(default_factory=list)
+    curves: list[Circle] = field(default_factory=list)
+
+    def part(self, name: str) -> int:
+        """Index of part ``name``, added on first use."""
+        if name not in self.part_names:
+            self.part_names.append(name)
+        return self.part_names.index(name)
+
+    def curve(self, center: tuple[float, float], radius: float) -> int:
+        """Index of the circle, shared by arcs of (numerically) the same circle."""
+        for index, circle in enumerate(self.curves):
+            if (
+                circle.center == center
+                and abs(circle.radius - radius) <= RADIUS_TOLERANCE * circle.radius
+            ):
+                return index
+        self.curves.append(Circle(center=center, radius=radius))
+        return len(self.curves) - 1
+
+
+def _arc_points(start: np.ndarray, end: np.ndarray, arc: Arc, max_edge: float) -> tuple[np.ndarray, float]:
+    """Points along an arc, start included and end excluded, and its radius.
+
+    Returns
+    -------
+    points : (n, 2) float64
+        ``n`` chords of length at most ``max_edge`` and angle at most ``MAX_CHORD_ANGLE``.
+    radius : float
+    """
+    center = np.asarray(arc.center)
+    radius = float(np.linalg.norm(start - center))
+    theta0 = math.atan2(start[1] - center[1], start[0] - center[0])
+    theta1 = math.atan2(end[1] - center[1], end[0] - center[0])
+    sweep = (theta1 - theta0) % (2 * math.pi) if arc.ccw else -((theta0 - theta1) % (2 * math.pi))
+    # A chord is shorter than its arc, so arc length / n <= max_edge suffices.
+    n = max(
+        1,
+        math.ceil(radius * abs(sweep) / max_edge * (1 - 1e-12)),
+        math.ceil(abs(sweep) / MAX_CHORD_ANGLE * (1 - 1e-12)),
+    )
+    theta = theta0 + sweep * np.arange(1, n) / n
+    inner = center + radius * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    return np.concatenate([start[None, :], inner]), radius
+
+
+def _line_points(start: np.ndarray, end: np.ndarray, max_edge: float) -> np.ndarray:
+    """Points along a straight edge, start included and end excluded, spaced <= max_edge."""
+    length = float(np.linalg.norm(end - start))
+    # The factor keeps lengths that are exact multiples of max_edge from gaining a
+    # segment through rounding.
+    n = max(1, math.ceil(length / max_edge * (1 - 1e-12)))
+    t = np.arange(n)[:, None] / n
+    return start + t * (end - start)
+
+
+def _discretise(loops: list[Loop], max_edge: float) -> _Boundary:
+    """Split every edge of every loop into segments of length <= max_edge."""
+    boundary = _Boundary()
+    for loop in loops:
+        k = len(loop.vertices)
+        chunks, parts, curves = [], [], []
+        for i in range(k):
+            start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
+            arc = loop.edge_arcs[i]
+            if arc is None:
+                pts = _line_points(start, end, max_edge)
+                curve = -1
+            else:
+                pts, radius = _arc_points(start, end, arc, max_edge)
+                curve = boundary.curve(arc.center, radius)
+            chunks.append(pts)
+            parts.append(np.full(len(pts), boundary.part(loop.edge_names[i]), dtype=np.int64))
+            curves.append(np.full(len(pts), curve, dtype=np.int64))
+        boundary.points.append(np.concatenate(chunks))
+        boundary.segment_part.append(np.concatenate(parts))
+        boundary.segment_curve.append(np.concatenate(curves))
+    return boundary
+
+
+def _closed_segments(n: int, offset: int = 0) -> np.ndarray:
+    """Segments (n, 2) joining points offset..offset+n-1 into a closed chain."""
+    idx = np.arange(n, dtype=np.int64) + offset
+    return np.stack([idx, np.roll(idx, -1)], axis=1)
+
+
+def _shoelace(points: np.ndarray) -> float:
+    """Signed area of the closed polygon through ``points`` (n, 2)."""
+    nxt = np.roll(points, -1, axis=0)
+    return 0.5 * float(np.sum(points[:, 0] * nxt[:, 1] - points[:, 1] * nxt[:, 0]))
+
+
+def _interior_point(points: np.ndarray, which: str) -> np.ndarray:
+    """A point strictly inside the closed polygon through ``points`` (n, 2).
+
+    The centroid of the largest triangle of the polygon's own constrained
+    triangulation is inside whatever the polygon's shape (the centroid of the
+    vertices is not, for non-convex holes).
+    """
+    result = triangle.triangulate({"vertices": points, "segments": _closed_segments(len(points))}, "pQ")
+    tri = result.get("triangles")
+    if tri is None or len(tri) == 0:
+        raise MeshError(f"cannot find a point inside {which}; is it a simple closed curve?")
+    corners = result["vertices"][tri]
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return corners[np.argmax(area)].mean(axis=0)
+
+
+def _area_switch(area: float) -> str:
+    """Fixed-point text of the area bound with enough digits to be nonzero.
+
+    Triangle parses the number after ``a`` up to the first character that is not a
+    digit or '.', so ``a2.4e-06`` would read as area 2.4 followed by the ``e`` switch.
+    """
+    digits = max(12, 6 - math.floor(math.log10(area)))
+    return f"{area:.{digits}f}"
+
+
+def _loop_label(index: int) -> str:
+    """'the outer loop' or 'hole 2', for messages."""
+    return "the outer loop" if index == 0 else f"hole {index - 1}"
+
+
+def triangulate_domain(outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0) -> Mesh:
+    """Quality triangulation of the region inside ``outer`` and outside every hole.
+
+    Parameters
+    ----------
+    outer : Loop
+        The outer boundary.
+    holes : list of Loop
+        Boundaries of holes, strictly inside ``outer`` and disjoint from each other.
+    max_edge : float
+        Target edge length: boundary edges are split into pieces of at most this
+        length (arcs into chords, also at most 45 degrees each) and triangles are
+        refined to area at most ``max_edge**2 * sqrt(3) / 4``, that of the equilateral
+        triangle with this edge.
+    min_angle : float, default 30
+        Smallest angle Triangle's refinement guarantees, in degrees, in (0, 34].
+
+    Returns
+    -------
+    Mesh
+        Counter-clockwise triangles; boundary edges oriented with the body on the
+        left, named after the loop edge they lie on; nodes of arc edges projected
+        onto their circle and the edges recorded in ``edge_curves`` / ``curves``.
+        ``part_names`` lists names in order of first appearance (outer loop first).
+
+    Raises
+    ------
+    MeshError
+        For bad parameters, loops that repeat a point, cross, touch or overlap,
+        holes outside the outer loop, or arcs too coarse for their projection.
+    """
+    if not (isinstance(max_edge, (int, float, np.integer, np.floating)) and math.isfinite(max_edge) and max_edge > 0):
+        raise MeshError(f"max_edge must be a positive number, got {max_edge!r}")
+    if not (
+        isinstance(min_angle, (int, float, np.integer, np.floating)) and 0 < min_angle <= MAX_MIN_ANGLE
+    ):
+        raise MeshError(f"min_angle must be in (0, {MAX_MIN_ANGLE:g}] degrees, got {min_angle!r}")
+    loops = [outer, *holes]
+    for index, loop in enumerate(loops):
+        if not isinstance(loop, Loop):
+            raise MeshError(f"{_loop_label(index)} must be a Loop, got {type(loop).__name__}")
+    max_edge = float(max_edge)
+    boundary = _discretise(loops, max_edge)
+
+    sizes = [len(p) for p in boundary.points]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    points = np.concatenate(boundary.points)
+    segments = np.concatenate([_closed_segments(n, int(o)) for n, o in zip(sizes, offsets)])
+    seg_part = np.concatenate(boundary.segment_part)
+    seg_curve = np.concatenate(boundary.segment_curve)
+    # Triangle silently drops duplicate input vertices, which would break the
+    # segment bookkeeping; they mean touching loops or an edge revisiting a vertex.
+    unique_points, first = np.unique(points, axis=0, return_index=True)
+    if len(unique_points) != len(points):
+        dup = np.setdiff1d(np.arange(len(points)), first)[0]
+        raise MeshError(f"the boundary passes twice through the point {tuple(points[dup])}")
+    areas = []
+    for index, loop_points in enumerate(boundary.points):
+        area = abs(_shoelace(loop_points))
+        if area == 0.0:
+            raise MeshError(f"{_loop_label(index)} encloses zero area")
+        areas.append(area)
+    expected_area = areas[0] - sum(areas[1:])
+    if expected_area <= 0:
+        raise MeshError("the holes cover the whole domain")
+
+    pslg: dict[str, np.ndarray] = {
+        "vertices": points,
+        "segments": segments.astype(np.int32),
+        "segment_markers": (np.arange(len(segments), dtype=np.int32) + MARKER_OFFSET)[:, None],
+    }
+    if holes:
+        pslg["holes"] = np.array(
+            [_interior_point(boundary.points[h], _loop_label(h)) for h in range(1, len(loops))]
+        )
+    max_area = max_edge**2 * math.sqrt(3) / 4
+    switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q"
+    result = triangle.triangulate(pslg, switches)
+    tri = result.get("triangles")
+    if tri is None or len(tri) == 0:
+        raise MeshError("Triangle produced no triangles; are the holes inside the outer loop?")
+
+    # Keep only nodes that some triangle uses, renumbered in their original order.
+    used, tri = np.unique(np.asarray(tri, dtype=np.int64), return_inverse=True)
+    tri = tri.reshape(-1, 3)
+    renumber = np.full(len(result["vertices"]), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    out_points = np.array(result["vertices"][used], dtype=np.float64)
+    out_segments = renumber[np.asarray(result["segments"], dtype=np.int64)]
+    source = np.asarray(result["segment_markers"], dtype=np.int64).reshape(-1) - MARKER_OFFSET
+    if np.any(out_segments < 0) or np.any(source < 0) or np.any(source >= len(segments)):
+        raise MeshError("Triangle returned boundary segments that lie on no input loop")
+
+    # Triangle's triangles are counter-clockwise; reorder any that are not, to be safe.
+    corners = out_points[tri]
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+
+    meshed_area = 0.5 * float(np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])))
+    if abs(meshed_area - expected_area) > AREA_TOLERANCE * sum(areas):
+        raise MeshError(
+            f"meshed area {meshed_area:.12g} differs from the area {expected_area:.12g} enclosed by the "
+            "loops: loops cross or overlap, or a hole is not inside the outer loop"
+        )
+
+    # Orient the boundary from the triangles (body on the left) and give each edge
+    # the part and curve of the input segment Triangle says it came from.
+    edges = boundary_edges(tri)
+    n = len(out_points)
+    seg_keys = _undirected_keys(out_segments, n)
+    order = np.argsort(seg_keys)
+    edge_keys = _undirected_keys(edges, n)
+    slot = np.minimum(np.searchsorted(seg_keys[order], edge_keys), len(order) - 1)
+    if np.any(seg_keys[order][slot] != edge_keys):
+        raise MeshError("part of the mesh boundary lies on no input loop")
+    if len(out_segments) != len(edges):
+        raise MeshError("loops touch or cross: some boundary segments ended up inside the mesh")
+    edge_source = source[order][slot]
+    edge_parts = seg_part[edge_source]
+    edge_curves = seg_curve[edge_source]
+
+    # Triangle may split chords of arcs; put those nodes (and, harmlessly, the chord
+    # ends already there) on the circle so the boundary converges to the true curve.
+    for index, circle in enumerate(boundary.curves):
+        nodes = np.unique(edges[edge_curves == index])
+        out_points[nodes] = circle.project(out_points[nodes])
+    corners = out_points[tri]
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    if np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0):
+        raise MeshError("projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge")
+
+    return Mesh(
+        points=out_points,
+        triangles=tri,
+        boundary_edges=edges,
+        edge_parts=edge_parts,
+        part_names=tuple(boundary.part_names),
+        edge_curves=edge_curves,
+        curves=tuple(boundary.curves),
+    )

@@ -1,0 +1,211 @@
+"""Uniform red refinement of triangle meshes and extraction of a triangulation's boundary."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from contactfem.errors import MeshError
+from contactfem.mesh.core import Mesh
+
+__all__ = ["boundary_edges", "refine_uniform"]
+
+
+def _half_edges(triangles: np.ndarray) -> np.ndarray:
+    """Directed edges of every triangle, edge-major.
+
+    Parameters
+    ----------
+    triangles : (n_triangles, 3) int
+        Node indices, counter-clockwise.
+
+    Returns
+    -------
+    (3 * n_triangles, 2) int64
+        Rows ``k * n_triangles + t`` hold edge ``k`` of triangle ``t``: (v0, v1),
+        (v1, v2), (v2, v0) for k = 0, 1, 2, each oriented as in its triangle.
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    starts = tri.T.reshape(-1)
+    ends = tri[:, [1, 2, 0]].T.reshape(-1)
+    return np.stack([starts, ends], axis=1)
+
+
+def _undirected_keys(edges: np.ndarray, n_points: int) -> np.ndarray:
+    """One int64 key per edge that ignores orientation: ``min * n_points + max``.
+
+    Parameters
+    ----------
+    edges : (n_edges, 2) int64
+    n_points : int
+        Any bound above the largest index; n_points**2 must fit in int64, which
+        holds for every mesh that fits in memory.
+
+    Returns
+    -------
+    (n_edges,) int64
+    """
+    lo = np.minimum(edges[:, 0], edges[:, 1])
+    hi = np.maximum(edges[:, 0], edges[:, 1])
+    return lo * np.int64(n_points) + hi
+
+
+def _sorted_edge_codes(triangles: np.ndarray, n_points: int) -> np.ndarray:
+    """Sorted codes ``2 * undirected key + (start > end)`` of all half-edges.
+
+    One sort of these codes groups the half-edges of each edge together and still
+    tells their directions, which is all that boundary extraction and conformity
+    checks need (cheaper than np.unique with return_index, which argsorts).
+
+    Parameters
+    ----------
+    triangles : (n_triangles, 3) int64
+    n_points : int
+        Bound above the largest node index.
+
+    Returns
+    -------
+    (3 * n_triangles,) int64, sorted.
+    """
+    half = _half_edges(triangles)
+    codes = 2 * _undirected_keys(half, n_points) + (half[:, 0] > half[:, 1])
+    codes.sort()
+    return codes
+
+
+def _single_codes(codes: np.ndarray) -> np.ndarray:
+    """The codes whose undirected edge occurs once in sorted ``codes``: boundary half-edges."""
+    keys = codes >> 1
+    differs = keys[1:] != keys[:-1]
+    single = np.ones(len(codes), dtype=bool)
+    single[1:] &= differs
+    single[:-1] &= differs
+    return codes[single]
+
+
+def _decode(codes: np.ndarray, n_points: int) -> np.ndarray:
+    """Directed edges (k, 2) int64 from half-edge codes."""
+    keys = codes >> 1
+    lo = keys // n_points
+    hi = keys % n_points
+    reverse = (codes & 1).astype(bool)
+    return np.stack([np.where(reverse, hi, lo), np.where(reverse, lo, hi)], axis=1)
+
+
+def boundary_edges(triangles: np.ndarray) -> np.ndarray:
+    """The edges that belong to exactly one triangle, oriented as in that triangle.
+
+    With counter-clockwise triangles the result has the body on the left of every
+    edge: the outer boundary runs counter-clockwise and holes clockwise.
+
+    Parameters
+    ----------
+    triangles : (n_triangles, 3) int
+        Node indices, counter-clockwise.
+
+    Returns
+    -------
+    (n_boundary_edges, 2) int64
+        Sorted by the undirected key ``(min node, max node)``.
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    if tri.size == 0:
+        return np.empty((0, 2), dtype=np.int64)
+    n = int(tri.max()) + 1
+    return _decode(_single_codes(_sorted_edge_codes(tri, n)), n)
+
+
+def _refine_once(mesh: Mesh) -> Mesh:
+    """One red refinement step; see :func:`refine_uniform`."""
+    n_points = mesh.n_points
+    n_tri = mesh.n_triangles
+    if n_tri == 0:
+        raise MeshError("cannot refine a mesh without triangles")
+    tri = mesh.triangles
+    half = _half_edges(tri)
+    keys = _undirected_keys(half, n_points)
+    unique_keys, inverse = np.unique(keys, return_inverse=True)
+    inverse = inverse.reshape(-1)
+
+    # New midpoint nodes are numbered after the old ones so the coarse mesh's nodes
+    # keep their indices and the meshes are nested.
+    lo = unique_keys // n_points
+    hi = unique_keys % n_points
+    midpoints = 0.5 * (mesh.points[lo] + mesh.points[hi])
+    mid_of_half = (n_points + inverse).reshape(3, n_tri)
+    m01, m12, m20 = mid_of_half
+    v0, v1, v2 = tri[:, 0], tri[:, 1], tri[:, 2]
+    # Children of triangle t are rows 4t..4t+3: the three corner triangles and the
+    # middle one, all counter-clockwise like their parent.
+    children = np.stack(
+        [
+            np.stack([v0, m01, m20], axis=1),
+            np.stack([v1, m12, m01], axis=1),
+            np.stack([v2, m20, m12], axis=1),
+            np.stack([m01, m12, m20], axis=1),
+        ],
+        axis=1,
+    ).reshape(-1, 3)
+
+    # Each boundary edge (a, b) becomes (a, m), (m, b) at rows 2k, 2k+1, keeping
+    # its part and curve; its midpoint is found among the unique edges by key.
+    bedges = mesh.boundary_edges
+    bkeys = _undirected_keys(bedges, n_points)
+    slot = np.minimum(np.searchsorted(unique_keys, bkeys), len(unique_keys) - 1)
+    if np.any(unique_keys[slot] != bkeys):
+        raise MeshError("cannot refine: a boundary edge is not an edge of any triangle")
+    bmid = n_points + slot
+    new_bedges = np.stack(
+        [np.stack([bedges[:, 0], bmid], axis=1), np.stack([bmid, bedges[:, 1]], axis=1)], axis=1
+    ).reshape(-1, 2)
+    new_parts = np.repeat(mesh.edge_parts, 2)
+    new_curves = np.repeat(mesh.edge_curves, 2)
+
+    points = np.concatenate([mesh.points, midpoints])
+    # Midpoints of curved boundary edges go onto their circle, so refinement
+    # converges to the true curved domain instead of the coarse polygon.
+    for index, circle in enumerate(mesh.curves):
+        nodes = bmid[mesh.edge_curves == index]
+        if nodes.size:
+            points[nodes] = circle.project(points[nodes])
+
+    return Mesh(
+        points=points,
+        triangles=children,
+        boundary_edges=new_bedges,
+        edge_parts=new_parts,
+        part_names=mesh.part_names,
+        edge_curves=new_curves,
+        curves=mesh.curves,
+    )
+
+
+def refine_uniform(mesh: Mesh, times: int = 1) -> Mesh:
+    """Split every triangle into four by its edge midpoints, ``times`` times.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The coarse mesh.
+    times : int, default 1
+        Number of refinement steps; 0 returns ``mesh`` itself.
+
+    Returns
+    -------
+    Mesh
+        ``4**times`` times as many triangles. The old nodes keep their indices
+        (nested meshes); the children of coarse triangle ``t`` after one step are
+        triangles ``4t .. 4t+3``. Boundary edges are split in two (children of
+        edge ``k`` are ``2k, 2k+1``) and keep their part and curve; new nodes on
+        curved edges are projected onto their circle.
+
+    Raises
+    ------
+    MeshError
+        If ``times`` is negative or not an integer, or the mesh's boundary edges are
+        not edges of its triangles.
+    """
+    if isinstance(times, bool) or not isinstance(times, (int, np.integer)) or times < 0:
+        raise MeshError(f"refinement count must be a non-negative integer, got {times!r}")
+    for _ in range(int(times)):
+        mesh = _refine_once(mesh)
+    return mesh

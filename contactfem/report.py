@@ -1,0 +1,110 @@
+"""Figures a user checks a solve by: sign conditions, contact zone, contact force, equilibrium."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from contactfem.discretize import DiscreteProblem
+
+SCHEMA_VERSION = 1
+
+
+def sign_conditions(
+    method: str, gap: np.ndarray, normal_displacement: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray
+) -> dict:
+    """The discrete contact conditions at the contact nodes, absolute and relative.
+
+    ``relative_*`` divide by the natural scale of the quantity: the largest |u_n − g| for
+    the gap, the largest nodal force for the forces, their product for complementarity.
+    """
+    slack = normal_displacement - gap
+    gap_scale = max(np.abs(slack).max(initial=0.0), np.abs(normal_displacement).max(initial=0.0))
+    force_scale = np.abs(nodal_force).max(initial=0.0)
+    complementarity = np.abs(nodal_force * slack).max(initial=0.0)
+    figures = {
+        "max_normal_displacement_minus_gap": float(slack.max(initial=0.0)) if len(slack) else 0.0,
+        "relative_max_penetration": _ratio(max(slack.max(initial=0.0), 0.0), gap_scale),
+        "min_multiplier": float(multiplier.min()) if len(multiplier) else 0.0,
+        "min_nodal_force": float(nodal_force.min()) if len(nodal_force) else 0.0,
+        "relative_min_nodal_force": _ratio(min(nodal_force.min(initial=0.0), 0.0), force_scale),
+        "max_abs_nodal_force_times_gap": float(complementarity),
+        "relative_complementarity": _ratio(complementarity, force_scale * gap_scale),
+    }
+    if method == "positive":
+        figures["max_abs_multiplier_times_gap"] = float(np.abs(multiplier * slack).max(initial=0.0))
+    else:
+        negative = multiplier < 0
+        figures["negative_multiplier_nodes"] = int(negative.sum())
+    return figures
+
+
+def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:
+    """Active nodes and the intervals of ΓC they form (connected along ΓC edges)."""
+    contact = problem.contact
+    m = len(contact.nodes)
+    index = np.full(problem.mesh.n_points, -1)
+    index[contact.nodes] = np.arange(m)
+    a, b = index[contact.edges[:, 0]], index[contact.edges[:, 1]]
+    linked = (a >= 0) & (b >= 0)
+    a, b = a[linked], b[linked]
+    both = active[a] & active[b]
+    graph = sp.coo_matrix((np.ones(both.sum()), (a[both], b[both])), shape=(m, m))
+    _, labels = connected_components(graph, directed=False)
+    intervals = []
+    for label in np.unique(labels[active]):
+        members = np.flatnonzero((labels == label) & active)
+        s = contact.abscissa[members]
+        first, last = members[np.argmin(s)], members[np.argmax(s)]
+        intervals.append({
+            "from": problem.mesh.points[contact.nodes[first]].tolist(),
+            "to": problem.mesh.points[contact.nodes[last]].tolist(),
+            "abscissa": [float(s.min()), float(s.max())],
+            "nodes": int(len(members)),
+        })
+    intervals.sort(key=lambda item: item["abscissa"][0])
+    return {"active_nodes": int(active.sum()), "contact_nodes": int(m), "intervals": intervals}
+
+
+def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray) -> dict:
+    """Force and moment balance: applied loads + contact force + support reactions = 0.
+
+    The reactions are what the supports must add for K u to balance: R = K u − F − f_c
+    on the prescribed unknowns, f_c = −n Λ being the obstacle's push on each contact node.
+    """
+    points = problem.mesh.points
+    u = displacement.ravel()
+    contact_force = np.zeros_like(u)
+    nodes = problem.contact.nodes
+    contact_force[2 * nodes] = -problem.contact.normal[0] * nodal_force
+    contact_force[2 * nodes + 1] = -problem.contact.normal[1] * nodal_force
+    internal = problem.stiffness @ u
+    reactions = np.zeros_like(u)
+    d = problem.dirichlet_dofs
+    reactions[d] = internal[d] - problem.load[d] - contact_force[d]
+    centre = points.mean(axis=0)
+
+    def resultant(force: np.ndarray) -> list[float]:
+        f = force.reshape(-1, 2)
+        arm = points - centre
+        moment = float(np.sum(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))
+        return [float(f[:, 0].sum()), float(f[:, 1].sum()), moment]
+
+    applied, contact, support = (resultant(v) for v in (problem.load, contact_force, reactions))
+    total = np.add(np.add(applied, contact), support)
+    length = np.ptp(points, axis=0).max()
+    scale = np.abs(applied) + np.abs(contact) + np.abs(support)
+    force_scale = max(scale[0], scale[1], scale[2] / length, np.finfo(float).tiny)
+    return {
+        "applied": applied,
+        "contact": contact,
+        "reactions": support,
+        "moment_about": centre.tolist(),
+        "relative_force_residual": float(np.hypot(total[0], total[1]) / force_scale),
+        "relative_moment_residual": float(abs(total[2]) / (force_scale * length)),
+    }
+
+
+def _ratio(value: float, scale: float) -> float:
+    return float(value / scale) if scale > 0 else 0.0

@@ -1,0 +1,71 @@
+"""What a solve produces: fields on the mesh and on the contact boundary, ready for the writers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from contactfem.mesh.core import Mesh
+
+
+@dataclass(frozen=True, eq=False)
+class ContactFields:
+    """Nodal quantities on the contact boundary ΓC.
+
+    Attributes
+    ----------
+    nodes : (m,) int64
+        Mesh node indices of the contact nodes (on the closure of ΓC, not on a
+        Dirichlet part), sorted along ΓC.
+    edges : (k, 2) int64
+        Mesh node indices of the edges of ΓC (an edge may touch a Dirichlet node).
+    multiplier : (m,) float64
+        The method's own multiplier at the contact nodes: λh for the positive
+        method, θh for the standard one (a pressure, force per unit length).
+    nodal_force : (m,) float64
+        Λ = D λ or M θ: the contact force carried by each node.
+    normal_displacement : (m,) float64
+        u·n at the contact nodes (n points from the body into the obstacle).
+    gap : (m,) float64
+        Initial gap g0 along n between each contact node and the obstacle.
+    active : (m,) bool
+        Whether the node is in the final active set (in contact).
+    """
+
+    nodes: np.ndarray
+    edges: np.ndarray
+    multiplier: np.ndarray
+    nodal_force: np.ndarray
+    normal_displacement: np.ndarray
+    gap: np.ndarray
+    active: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """Displacement, stresses and contact fields of one solved case.
+
+    Attributes
+    ----------
+    method : str
+        ``"positive"`` (method 4) or ``"standard"`` (method 5).
+    mesh : Mesh
+    displacement : (n_points, 2) float64
+    stress : (n_triangles, 4) float64
+        Cauchy stress per triangle, columns xx, yy, xy, zz (zz is zero in plane stress).
+    von_mises : (n_triangles,) float64
+    contact : ContactFields
+    newton : dict of str to ndarray
+        Per Newton iteration (1-based), equal-length arrays: ``active`` (size of the
+        active set), ``added``, ``removed`` (nodes entering / leaving it),
+        ``equilibrium_residual`` and ``complementarity_residual`` (relative).
+    """
+
+    method: str
+    mesh: Mesh
+    displacement: np.ndarray
+    stress: np.ndarray
+    von_mises: np.ndarray
+    contact: ContactFields
+    newton: dict[str, np.ndarray]
