@@ -103,7 +103,8 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     unsupported = sorted(set(found) - _ACCEPTED_CELLS)
     if unsupported:
         raise MeshError(
-            f"mesh {path} has unsupported cells ({summary}); only linear triangles (with lines) are supported"
+            f"mesh {path} has unsupported cells ({summary}); "
+            "only linear triangles (with boundary lines) are supported"
         )
     if found.get("triangle", 0) == 0:
         raise MeshError(

@@ -106,19 +106,29 @@ class Loop:
                 raise MeshError(f"edge_arcs[{i}] must be an Arc or None, got {arc!r}")
             start, end = vertices[i], vertices[(i + 1) % k]
             if np.array_equal(start, end):
-                raise MeshError(f"loop edge {i} starts and ends at the same point {tuple(start)}")
+                raise MeshError(f"loop edge {i} starts and ends at the same point {start.tolist()}")
             if arc is not None:
                 center = np.asarray(arc.center)
                 r_start = float(np.linalg.norm(start - center))
                 r_end = float(np.linalg.norm(end - center))
                 if r_start == 0.0 or abs(r_end - r_start) > RADIUS_TOLERANCE * r_start:
                     raise MeshError(
-                        f"arc edge {i} ({names[i]!r}): end vertex {tuple(end)} is at distance "
+                        f"arc edge {i} ({names[i]!r}): end vertex {end.tolist()} is at distance "
                         f"{r_end:.12g} from centre {arc.center}, start vertex at {r_start:.12g}"
                     )
         object.__setattr__(self, "vertices", vertices)
         object.__setattr__(self, "edge_names", names)
         object.__setattr__(self, "edge_arcs", arcs)
+
+
+def _is_positive_number(value: object) -> bool:
+    """Whether ``value`` is a finite real number > 0 (bools excluded)."""
+    return (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )
 
 
 def circle_loop(center: tuple[float, float], radius: float, name: str) -> Loop:
@@ -137,7 +147,7 @@ def circle_loop(center: tuple[float, float], radius: float, name: str) -> Loop:
     Loop
         Vertices at angles 0, 90, 180 and 270 degrees.
     """
-    if not (isinstance(radius, (int, float, np.floating, np.integer)) and math.isfinite(radius) and radius > 0):
+    if not _is_positive_number(radius):
         raise MeshError(f"circle radius must be a positive number, got {radius!r}")
     cx, cy = (float(c) for c in center)
     r = float(radius)
@@ -315,7 +325,9 @@ class _Boundary:
         return len(self.curves) - 1
 
 
-def _arc_points(start: np.ndarray, end: np.ndarray, arc: Arc, max_edge: float) -> tuple[np.ndarray, float]:
+def _arc_points(
+    start: np.ndarray, end: np.ndarray, arc: Arc, max_edge: float
+) -> tuple[np.ndarray, float]:
     """Points along an arc, start included and end excluded, and its radius.
 
     Returns
@@ -393,7 +405,8 @@ def _interior_point(points: np.ndarray, which: str) -> np.ndarray:
     triangulation is inside whatever the polygon's shape (the centroid of the
     vertices is not, for non-convex holes).
     """
-    result = triangle.triangulate({"vertices": points, "segments": _closed_segments(len(points))}, "pQ")
+    pslg = {"vertices": points, "segments": _closed_segments(len(points))}
+    result = triangle.triangulate(pslg, "pQ")
     tri = result.get("triangles")
     if tri is None or len(tri) == 0:
         raise MeshError(f"cannot find a point inside {which}; is it a simple closed curve?")
@@ -419,7 +432,9 @@ def _loop_label(index: int) -> str:
     return "the outer loop" if index == 0 else f"hole {index - 1}"
 
 
-def triangulate_domain(outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0) -> Mesh:
+def triangulate_domain(
+    outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0
+) -> Mesh:
     """Quality triangulation of the region inside ``outer`` and outside every hole.
 
     Parameters
@@ -450,11 +465,9 @@ def triangulate_domain(outer: Loop, holes: list[Loop], max_edge: float, min_angl
         For bad parameters, loops that repeat a point, cross, touch or overlap,
         holes outside the outer loop, or arcs too coarse for their projection.
     """
-    if not (isinstance(max_edge, (int, float, np.integer, np.floating)) and math.isfinite(max_edge) and max_edge > 0):
+    if not _is_positive_number(max_edge):
         raise MeshError(f"max_edge must be a positive number, got {max_edge!r}")
-    if not (
-        isinstance(min_angle, (int, float, np.integer, np.floating)) and 0 < min_angle <= MAX_MIN_ANGLE
-    ):
+    if not (_is_positive_number(min_angle) and min_angle <= MAX_MIN_ANGLE):
         raise MeshError(f"min_angle must be in (0, {MAX_MIN_ANGLE:g}] degrees, got {min_angle!r}")
     loops = [outer, *holes]
     for index, loop in enumerate(loops):
@@ -474,7 +487,7 @@ def triangulate_domain(outer: Loop, holes: list[Loop], max_edge: float, min_angl
     unique_points, first = np.unique(points, axis=0, return_index=True)
     if len(unique_points) != len(points):
         dup = np.setdiff1d(np.arange(len(points)), first)[0]
-        raise MeshError(f"the boundary passes twice through the point {tuple(points[dup])}")
+        raise MeshError(f"the boundary passes twice through the point {points[dup].tolist()}")
     areas = []
     for index, loop_points in enumerate(boundary.points):
         area = abs(_shoelace(loop_points))
@@ -551,7 +564,9 @@ def triangulate_domain(outer: Loop, holes: list[Loop], max_edge: float, min_angl
     e1 = corners[:, 1] - corners[:, 0]
     e2 = corners[:, 2] - corners[:, 0]
     if np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0):
-        raise MeshError("projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge")
+        raise MeshError(
+            "projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge"
+        )
 
     return Mesh(
         points=out_points,

@@ -26,7 +26,7 @@ def _check_arrays(mesh: Mesh) -> None:
         raise MeshError(f"points must be a float (n, 2) array, got {points.dtype} {points.shape}")
     bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
     if bad.size:
-        raise MeshError(f"point {bad[0]} has a non-finite coordinate {tuple(points[bad[0]])}")
+        raise MeshError(f"point {bad[0]} has a non-finite coordinate {points[bad[0]].tolist()}")
     if tri.ndim != 2 or tri.shape[1] != 3 or not np.issubdtype(tri.dtype, np.integer):
         raise MeshError(f"triangles must be an integer (n, 3) array, got {tri.dtype} {tri.shape}")
     if len(tri) == 0:
@@ -95,7 +95,9 @@ def _check_edges(mesh: Mesh) -> None:
     same = np.flatnonzero(codes[1:] == codes[:-1])
     if same.size:
         a, b = _decode(codes[same[:1]], n)[0]
-        raise MeshError(f"edge ({a}, {b}) is used in the same direction by two triangles (overlapping triangles)")
+        raise MeshError(
+            f"edge ({a}, {b}) is used in the same direction by two triangles (overlapping triangles)"
+        )
     keys = codes >> 1
     triple = np.flatnonzero(keys[2:] == keys[:-2])
     if triple.size:
@@ -110,7 +112,8 @@ def _check_edges(mesh: Mesh) -> None:
         return
     twice = np.flatnonzero(sorted_listed[1:] == sorted_listed[:-1])
     if twice.size:
-        raise MeshError(f"boundary edge {_decode(sorted_listed[twice[:1]], n)[0].tolist()} is listed more than once")
+        edge = _decode(sorted_listed[twice[:1]], n)[0].tolist()
+        raise MeshError(f"boundary edge {edge} is listed more than once")
     extra = np.flatnonzero(~np.isin(listed_codes, actual))
     if extra.size:
         raise MeshError(

@@ -105,7 +105,7 @@ def structured_rectangle(
     lo = _check_corner("lower corner", lower)
     hi = _check_corner("upper corner", upper)
     if not np.all(hi > lo):
-        raise MeshError(f"upper corner {tuple(hi)} must exceed lower corner {tuple(lo)} in x and y")
+        raise MeshError(f"upper corner {hi.tolist()} must exceed lower corner {lo.tolist()} in x and y")
     if diagonal not in DIAGONALS:
         raise MeshError(f"unknown diagonal {diagonal!r}; choose one of {', '.join(DIAGONALS)}")
     part_names, side_part = _part_table(side_names)
