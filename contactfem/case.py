@@ -2,7 +2,7 @@
 
 Every refusal is a :class:`CaseError` whose message names the file, the key, the value
 and what was expected, e.g. ``beam.yaml: material.nu = 0.5: must be in [0, 0.5)``.
-The reference of the format is docs/case-format.md; ``cases/`` holds commented examples.
+The format is documented in README.md ("The case file"); ``cases/`` holds commented examples.
 """
 
 from __future__ import annotations
@@ -189,8 +189,11 @@ class _Reader:
                     raise self.fail(key, value, "expected a number") from None
             else:
                 raise self.fail(key, value, "expected a number")
-        value = float(value)
         rule = expected or _range_text(low, high, low_open, high_open)
+        try:
+            value = float(value)
+        except OverflowError:
+            raise self.fail(key, value, f"expected a finite number{', ' + rule if rule else ''}") from None
         if not math.isfinite(value):
             raise self.fail(key, value, f"expected a finite number{', ' + rule if rule else ''}")
         if low is not None and (value < low or (low_open and value == low)):

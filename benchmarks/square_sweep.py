@@ -1,0 +1,81 @@
+"""Square case of the README at N x N divisions, both methods: time per stage, Newton iterations, contact.
+
+Usage: python benchmarks/square_sweep.py [N ...] [--out FILE.json]
+Writes a JSON list with one record per (N, method) and prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+from pathlib import Path
+import tempfile
+
+import yaml
+
+from contactfem.case import parse_case
+from contactfem.solve import prepare, solve_case, write_outputs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def square_case(divisions: int):
+    data = yaml.safe_load((ROOT / "cases" / "square.yaml").read_text())
+    data["mesh"]["divisions"] = divisions
+    return parse_case(yaml.safe_dump(data), source=ROOT / "cases" / f"square-{divisions}.yaml")
+
+
+def run(divisions: int) -> list[dict]:
+    case = square_case(divisions)
+    timings: dict[str, float] = {}
+    problem = prepare(case, timings=timings)
+    records = []
+    for method in ("positive", "standard"):
+        started = time.perf_counter()
+        outcome = solve_case(case, method=method, problem=problem)
+        with tempfile.TemporaryDirectory() as directory:
+            write_outputs(outcome, Path(directory))
+        report = outcome.report
+        records.append({
+            "N": divisions,
+            "method": method,
+            "unknowns": report["unknowns"]["displacement"],
+            "iterations": report["solver"]["iterations"],
+            "active_per_iteration": [r["active"] for r in report["newton"]],
+            "mesh_s": timings["mesh"],
+            "assemble_s": timings["assemble"],
+            "solve_s": outcome.timings["solve"],
+            "postprocess_s": outcome.timings["postprocess"],
+            "write_s": outcome.timings["write"],
+            "method_total_s": time.perf_counter() - started,
+            "contact_force": report["contact_force"]["normal"],
+            "contact_zone": [i["abscissa"] for i in report["contact_zone"]["intervals"]],
+            "active_nodes": report["contact_zone"]["active_nodes"],
+            "min_multiplier": report["sign_conditions"]["min_multiplier"],
+            "backend": report["solver"]["backend"],
+            "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+        })
+        print(json.dumps(records[-1]), flush=True)
+    return records
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("sizes", nargs="*", type=int, default=[64, 256])
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    records = [record for n in args.sizes for record in run(n)]
+    if args.out:
+        args.out.write_text(json.dumps(records, indent=2) + "\n")
+    print("| N | method | unknowns | Newton | mesh s | assemble s | solve s | write s | contact force | zone |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in records:
+        zone = ", ".join(f"[{a:.4f}, {b:.4f}]" for a, b in r["contact_zone"])
+        print(f"| {r['N']} | {r['method']} | {r['unknowns']} | {r['iterations']} | {r['mesh_s']:.2f} | "
+              f"{r['assemble_s']:.2f} | {r['solve_s']:.2f} | {r['write_s']:.2f} | {r['contact_force']:.2f} | {zone} |")
+
+
+if __name__ == "__main__":
+    main()
