@@ -11,6 +11,10 @@ M for the standard one. Newton's method on C(Bμ, d) = Bμ − max(0, Bμ + c (d
 active set iteration: on A, d = G (a Dirichlet condition on one unknown); on I, (Bμ) = 0,
 so each step is one SPD solve of the size of the linear problem, after which Bμ on A is
 the reaction of the fixed normal unknowns and μ = B⁻¹(Bμ).
+
+Plain Newton can revisit an active set on hard problems. The kernel detects the repeat
+and continues with Murty's least-index rule (change only the lowest-numbered node whose
+condition fails), which terminates for P-matrix complementarity problems like this one.
 """
 
 from __future__ import annotations
@@ -89,6 +93,7 @@ class KernelResult:
     active: np.ndarray
     c: float
     history: list[Iteration] = field(default_factory=list)
+    cycle_detected_at: int | None = None
 
     @property
     def iterations(self) -> int:
@@ -114,6 +119,7 @@ def solve_contact(
     backend: str = "auto",
     initial_active: np.ndarray | None = None,
     on_iteration: Callable[[Iteration], None] | None = None,
+    safeguard: bool = True,
 ) -> KernelResult:
     """Run the primal–dual active set iteration until the active set repeats.
 
@@ -132,6 +138,9 @@ def solve_contact(
         Starting active set; default: the nodes that touch or overlap the obstacle (G ≤ 0).
     on_iteration : callable, optional
         Called with each :class:`Iteration` record (progress reporting).
+    safeguard : bool
+        When the active set repeats, go on with least-index single changes (default);
+        False stops with status CYCLING instead.
     """
     stiffness = sp.csr_matrix(system.stiffness)
     load = np.asarray(system.load, dtype=float)
@@ -144,6 +153,7 @@ def solve_contact(
 
     active = (gap <= 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
     seen: dict[bytes, int] = {}
+    cycle_detected_at: int | None = None
     history: list[Iteration] = []
     displacement = np.zeros(len(load))
     multiplier = np.zeros(m)
@@ -191,6 +201,11 @@ def solve_contact(
             if equilibrium <= tolerance and complementarity <= tolerance:
                 status = Status.CONVERGED
                 message = f"converged in {iteration} iterations, {int(active.sum())} active nodes"
+                if cycle_detected_at is not None:
+                    message += (
+                        f"; the active set cycled at iteration {cycle_detected_at}, "
+                        "resolved by least-index single changes"
+                    )
             else:
                 status = Status.INACCURATE
                 message = (
@@ -200,13 +215,29 @@ def solve_contact(
                 )
             break
         key = np.packbits(new_active).tobytes()
-        if key in seen:
+        if key in seen and not safeguard:
             status = Status.CYCLING
             message = (
                 f"the active set cycles: iteration {iteration + 1} would repeat the set of "
                 f"iteration {seen[key]}"
             )
             break
+        if key in seen and cycle_detected_at is None:
+            # Plain Newton revisits a set: from now on change one node at a time, the
+            # lowest-numbered one whose sign condition fails (Murty's least-index rule),
+            # which terminates on P-matrix problems such as ours (S = P K⁻¹ Pᵀ is SPD).
+            cycle_detected_at = iteration
+        if cycle_detected_at is not None:
+            first_wrong = np.flatnonzero(new_active != active)[0]
+            new_active = active.copy()
+            new_active[first_wrong] = not active[first_wrong]
+            if np.packbits(new_active).tobytes() in seen and iteration > cycle_detected_at:
+                status = Status.CYCLING
+                message = (
+                    f"the active set cycles (first detected at iteration {cycle_detected_at}) "
+                    "even under the least-index safeguard"
+                )
+                break
         active = new_active
 
     return KernelResult(
@@ -218,6 +249,7 @@ def solve_contact(
         active=active,
         c=c,
         history=history,
+        cycle_detected_at=cycle_detected_at,
     )
 
 

@@ -177,6 +177,7 @@ def build_report(outcome: Outcome) -> dict:
             "iterations": kernel.iterations,
             "c": kernel.c,
             "tolerance": case.solver.tolerance,
+            "cycle_detected_at": kernel.cycle_detected_at,
         },
         "newton": [
             {"iteration": i + 1, **{k: getattr(r, k) for k in

@@ -122,3 +122,57 @@ def test_scaling_forces_scales_multiplier_and_keeps_iterations():
     assert scaled.iterations == base.iterations
     np.testing.assert_allclose(scaled.displacement, base.displacement, rtol=1e-14)
     np.testing.assert_allclose(scaled.multiplier, 1e6 * base.multiplier, rtol=1e-14)
+
+
+# A 6x6 SPD problem found by random search on which plain primal–dual active set Newton,
+# started from the given set, revisits the set of its second iteration.
+CYCLING_K = np.array([
+    [25.754986512629742, 7.4932091971787109, -40.297945114623886, 27.710624293007012, -1.4584316650516906, -51.714593656474598],
+    [7.4932091971787109, 112.63505729996257, 47.148759191137984, 95.766680099624523, -42.171685762874944, -6.8675841457324251],
+    [-40.297945114623886, 47.148759191137984, 95.337588611063339, 3.2174016195704485, -20.270118340963023, 86.069878400898091],
+    [27.710624293007012, 95.766680099624523, 3.2174016195704485, 100.63085557546876, -35.252021766792915, -50.196152640137697],
+    [-1.4584316650516906, -42.171685762874944, -20.270118340963023, -35.252021766792915, 16.295893625765757, 0.071491779557255969],
+    [-51.714593656474598, -6.8675841457324251, 86.069878400898091, -50.196152640137697, 0.071491779557255969, 105.89250379729128],
+])
+CYCLING_F = np.array([4.534143132567809, -3.772803403363463, -3.4495549395958176, -8.786958075467437, -0.3164404899390113, 6.1533433031949425])
+CYCLING_G = np.array([0.6304053218256808, 0.2624465907021045, -0.13613884828772888, 0.6014324497226521, 0.8696762949359567, -0.3851143409839568])
+CYCLING_START = np.array([True, True, True, False, False, False])
+
+
+def test_plain_newton_cycles_and_says_so():
+    """Without the safeguard the kernel stops at the first repeated set with status CYCLING
+    (instead of running to the iteration cap)."""
+    result = solve_contact(system(CYCLING_K, CYCLING_F, CYCLING_G), initial_active=CYCLING_START,
+                           safeguard=False, max_iterations=100)
+    assert result.status is Status.CYCLING
+    assert "cycles" in result.message
+    assert result.iterations < 10
+
+
+def test_safeguard_resolves_the_cycle_to_the_complementarity_solution():
+    """With the least-index safeguard the same start converges, and the answer satisfies the
+    conditions directly: K u + μ = F, μ ≥ 0, u ≤ G, μ (u − G) = 0 (to 1e-12 relative)."""
+    result = solve_contact(system(CYCLING_K, CYCLING_F, CYCLING_G), initial_active=CYCLING_START,
+                           max_iterations=100)
+    assert result.status is Status.CONVERGED
+    assert result.cycle_detected_at is not None
+    assert "least-index" in result.message
+    u, mu = result.displacement, result.multiplier
+    scale = np.abs(CYCLING_F).max()
+    assert np.abs(CYCLING_K @ u + mu - CYCLING_F).max() <= 1e-12 * scale
+    assert mu.min() >= -1e-12 * scale
+    assert (u - CYCLING_G).max() <= 1e-12 * np.abs(u).max()
+    assert np.abs(mu * (u - CYCLING_G)).max() <= 1e-12 * scale * np.abs(u).max()
+
+
+@pytest.mark.parametrize("start", [None, "empty"])
+def test_safeguard_changes_nothing_on_an_easy_problem(start):
+    """On the chain problem plain Newton converges; the safeguard never engages and the
+    iterates are identical with it on or off."""
+    k = 2 * np.eye(4) - np.eye(4, k=1) - np.eye(4, k=-1)
+    initial = None if start is None else np.zeros(4, dtype=bool)
+    on = solve_contact(system(k, [0, 0, 0, 5], [10, 10, 10, 1]), initial_active=initial)
+    off = solve_contact(system(k, [0, 0, 0, 5], [10, 10, 10, 1]), initial_active=initial, safeguard=False)
+    assert on.cycle_detected_at is None
+    assert [r.active for r in on.history] == [r.active for r in off.history]
+    np.testing.assert_array_equal(on.displacement, off.displacement)

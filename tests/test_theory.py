@@ -181,3 +181,19 @@ def test_scale_invariance(method):
     assert np.abs(u - v).max() <= 1e-10 * np.abs(u).max()
     lam, mu = base.solution.contact.multiplier, scaled.solution.contact.multiplier
     assert np.abs(mu - 1e6 * lam).max() <= 1e-10 * np.abs(1e6 * lam).max()
+
+
+def test_every_installed_backend_gives_the_same_solution():
+    """SuperLU, CHOLMOD and Pardiso factorise the same SPD matrices: solutions agree to 1e-10."""
+    from contactfem.linalg import available_backends
+
+    case = square(16)
+    problem = prepare(case)
+    results = {
+        name: solve_case(case.with_solver(backend=name), method="positive", problem=problem)
+        for name in available_backends()
+    }
+    reference = results["superlu"].solution.displacement
+    for name, outcome in results.items():
+        assert outcome.backend == name
+        assert np.abs(outcome.solution.displacement - reference).max() <= 1e-10 * np.abs(reference).max()
