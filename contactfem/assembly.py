@@ -173,3 +173,28 @@ def von_mises(stress: np.ndarray) -> np.ndarray:
     """Von Mises equivalent stress (n,) from (n, 4) xx, yy, xy, zz stresses."""
     sxx, syy, sxy, szz = stress.T
     return np.sqrt(0.5 * ((sxx - syy) ** 2 + (syy - szz) ** 2 + (szz - sxx) ** 2) + 3.0 * sxy**2)
+
+
+def _scalar_matrix(triangles: np.ndarray, local: np.ndarray, n_points: int) -> sp.csr_matrix:
+    rows = np.broadcast_to(triangles[:, :, None], local.shape).ravel()
+    cols = np.broadcast_to(triangles[:, None, :], local.shape).ravel()
+    return sp.coo_matrix((local.ravel(), (rows, cols)), shape=(n_points, n_points)).tocsr()
+
+
+def mass_matrix(points: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
+    """Scalar P1 mass matrix (n, n): ∫ φ_i φ_j = |T|/12 (1 + δ_ij) per triangle."""
+    _, area = shape_gradients(points, triangles)
+    local = (area / 12.0)[:, None, None] * (np.ones((3, 3)) + np.eye(3))
+    return _scalar_matrix(triangles, local, len(points))
+
+
+def laplacian_matrix(points: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
+    """Scalar P1 stiffness (n, n): ∫ ∇φ_i·∇φ_j."""
+    g, area = shape_gradients(points, triangles)
+    local = area[:, None, None] * np.einsum("tia,tja->tij", g, g)
+    return _scalar_matrix(triangles, local, len(points))
+
+
+def vector_form(scalar: sp.spmatrix) -> sp.csr_matrix:
+    """The same form on both displacement components, in interleaved unknowns 2i + c."""
+    return sp.kron(scalar, sp.identity(2), format="csr")

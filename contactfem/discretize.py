@@ -179,28 +179,35 @@ class ReducedSystem:
         lifted = k[free_dofs][:, problem.dirichlet_dofs] @ problem.dirichlet_values
         load = problem.load[free_dofs] - lifted
 
-        # At a contact node, (u_x, u_y) = u_n n + u_t t: its x slot becomes u_n, its y slot u_t.
+        # At a contact node with both components free, (u_x, u_y) = u_n n + u_t t: its x
+        # slot becomes u_n, its y slot u_t. A node on a roller (one component prescribed)
+        # keeps only its other component, which lies along n: that slot is n_c u_n.
         contact = problem.contact
+        n, t = contact.normal, contact.tangent
         px = position[2 * contact.nodes]
         py = position[2 * contact.nodes + 1]
-        n, t = contact.normal, contact.tangent
+        both = (px >= 0) & (py >= 0)
+        roller_slot = np.where(px >= 0, px, py)[~both]
+        roller_sign = np.where(px >= 0, n[0], n[1])[~both]
         size = len(free_dofs)
         plain = np.ones(size, dtype=bool)
-        plain[px] = False
-        plain[py] = False
+        plain[np.concatenate([px[both], py[both], roller_slot])] = False
         plain_idx = np.flatnonzero(plain)
-        rows = np.concatenate([plain_idx, px, px, py, py])
-        cols = np.concatenate([plain_idx, px, py, px, py])
-        m = len(px)
-        vals = np.concatenate([np.ones(len(plain_idx)), np.full(m, n[0]), np.full(m, t[0]),
-                               np.full(m, n[1]), np.full(m, t[1])])
+        bx, by = px[both], py[both]
+        k = len(bx)
+        rows = np.concatenate([plain_idx, bx, bx, by, by, roller_slot])
+        cols = np.concatenate([plain_idx, bx, by, bx, by, roller_slot])
+        vals = np.concatenate([np.ones(len(plain_idx)), np.full(k, n[0]), np.full(k, t[0]),
+                               np.full(k, n[1]), np.full(k, t[1]), roller_sign])
+        normal_dofs = np.where(both, px, 0)
+        normal_dofs[~both] = roller_slot
         rotation = sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
         stiffness = (rotation.T @ k_ff @ rotation).tocsr()
         stiffness.sum_duplicates()
         system = ContactSystem(
             stiffness=stiffness,
             load=rotation.T @ load,
-            normal_dofs=px,
+            normal_dofs=normal_dofs,
             gap=contact.gap,
             multiplier_mass=method.multiplier_mass(contact.masses),
         )
@@ -318,10 +325,14 @@ def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray) -> Con
                 f"({b[0]:g}, {b[1]:g}) faces away from the obstacle (outward normal · obstacle normal = "
                 f"{facing.min():.3g}); a contact part must face the obstacle"
             )
-    on_support = np.zeros(mesh.n_points, dtype=bool)
-    on_support[dirichlet_dofs // 2] = True
+    # A node whose normal motion a support fixes carries no multiplier: both components
+    # prescribed, or one prescribed while the obstacle's normal is not along the other.
+    prescribed = np.zeros((mesh.n_points, 2), dtype=bool)
+    prescribed[dirichlet_dofs // 2, dirichlet_dofs % 2] = True
+    roller_keeps_normal = np.where(prescribed[:, 0], abs(normal[1]), abs(normal[0])) > 1 - 1e-12
+    supported = prescribed.all(axis=1) | (prescribed.any(axis=1) & ~roller_keeps_normal)
     gamma_nodes = np.unique(edges)
-    nodes = gamma_nodes[~on_support[gamma_nodes]]
+    nodes = gamma_nodes[~supported[gamma_nodes]]
     abscissa = mesh.points[nodes] @ tangent
     order = np.argsort(abscissa, kind="stable")
     nodes, abscissa = nodes[order], abscissa[order]

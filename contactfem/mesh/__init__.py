@@ -4,7 +4,7 @@ from contactfem.mesh.core import Circle, Mesh
 from contactfem.mesh.gmsh_io import read_gmsh
 from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems, triangulate_domain
 from contactfem.mesh.quality import check_mesh
-from contactfem.mesh.refine import boundary_edges, refine_uniform
+from contactfem.mesh.refine import boundary_edges, prolongation, refine_uniform
 from contactfem.mesh.structured import structured_rectangle
 
 __all__ = [
@@ -16,6 +16,7 @@ __all__ = [
     "check_mesh",
     "circle_loop",
     "polygon_problems",
+    "prolongation",
     "read_gmsh",
     "refine_uniform",
     "structured_rectangle",

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
 
-__all__ = ["boundary_edges", "refine_uniform"]
+__all__ = ["boundary_edges", "prolongation", "refine_uniform"]
 
 
 def _half_edges(triangles: np.ndarray) -> np.ndarray:
@@ -209,3 +210,28 @@ def refine_uniform(mesh: Mesh, times: int = 1) -> Mesh:
     for _ in range(int(times)):
         mesh = _refine_once(mesh)
     return mesh
+
+
+def prolongation(mesh: Mesh, times: int = 1) -> sp.csr_matrix:
+    """Interpolation of P1 fields from ``mesh`` onto ``refine_uniform(mesh, times)``.
+
+    Returns
+    -------
+    (n_fine_points, n_points) sparse
+        Old nodes copy their value, each new node takes the mean of the two ends of the
+        edge it splits: exact for the nested P1 spaces (a new node on a curved edge is
+        moved onto its circle, where this is the interpolant at the chord's midpoint).
+    """
+    operator = sp.identity(mesh.n_points, format="csr")
+    for _ in range(int(times)):
+        n_points = mesh.n_points
+        keys = np.unique(_undirected_keys(_half_edges(mesh.triangles), n_points))
+        lo, hi = keys // n_points, keys % n_points
+        new = n_points + np.arange(len(keys))
+        rows = np.concatenate([np.arange(n_points), new, new])
+        cols = np.concatenate([np.arange(n_points), lo, hi])
+        vals = np.concatenate([np.ones(n_points), np.full(2 * len(keys), 0.5)])
+        step = sp.csr_matrix((vals, (rows, cols)), shape=(n_points + len(keys), n_points))
+        operator = step @ operator
+        mesh = _refine_once(mesh)
+    return operator.tocsr()
