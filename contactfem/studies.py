@@ -1,0 +1,152 @@
+"""Studies built on the pipeline: both methods side by side, and convergence with cost.
+
+Nothing here prints or writes; the command line renders the returned dictionaries.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from contactfem.case import Case
+from contactfem.norms import NORM_NAMES, exact_errors, nested_errors, nodal_multiplier, observed_rates
+from contactfem.solve import Outcome, Progress, prepare, solve_case
+
+METHOD_NAMES = ("positive", "standard")
+
+
+def compare_methods(case: Case, *, refine: int | None = None, progress: Progress | None = None) -> tuple[dict, dict[str, Outcome]]:
+    """Solve ``case`` with both methods on one assembled system and measure how they differ.
+
+    Returns the figures (JSON-ready) and the two outcomes.
+    """
+    timings: dict[str, float] = {}
+    problem = prepare(case, refine=refine, progress=progress, timings=timings)
+    outcomes = {name: solve_case(case, method=name, problem=problem, progress=progress) for name in METHOD_NAMES}
+    positive, standard = outcomes["positive"], outcomes["standard"]
+    u, w = positive.solution.displacement, standard.solution.displacement
+    lam, theta = positive.solution.contact.multiplier, standard.solution.contact.multiplier
+    masses = problem.contact.masses
+    pi_theta = (masses.consistent @ theta) / masses.lumped
+    contact = problem.contact
+    lift_off = ~positive.solution.contact.active
+    negative = theta < 0
+    scale_u = max(np.abs(u).max(), np.finfo(float).tiny)
+    scale_p = max(np.abs(lam).max(), np.finfo(float).tiny)
+    figures = {
+        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "mesh": {"nodes": problem.mesh.n_points, "triangles": problem.mesh.n_triangles,
+                 "unknowns": problem.n_unknowns, "contact_nodes": int(len(contact.nodes))},
+        "setup_seconds": timings,
+        "max_displacement_difference": float(np.abs(u - w).max()),
+        "relative_displacement_difference": float(np.abs(u - w).max() / scale_u),
+        "max_lambda_minus_pi_theta": float(np.abs(lam - pi_theta).max()),
+        "relative_lambda_minus_pi_theta": float(np.abs(lam - pi_theta).max() / scale_p),
+        "min_lambda": float(lam.min()) if len(lam) else 0.0,
+        "min_theta": float(theta.min()) if len(theta) else 0.0,
+        "negative_theta_nodes": int(negative.sum()),
+        "negative_theta_positions": problem.mesh.points[contact.nodes[negative]].tolist(),
+        "lift_off_nodes": int(lift_off.sum()),
+        "theta_total_variation_in_lift_off": _total_variation(theta, lift_off),
+        "lambda_total_variation_in_lift_off": _total_variation(lam, lift_off),
+        "methods": {
+            name: {
+                "iterations": o.kernel.iterations,
+                "solve_seconds": o.timings["solve"],
+                "sign_conditions": o.report["sign_conditions"],
+                "contact_zone": o.report["contact_zone"],
+                "contact_force": o.report["contact_force"]["normal"],
+            }
+            for name, o in outcomes.items()
+        },
+    }
+    return figures, outcomes
+
+
+def _total_variation(values: np.ndarray, mask: np.ndarray) -> float:
+    """Σ |v_{i+1} − v_i| over consecutive contact nodes (along ΓC) that are both in ``mask``."""
+    both = mask[:-1] & mask[1:]
+    return float(np.abs(np.diff(values))[both].sum()) if len(values) > 1 else 0.0
+
+
+def convergence_study(
+    case: Case,
+    levels: int,
+    *,
+    extra: int = 1,
+    methods: tuple[str, ...] = METHOD_NAMES,
+    progress: Progress | None = None,
+) -> dict:
+    """Solve on ``levels`` nested meshes (the case's mesh refined 0 … levels−1 times).
+
+    The reference is the case's exact solution when it has one, otherwise the solution on
+    the mesh ``extra`` refinements finer than the last level (its positive-method λ is
+    λ_ref for both methods). Each row carries h, unknowns, seconds per stage, Newton
+    iterations and every error norm; ``rates`` holds the observed rate between levels.
+    """
+    say = progress or (lambda message: None)
+    base_refine = case.mesh.refine
+    exact = _exact_of(case)
+    reference = None
+    if exact is None:
+        finest = base_refine + levels - 1 + extra
+        say(f"reference: {extra} refinement(s) beyond the last level")
+        reference_problem = prepare(case, refine=finest)
+        reference = {
+            name: solve_case(case, method=name, problem=reference_problem) for name in methods
+        }
+        reference_lambda = nodal_multiplier(
+            (reference.get("positive") or solve_case(case, method="positive", problem=reference_problem)).solution
+        )
+    rows = []
+    for level in range(levels):
+        timings: dict[str, float] = {}
+        started = time.perf_counter()
+        problem = prepare(case, refine=base_refine + level, timings=timings)
+        setup = time.perf_counter() - started
+        for name in methods:
+            outcome = solve_case(case, method=name, problem=problem)
+            if exact is not None:
+                errors = exact_errors(outcome.solution, problem, exact)
+            else:
+                errors = nested_errors(
+                    outcome.solution, reference[name].solution, reference[name].problem,
+                    levels=finest - base_refine - level, reference_multiplier=reference_lambda,
+                )
+            row = {
+                "level": level,
+                "method": name,
+                "h": float(problem.mesh.triangle_diameters().max()),
+                "unknowns": problem.n_unknowns,
+                "contact_nodes": int(len(problem.contact.nodes)),
+                "iterations": outcome.kernel.iterations,
+                "mesh_seconds": timings["mesh"],
+                "assemble_seconds": timings["assemble"],
+                "solve_seconds": outcome.timings["solve"],
+                "total_seconds": setup + outcome.timings["solve"] + outcome.timings["postprocess"],
+                **errors,
+            }
+            rows.append(row)
+            say(f"level {level} {name}: h = {row['h']:.4g}, {row['unknowns']} unknowns, "
+                f"H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
+    rates = {}
+    for name in methods:
+        mine = [r for r in rows if r["method"] == name]
+        h = [r["h"] for r in mine]
+        rates[name] = {
+            norm: [float(v) for v in observed_rates(h, [r[norm] for r in mine])] for norm in NORM_NAMES
+        }
+    return {
+        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "reference": "exact" if exact is not None else f"nested, {extra} refinement(s) finer",
+        "levels": levels,
+        "rows": rows,
+        "rates": rates,
+    }
+
+
+def _exact_of(case: Case):
+    """The case's exact solution as the norms expect it, or None."""
+    builder = getattr(case, "exact_solution", None)
+    return builder() if callable(builder) else None
