@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 from fractions import Fraction
 
 import numpy as np
@@ -326,7 +327,7 @@ class _Boundary:
 
 
 def _arc_points(
-    start: np.ndarray, end: np.ndarray, arc: Arc, max_edge: float
+    start: np.ndarray, end: np.ndarray, arc: Arc, max_edge: float, size: SizeField | None = None
 ) -> tuple[np.ndarray, float]:
     """Points along an arc, start included and end excluded, and its radius.
 
@@ -341,6 +342,17 @@ def _arc_points(
     theta0 = math.atan2(start[1] - center[1], start[0] - center[0])
     theta1 = math.atan2(end[1] - center[1], end[0] - center[0])
     sweep = (theta1 - theta0) % (2 * math.pi) if arc.ccw else -((theta0 - theta1) % (2 * math.pi))
+    if size is not None:
+        def on_arc(t: np.ndarray) -> np.ndarray:
+            angle = theta0 + sweep * t
+            return center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+
+        t = _graded_parameters(on_arc, radius * abs(sweep), size)
+        # Keep at most MAX_CHORD_ANGLE per chord even where the size field is coarse.
+        extra = math.ceil(abs(sweep) / MAX_CHORD_ANGLE * (1 - 1e-12))
+        if len(t) < extra:
+            t = np.arange(extra) / extra
+        return on_arc(t), radius
     # A chord is shorter than its arc, so arc length / n <= max_edge suffices.
     n = max(
         1,
@@ -352,9 +364,29 @@ def _arc_points(
     return np.concatenate([start[None, :], inner]), radius
 
 
-def _line_points(start: np.ndarray, end: np.ndarray, max_edge: float) -> np.ndarray:
+# A size field: target edge length at points (k, 2) -> (k,).
+SizeField = Callable[[np.ndarray], np.ndarray]
+
+
+def _graded_parameters(curve: Callable[[np.ndarray], np.ndarray], length: float, size: SizeField) -> np.ndarray:
+    """Parameters t in [0, 1) of points spaced by the local size along a curve of ``length``.
+
+    The number of pieces equidistributes ∫ ds / h(s): each piece spans about one local
+    target length, so a graded boundary meets the graded triangles inside.
+    """
+    t = np.linspace(0.0, 1.0, 2049)
+    density = length / np.maximum(size(curve(t)), 1e-300)
+    cumulative = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(t))])
+    n = max(1, math.ceil(cumulative[-1] * (1 - 1e-12)))
+    return np.interp(np.arange(n) / n * cumulative[-1], cumulative, t)
+
+
+def _line_points(start: np.ndarray, end: np.ndarray, max_edge: float, size: SizeField | None = None) -> np.ndarray:
     """Points along a straight edge, start included and end excluded, spaced <= max_edge."""
     length = float(np.linalg.norm(end - start))
+    if size is not None:
+        t = _graded_parameters(lambda t: start + t[:, None] * (end - start), length, size)
+        return start + t[:, None] * (end - start)
     # The factor keeps lengths that are exact multiples of max_edge from gaining a
     # segment through rounding.
     n = max(1, math.ceil(length / max_edge * (1 - 1e-12)))
@@ -362,7 +394,7 @@ def _line_points(start: np.ndarray, end: np.ndarray, max_edge: float) -> np.ndar
     return start + t * (end - start)
 
 
-def _discretise(loops: list[Loop], max_edge: float) -> _Boundary:
+def _discretise(loops: list[Loop], max_edge: float, size: SizeField | None = None) -> _Boundary:
     """Split every edge of every loop into segments of length <= max_edge."""
     boundary = _Boundary()
     for loop in loops:
@@ -372,10 +404,10 @@ def _discretise(loops: list[Loop], max_edge: float) -> _Boundary:
             start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
             arc = loop.edge_arcs[i]
             if arc is None:
-                pts = _line_points(start, end, max_edge)
+                pts = _line_points(start, end, max_edge, size)
                 curve = -1
             else:
-                pts, radius = _arc_points(start, end, arc, max_edge)
+                pts, radius = _arc_points(start, end, arc, max_edge, size)
                 curve = boundary.curve(arc.center, radius)
             chunks.append(pts)
             parts.append(np.full(len(pts), boundary.part(loop.edge_names[i]), dtype=np.int64))
@@ -427,13 +459,35 @@ def _area_switch(area: float) -> str:
     return f"{area:.{digits}f}"
 
 
+def _refine_to_size(result: dict, holes: np.ndarray | None, size: SizeField, min_angle: float,
+                    rounds: int = 12) -> dict:
+    """Refine Triangle's mesh until every triangle is at most the equilateral one of edge
+    h(centroid); Triangle's ``r`` switch keeps segments and their markers."""
+    switches = f"rpq{float(min_angle):.6f}aQ"
+    for _ in range(rounds):
+        vertices = np.asarray(result["vertices"])
+        tri = np.asarray(result["triangles"])
+        corners = vertices[tri]
+        area = 0.5 * np.abs(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+        target = np.sqrt(3) / 4 * size(corners.mean(axis=1)) ** 2
+        if np.all(area <= 1.5 * target):
+            break
+        refine = {key: result[key] for key in ("vertices", "triangles", "segments", "segment_markers")}
+        refine["triangle_max_area"] = target[:, None]
+        if holes is not None:
+            refine["holes"] = holes
+        result = triangle.triangulate(refine, switches)
+    return result
+
+
 def _loop_label(index: int) -> str:
     """'the outer loop' or 'hole 2', for messages."""
     return "the outer loop" if index == 0 else f"hole {index - 1}"
 
 
 def triangulate_domain(
-    outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0
+    outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0,
+    size: SizeField | None = None,
 ) -> Mesh:
     """Quality triangulation of the region inside ``outer`` and outside every hole.
 
@@ -450,6 +504,10 @@ def triangulate_domain(
         triangle with this edge.
     min_angle : float, default 30
         Smallest angle Triangle's refinement guarantees, in degrees, in (0, 34].
+    size : callable, optional
+        A size field h(points (k, 2)) -> (k,), at most ``max_edge``: boundary points are
+        spaced by it and triangles refined until each is no larger than the
+        equilateral triangle of edge h at its centroid (a graded mesh).
 
     Returns
     -------
@@ -474,7 +532,7 @@ def triangulate_domain(
         if not isinstance(loop, Loop):
             raise MeshError(f"{_loop_label(index)} must be a Loop, got {type(loop).__name__}")
     max_edge = float(max_edge)
-    boundary = _discretise(loops, max_edge)
+    boundary = _discretise(loops, max_edge, size)
 
     sizes = [len(p) for p in boundary.points]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
@@ -510,6 +568,8 @@ def triangulate_domain(
     max_area = max_edge**2 * math.sqrt(3) / 4
     switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q"
     result = triangle.triangulate(pslg, switches)
+    if size is not None:
+        result = _refine_to_size(result, pslg.get("holes"), size, min_angle)
     tri = result.get("triangles")
     if tri is None or len(tri) == 0:
         raise MeshError("Triangle produced no triangles; are the holes inside the outer loop?")
