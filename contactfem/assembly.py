@@ -110,15 +110,23 @@ def edge_geometry(points: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np
     return length, normal
 
 
+# A traction that depends on the boundary's outward unit normal: g(x, y, n) -> (k, 2).
+EdgeTraction = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
 def traction_vector(
     points: np.ndarray,
     edges: np.ndarray,
     traction: tuple[Field, Field] | None = None,
     pressure: Field | None = None,
+    edge_traction: EdgeTraction | None = None,
 ) -> np.ndarray:
     """Load vector (2n,) of ∫_E g·v over boundary edges, by Simpson's rule (exact for quadratic g).
 
-    ``traction`` gives g directly; ``pressure`` p gives g = -p n with n the outward normal.
+    Give one of: ``traction`` g = (g_x, g_y) directly; ``pressure`` p, g = −p n with n the
+    outward normal; ``edge_traction`` g(x, y, n) → (k, 2), called with the k points of one
+    Simpson node on every edge and the edges' outward normals (k, 2), e.g. σ n of an exact
+    stress.
     """
     n_dof = 2 * len(points)
     if len(edges) == 0:
@@ -126,18 +134,21 @@ def traction_vector(
     length, normal = edge_geometry(points, edges)
     a, b = points[edges[:, 0]], points[edges[:, 1]]
     m = 0.5 * (a + b)
+    if edge_traction is not None:
+        values = [np.broadcast_to(edge_traction(q[:, 0], q[:, 1], normal), normal.shape) for q in (a, m, b)]
+    elif pressure is not None:
+        values = [-normal * np.broadcast_to(pressure(q[:, 0], q[:, 1]), length.shape)[:, None] for q in (a, m, b)]
+    else:
+        values = [np.stack([np.broadcast_to(f(q[:, 0], q[:, 1]), length.shape) for f in traction], axis=1)
+                  for q in (a, m, b)]
+    ga, gm, gb = values
     load = np.zeros(n_dof)
     for component in range(2):
-        if pressure is not None:
-            values = [-normal[:, component] * np.broadcast_to(pressure(q[:, 0], q[:, 1]), length.shape)
-                      for q in (a, m, b)]
-        else:
-            f = traction[component]
-            values = [np.broadcast_to(f(q[:, 0], q[:, 1]), length.shape) for q in (a, m, b)]
-        ga, gm, gb = values
         # Simpson: ∫ g φ_a = L/6 (g(a) + 2 g(m)), ∫ g φ_b = L/6 (g(b) + 2 g(m)).
-        load += np.bincount(2 * edges[:, 0] + component, length / 6 * (ga + 2 * gm), minlength=n_dof)
-        load += np.bincount(2 * edges[:, 1] + component, length / 6 * (gb + 2 * gm), minlength=n_dof)
+        load += np.bincount(2 * edges[:, 0] + component, length / 6 * (ga[:, component] + 2 * gm[:, component]),
+                            minlength=n_dof)
+        load += np.bincount(2 * edges[:, 1] + component, length / 6 * (gb[:, component] + 2 * gm[:, component]),
+                            minlength=n_dof)
     return load
 
 

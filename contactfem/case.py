@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -20,12 +20,16 @@ from contactfem.errors import CaseError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
 from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems
 
+if TYPE_CHECKING:
+    from contactfem.exact import ExactSolution
+
 METHODS = ("positive", "standard")
 PART_KINDS = ("clamped", "free", "contact")
 PART_LOADS = ("traction", "pressure", "displacement")
 DIAGONALS = ("right", "left", "alternate", "crossed")
 OUTPUT_FILES = ("vtu", "h5", "json")
 BACKENDS = ("auto", "cholmod", "pardiso", "superlu")
+EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
 
 
@@ -77,12 +81,20 @@ class BoundaryPart:
 
     ``kind`` is clamped | free | contact | traction | pressure | displacement. ``values``
     holds the two components of a traction or a displacement (None for a displacement
-    component left free), or the single pressure.
+    component left free), or the single pressure. ``exact`` marks ``{traction: exact}``
+    (``values`` empty: σ(u_exact) n depends on the edge's normal) and
+    ``{displacement: exact}`` (``values`` are the exact block's two expressions).
     """
 
     name: str
     kind: str
     values: tuple[Expression | None, ...] = ()
+    exact: bool = False
+
+    @property
+    def label(self) -> str:
+        """The kind as the case file says it, e.g. ``traction (exact)``."""
+        return f"{self.kind} (exact)" if self.exact else self.kind
 
     @property
     def is_dirichlet(self) -> bool:
@@ -95,6 +107,19 @@ class Obstacle:
 
     point: tuple[float, float]
     normal: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class ExactBlock:
+    """The ``exact:`` block: a manufactured displacement and what is derived from it.
+
+    ``displacement`` holds the two checked expressions; ``solution`` is the
+    :class:`~contactfem.exact.ExactSolution` built from them once, at validation, with
+    the case's plane law and obstacle normal (excluded from comparison and hashing).
+    """
+
+    displacement: tuple[Expression, Expression]
+    solution: "ExactSolution" = field(compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -114,7 +139,11 @@ class OutputSettings:
 
 @dataclass(frozen=True)
 class Case:
-    """A validated case. ``text`` is the file as read, ``digest`` its SHA-256."""
+    """A validated case. ``text`` is the file as read, ``digest`` its SHA-256.
+
+    ``exact`` is the manufactured solution of an ``exact:`` block (None without one); the
+    body force is then derived from it and ``body_force`` is None.
+    """
 
     source: Path
     text: str
@@ -128,6 +157,7 @@ class Case:
     obstacle: Obstacle
     solver: SolverSettings
     output: OutputSettings
+    exact: ExactBlock | None = None
 
     def part(self, name: str) -> BoundaryPart:
         return next(p for p in self.parts if p.name == name)
@@ -142,6 +172,10 @@ class Case:
     @property
     def dirichlet_parts(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.parts if p.is_dirichlet)
+
+    def exact_solution(self) -> "ExactSolution | None":
+        """The exact: block's derived solution (for the norms), or None without one."""
+        return None if self.exact is None else self.exact.solution
 
     def with_solver(self, **changes: Any) -> "Case":
         """A copy with some solver settings replaced (validated like the file's)."""
@@ -281,7 +315,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     top = r.mapping(
         data, "",
         ("title", "description", "geometry", "mesh", "material", "body_force",
-         "boundary", "obstacle", "solver", "output"),
+         "boundary", "obstacle", "solver", "output", "exact"),
         required=("geometry", "material", "boundary", "obstacle"),
     )
     title = top.get("title", source.stem)
@@ -293,11 +327,11 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     geometry, part_names = _geometry(r, top["geometry"], source)
     mesh = _mesh_settings(r, top.get("mesh", {}), geometry)
     material = _material(r, top["material"])
-    body_force = None
-    if top.get("body_force") is not None:
-        body_force = r.vector_field(top["body_force"], "body_force")
-    parts = _boundary(r, top["boundary"], part_names)
+    exact_displacement = _exact_displacement(r, top["exact"]) if "exact" in top else None
+    body_force = _body_force(r, top.get("body_force"), exact_displacement is not None)
+    parts = _boundary(r, top["boundary"], part_names, exact_displacement)
     obstacle = _obstacle(r, top["obstacle"])
+    exact = None if exact_displacement is None else _exact_block(r, exact_displacement, material, obstacle)
     solver = _solver(r, top.get("solver", {}))
     output = _output(r, top.get("output", {}), source)
     return Case(
@@ -313,6 +347,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
         obstacle=obstacle,
         solver=solver,
         output=output,
+        exact=exact,
     )
 
 
@@ -508,7 +543,45 @@ def _material(r: _Reader, data: Any) -> Material:
     return Material(lame_lambda=lam, lame_mu=mu, plane=plane, young=young, poisson=nu)
 
 
-def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None) -> tuple[BoundaryPart, ...]:
+def _exact_displacement(r: _Reader, data: Any) -> tuple[Expression, Expression]:
+    data = r.mapping(data, "exact", ("displacement",), required=("displacement",))
+    return r.vector_field(data["displacement"], "exact.displacement")  # type: ignore[return-value]
+
+
+def _exact_block(r: _Reader, displacement: tuple[Expression, Expression], material: Material,
+                 obstacle: Obstacle) -> ExactBlock:
+    """Derive the exact fields once, with the plane law; refuse what sympy cannot differentiate or evaluate."""
+    from contactfem.assembly import Elasticity
+    from contactfem.exact import ExactSolution
+
+    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
+    try:
+        solution = ExactSolution.from_expressions(displacement, law.lam, law.mu, obstacle.normal)
+    except ExpressionError as error:
+        texts = [e.text for e in displacement]
+        raise r.fail("exact.displacement", texts, f"cannot derive the stress and body force: {error}") from None
+    return ExactBlock(displacement=displacement, solution=solution)
+
+
+def _body_force(r: _Reader, value: Any, has_exact: bool) -> tuple[Expression, Expression] | None:
+    """The body force; with an exact: block it is derived (f = −div σ), so only `exact` or nothing is accepted."""
+    if has_exact:
+        if value is not None and value != EXACT:
+            raise r.fail(
+                "body_force", value,
+                "with an exact: block the body force is derived from exact.displacement (f = -div sigma); "
+                "give body_force: exact or leave it out",
+            )
+        return None
+    if value == EXACT:
+        raise r.fail("body_force", value, "'exact' needs an exact: block with the displacement")
+    if value is None:
+        return None
+    return r.vector_field(value, "body_force")  # type: ignore[return-value]
+
+
+def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None,
+              exact: tuple[Expression, Expression] | None = None) -> tuple[BoundaryPart, ...]:
     if not isinstance(data, dict) or not data:
         raise r.fail("boundary", data, "expected a mapping of boundary part names to conditions")
     parts = []
@@ -532,6 +605,13 @@ def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None) -> tupl
         (kind, value), = spec.items()
         if kind not in PART_LOADS:
             raise CaseError(f"{r.filename}: {key}.{kind}: unknown key; expected one of {', '.join(PART_LOADS)}")
+        if value == EXACT:
+            if kind == "pressure":
+                raise r.fail(f"{key}.pressure", value, "'exact' is for traction and displacement; use {traction: exact}")
+            if exact is None:
+                raise r.fail(f"{key}.{kind}", value, "'exact' needs an exact: block with the displacement")
+            parts.append(BoundaryPart(name, kind, exact if kind == "displacement" else (), exact=True))
+            continue
         if kind == "pressure":
             values: tuple[Expression | None, ...] = (r.expression(value, f"{key}.pressure"),)
         else:

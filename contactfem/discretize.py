@@ -229,12 +229,25 @@ def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:
     stiffness = stiffness_matrix(points, mesh.triangles, law)
 
     load = np.zeros(2 * mesh.n_points)
+    exact = case.exact.solution if case.exact is not None else None
     if case.body_force is not None:
         _check_finite(case, "body_force", case.body_force, _centroids(mesh))
         load += body_force_vector(points, mesh.triangles, case.body_force)
+    if exact is not None:
+        # f = −div σ(u_exact), at the edge midpoints the load's quadrature uses.
+        midpoints = 0.5 * (points[mesh.triangles] + np.roll(points[mesh.triangles], -1, axis=1)).reshape(-1, 2)
+        _refuse_non_finite_exact(case, "body_force = 'exact' (-div sigma)", exact.body_force(*midpoints.T), midpoints)
+        force = (lambda x, y: exact.body_force(x, y)[..., 0], lambda x, y: exact.body_force(x, y)[..., 1])
+        load += body_force_vector(points, mesh.triangles, force)
     for part in case.parts:
         edges = mesh.edges_of(part.name)
-        if part.kind in ("traction", "pressure") and len(edges):
+        if part.exact and part.kind == "traction" and len(edges):
+            _, outward = edge_geometry(points, edges)
+            where = _edge_samples(points, edges)
+            values = exact.traction(*where.T, np.concatenate([outward] * 3))
+            _refuse_non_finite_exact(case, f"boundary.{part.name}.traction = 'exact' (sigma n)", values, where)
+            load += traction_vector(points, edges, edge_traction=exact.traction)
+        elif part.kind in ("traction", "pressure") and len(edges):
             key = f"boundary.{part.name}.{part.kind}"
             _check_finite(case, key, part.values, _edge_samples(points, edges))
             if part.kind == "traction":
@@ -244,6 +257,8 @@ def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:
 
     dirichlet_dofs, dirichlet_values = _supports(case, mesh)
     contact = _contact_boundary(case, mesh, dirichlet_dofs)
+    if exact is not None:
+        check_exact_contact(case, mesh, contact.edges)
     return DiscreteProblem(
         mesh=mesh, law=law, stiffness=stiffness, load=load,
         dirichlet_dofs=dirichlet_dofs, dirichlet_values=dirichlet_values, contact=contact,
@@ -345,6 +360,82 @@ def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray) -> Con
         nodes=nodes, edges=edges, gap=gap, abscissa=abscissa, normal=normal, tangent=tangent,
         masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent),
     )
+
+
+#: Where on each ΓC edge the exact solution's contact conditions are checked (0 and 1: its ends).
+EXACT_CHECK_POINTS = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+#: Relative tolerance of those checks, against the scales of the exact displacement and stress.
+EXACT_CHECK_TOLERANCE = 1e-9
+
+
+def check_exact_contact(case: Case, mesh: Mesh, edges: np.ndarray) -> None:
+    """Refuse an exact solution that violates a frictionless contact condition on ΓC.
+
+    At the ends and 4 interior points of every contact edge, with g the initial gap of
+    the point, u_n = u·n, p = −n·σ n and σ_t = t·σ n: u_n − g ≤ τ_u, p ≥ −τ_σ,
+    |p (u_n − g)| ≤ τ_σ τ_u / 1e-9 and |σ_t| ≤ τ_σ, where τ_u = 1e-9 × the largest |u| (at
+    the mesh nodes and the check points) or |g|, and τ_σ = 1e-9 × the largest |σ| (at the
+    check points and the triangle centroids). Points where the exact stress is not
+    finite (the 0/0 of a derivative formula at a singular point such as the tip of
+    r^{3/2}) are left out of the stress conditions; the displacement must be finite.
+
+    Raises
+    ------
+    CaseError
+        ``file: exact.displacement: <condition> fails at (x, y) (value ..., tolerance ...)``.
+    """
+    exact = case.exact.solution
+    normal = np.asarray(case.obstacle.normal, dtype=float)
+    a, b = mesh.points[edges[:, 0]], mesh.points[edges[:, 1]]
+    where = np.concatenate([(1 - s) * a + s * b for s in EXACT_CHECK_POINTS])
+    x, y = where.T
+    u = exact.displacement(x, y)
+    _refuse_non_finite_exact(case, "exact.displacement", u, where, "on the contact boundary")
+    gap = (np.asarray(case.obstacle.point) - where) @ normal
+    slack = exact.normal_displacement(x, y) - gap
+    pressure = exact.pressure(x, y)
+    tangential = exact.tangential_traction(x, y)
+    stress_finite = np.isfinite(pressure) & np.isfinite(tangential)
+
+    def largest(values: np.ndarray) -> float:
+        values = np.abs(values[np.isfinite(values)])
+        return float(values.max(initial=0.0))
+
+    u_scale = max(largest(exact.displacement(*mesh.points.T)), largest(u), largest(gap))
+    centroids = _centroids(mesh)
+    s_scale = max(largest(exact.stress(x, y)), largest(exact.stress(*centroids.T)))
+    tol_u = EXACT_CHECK_TOLERANCE * u_scale
+    tol_s = EXACT_CHECK_TOLERANCE * s_scale
+    complementarity = np.where(stress_finite, np.abs(pressure * slack), 0.0)
+    conditions = (
+        ("non-penetration u_n <= g", slack, slack > tol_u, tol_u),
+        ("pressure -sigma_nn >= 0", pressure, stress_finite & (pressure < -tol_s), tol_s),
+        ("complementarity pressure * (u_n - g) = 0", complementarity,
+         complementarity > EXACT_CHECK_TOLERANCE * s_scale * u_scale, EXACT_CHECK_TOLERANCE * s_scale * u_scale),
+        ("zero tangential traction sigma_t = 0 (frictionless)", tangential,
+         stress_finite & (np.abs(tangential) > tol_s), tol_s),
+    )
+    for name, values, fails, tolerance in conditions:
+        if fails.any():
+            worst = np.flatnonzero(fails)[np.argmax(np.abs(values[fails]))]
+            px, py = where[worst]
+            raise CaseError(
+                f"{case.source.name}: exact.displacement: {name} fails at ({px:g}, {py:g}) "
+                f"(value {values[worst]:.3g}, tolerance {tolerance:.3g}); the exact solution must satisfy "
+                f"the frictionless contact conditions on {', '.join(f'boundary.{n}' for n in case.contact_parts)}"
+            )
+
+
+def _refuse_non_finite_exact(case: Case, key: str, values: np.ndarray, where: np.ndarray,
+                             reason: str = "where the load is integrated") -> None:
+    """Refuse non-finite values (len(where), ...) of a field derived from exact.displacement."""
+    bad = ~np.isfinite(values.reshape(len(where), -1)).all(axis=1)
+    if bad.any():
+        x, y = where[np.argmax(bad)]
+        raise CaseError(
+            f"{case.source.name}: {key}: not finite at ({x:g}, {y:g}) (derived from exact.displacement); "
+            f"expected finite values {reason} (keep singular points off the mesh's quadrature points)"
+        )
 
 
 def _centroids(mesh: Mesh) -> np.ndarray:

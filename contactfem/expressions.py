@@ -13,7 +13,7 @@ import numpy as np
 
 from contactfem.errors import ContactFemError
 
-__all__ = ["ExpressionError", "Expression", "compile_expression"]
+__all__ = ["ExpressionError", "Expression", "compile_expression", "to_sympy", "sympy_symbols"]
 
 #: Refused before evaluation: longer text, more expression nodes, deeper nesting.
 MAX_LENGTH = 1000
@@ -145,6 +145,14 @@ def compile_expression(value: int | float | str) -> Expression:
         got = "None" if value is None else type(value).__name__
         raise ExpressionError(f"expected a number or an expression string, got {got}")
     text = " ".join(value.split())
+    tree = _parse(text)
+    variables: set[str] = set()
+    fn = _build(tree, variables)
+    return Expression(text, not variables, frozenset(variables), fn)
+
+
+def _parse(text: str) -> ast.expr:
+    """Parse normalised text into an expression tree, refusing what is empty, too long, too large or too deep."""
     if not text:
         raise ExpressionError("empty expression")
     if len(text) > MAX_LENGTH:
@@ -161,9 +169,7 @@ def compile_expression(value: int | float | str) -> Expression:
     except (RecursionError, ValueError, MemoryError, OverflowError) as exc:
         raise ExpressionError(f"not a valid expression: {exc or type(exc).__name__}") from None
     _check_size(tree.body)
-    variables: set[str] = set()
-    fn = _build(tree.body, variables)
-    return Expression(text, not variables, frozenset(variables), fn)
+    return tree.body
 
 
 def _check_size(root: ast.AST) -> None:
@@ -268,3 +274,100 @@ def _call(node: ast.Call, variables: set[str]) -> _Fn:
         raise ExpressionError(f"{name}() takes {arity} argument{plural}, got {len(node.args)}")
     args = [_build(arg, variables) for arg in node.args]
     return lambda x, y: function(*[arg(x, y) for arg in args])
+
+
+# --------------------------------------------------------------------------- to sympy
+
+
+def sympy_symbols() -> tuple[Any, Any]:
+    """The sympy symbols x and y (real) that :func:`to_sympy` uses."""
+    import sympy
+
+    return sympy.Symbol("x", real=True), sympy.Symbol("y", real=True)
+
+
+def to_sympy(expression: Expression) -> Any:
+    """The sympy form of a checked expression, through the same whitelisted tree.
+
+    ``expression.text`` is parsed again and checked node by node by the same rules as
+    :func:`compile_expression`; each node is then mapped to its sympy counterpart. The
+    text never reaches ``eval``, ``sympify`` or ``lambdify``.
+
+    Integers become ``Integer``; floats the exact rational of their shortest decimal
+    form (``0.1`` → 1/10), so ``x**0.5`` is ``sqrt(x)``. ``pi``, ``e`` are ``pi``, ``E``.
+    ``hypot(a, b)`` is ``sqrt(a**2 + b**2)``, ``log10``/``log2`` are ``log(a)/log(10|2)``,
+    ``minimum``/``maximum`` are ``Min``/``Max``, ``abs`` is ``Abs``, ``ceil`` is
+    ``ceiling``. A comparison used as a value is ``Piecewise((1, rel), (0, True))`` (the
+    1.0/0.0 of the numeric form); ``where(c, a, b)`` is ``Piecewise((a, c), (b, True))``
+    with ``c`` the relational (a chain ``a < b < c`` is an ``And``), or ``Ne(c, 0)`` when
+    ``c`` is not a comparison.
+
+    Returns
+    -------
+    sympy.Expr
+        In the real symbols of :func:`sympy_symbols`.
+
+    Raises
+    ------
+    ExpressionError
+        If the text is refused by the checker (it cannot be, for an Expression made by
+        :func:`compile_expression`).
+    """
+    import sympy
+
+    tree = _parse(expression.text)
+    _build(tree, set())  # the same whitelist as the numeric form, before any mapping
+    return _Sympy(sympy, *sympy_symbols()).value(tree)
+
+
+class _Sympy:
+    """Maps checked ast nodes to sympy objects (only the whitelisted node types)."""
+
+    def __init__(self, sympy: Any, x: Any, y: Any) -> None:
+        self.s = sympy
+        self.names = {"x": x, "y": y, "pi": sympy.pi, "e": sympy.E}
+        s = sympy
+        self.binary = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
+                       ast.Mult: lambda a, b: a * b, ast.Div: lambda a, b: a / b,
+                       ast.Pow: lambda a, b: s.Pow(a, b), ast.Mod: lambda a, b: s.Mod(a, b)}
+        self.compare = {ast.Lt: s.Lt, ast.LtE: s.Le, ast.Gt: s.Gt, ast.GtE: s.Ge, ast.Eq: s.Eq, ast.NotEq: s.Ne}
+        self.functions: dict[str, Callable[..., Any]] = {
+            "sin": s.sin, "cos": s.cos, "tan": s.tan, "arcsin": s.asin, "arccos": s.acos, "arctan": s.atan,
+            "sinh": s.sinh, "cosh": s.cosh, "tanh": s.tanh, "exp": s.exp, "log": s.log,
+            "log10": lambda a: s.log(a, 10), "log2": lambda a: s.log(a, 2), "sqrt": s.sqrt,
+            "abs": s.Abs, "sign": s.sign, "floor": s.floor, "ceil": s.ceiling, "arctan2": s.atan2,
+            "hypot": lambda a, b: s.sqrt(a**2 + b**2), "minimum": s.Min, "maximum": s.Max,
+        }
+
+    def value(self, node: ast.AST) -> Any:
+        s = self.s
+        if isinstance(node, ast.Constant):
+            _constant(node.value)  # refuses what the numeric form refuses
+            if isinstance(node.value, (int, np.integer)):
+                return s.Integer(int(node.value))
+            return s.Rational(repr(float(node.value)))
+        if isinstance(node, ast.Name) and node.id in self.names:
+            return self.names[node.id]
+        if isinstance(node, ast.BinOp) and type(node.op) in self.binary:
+            return self.binary[type(node.op)](self.value(node.left), self.value(node.right))
+        if isinstance(node, ast.UnaryOp) and type(node.op) in _UNARY:
+            operand = self.value(node.operand)
+            return -operand if isinstance(node.op, ast.USub) else operand
+        if isinstance(node, ast.Compare):
+            return s.Piecewise((s.Integer(1), self.condition(node)), (s.Integer(0), True))
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS:
+            name = _ALIASES.get(node.func.id, node.func.id)
+            if name == "where":
+                condition, if_true, if_false = node.args
+                return s.Piecewise((self.value(if_true), self.condition(condition)), (self.value(if_false), True))
+            return self.functions[name](*[self.value(arg) for arg in node.args])
+        raise ExpressionError(_REFUSED.get(type(node), f"{type(node).__name__} is not allowed"))
+
+    def condition(self, node: ast.AST) -> Any:
+        """A relational (an And of them for a chain), or ``value != 0`` for any other node."""
+        s = self.s
+        if isinstance(node, ast.Compare) and all(type(op) in self.compare for op in node.ops):
+            operands = [self.value(node.left), *(self.value(c) for c in node.comparators)]
+            relations = [self.compare[type(op)](a, b) for op, a, b in zip(node.ops, operands, operands[1:])]
+            return s.And(*relations)
+        return s.Ne(self.value(node), 0)

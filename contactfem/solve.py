@@ -194,9 +194,24 @@ def build_report(outcome: Outcome) -> dict:
             "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
         },
         "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force),
+        "errors": _exact_errors(case, problem, solution),
         "timings": dict(outcome.timings),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
+
+
+def _exact_errors(case: Case, problem: DiscreteProblem, solution: Solution) -> dict | None:
+    """The six norms of exact − discrete for a case with an exact: block (None otherwise).
+
+    The multiplier is compared with the exact pressure −σ_nn(u_exact) on ΓC. A norm
+    that is not finite (a singular exact field hit by a quadrature point) is null.
+    """
+    if case.exact is None:
+        return None
+    from contactfem.norms import exact_errors
+
+    errors = exact_errors(solution, problem, case.exact.solution)
+    return {name: (float(value) if np.isfinite(value) else None) for name, value in errors.items()}
 
 
 def write_outputs(outcome: Outcome, directory: Path, files: tuple[str, ...] | None = None,

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CASES = sorted((ROOT / "cases").glob("*.yaml"))
 METHODS = ("positive", "standard")
 OUTPUT_FILES = ("solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "report.json")
-REPORT_KEYS = ("schema_version", "method", "mesh", "newton", "sign_conditions", "contact_zone",
+REPORT_KEYS = ("schema_version", "method", "mesh", "newton", "sign_conditions", "contact_zone", "errors",
                "contact_force", "equilibrium", "timings")
 
 
