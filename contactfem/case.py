@@ -59,11 +59,16 @@ Geometry = RectangleGeometry | PolygonGeometry | MeshFileGeometry
 
 @dataclass(frozen=True)
 class MeshSettings:
+    """How to mesh. ``contact_size`` and ``grading`` grade a polygon mesh towards ΓC:
+    h(x) = min(size, contact_size + grading · distance(x, ΓC))."""
+
     divisions: tuple[int, int] | None
     size: float | None
     diagonal: str
     refine: int
     min_angle: float
+    contact_size: float | None = None
+    grading: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -471,7 +476,7 @@ def _points_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def _mesh_settings(r: _Reader, data: Any, geometry: Geometry) -> MeshSettings:
     data = r.mapping(data if data is not None else {}, "mesh",
-                     ("divisions", "size", "diagonal", "refine", "min_angle"))
+                     ("divisions", "size", "diagonal", "refine", "min_angle", "contact_size", "grading"))
     divisions = None
     if "divisions" in data:
         if not isinstance(geometry, RectangleGeometry):
@@ -503,7 +508,19 @@ def _mesh_settings(r: _Reader, data: Any, geometry: Geometry) -> MeshSettings:
         divisions = (max(1, math.ceil(width / h - 1e-9)), max(1, math.ceil(height / h - 1e-9)))
     if isinstance(geometry, PolygonGeometry) and size is None:
         size = _extent(geometry) / 20
-    return MeshSettings(divisions=divisions, size=size, diagonal=diagonal, refine=refine, min_angle=min_angle)
+    contact_size = None
+    if "contact_size" in data:
+        if not isinstance(geometry, PolygonGeometry):
+            raise r.fail("mesh.contact_size", data["contact_size"],
+                         "graded meshes need a polygon geometry (Triangle); a rectangle can be given as a polygon")
+        contact_size = r.number(data["contact_size"], "mesh.contact_size", low=0, high=size, low_open=True,
+                                expected=f"must be in (0, mesh.size = {size:g}]")
+    elif "grading" in data:
+        raise r.fail("mesh.grading", data["grading"], "only meaningful with mesh.contact_size")
+    grading = r.number(data.get("grading", 0.25), "mesh.grading", low=0.01, high=10.0,
+                       expected="must be in [0.01, 10] (growth of h per unit distance from the contact parts)")
+    return MeshSettings(divisions=divisions, size=size, diagonal=diagonal, refine=refine, min_angle=min_angle,
+                        contact_size=contact_size, grading=grading)
 
 
 def _extent(geometry: Geometry) -> float | None:

@@ -55,7 +55,7 @@ BYTES_PER_TRIANGLE = 2500
 
 
 def estimate_triangles(case: Case, refine: int | None = None) -> int:
-    """Triangles the case will be meshed into, estimated before meshing (None: unknown)."""
+    """Triangles the case will be meshed into, estimated before meshing (0 for mesh files)."""
     geometry, settings = case.geometry, case.mesh
     times = settings.refine if refine is None else refine
     if isinstance(geometry, RectangleGeometry):
@@ -67,9 +67,52 @@ def estimate_triangles(case: Case, refine: int | None = None) -> int:
         # Bounding box over the area of an equilateral triangle of side h, a safe upper bound.
         extent = max(span.max(), 1e-300)
         base = int(1.2 * extent * extent / (np.sqrt(3) / 4 * settings.size**2)) + 1
+        if settings.contact_size is not None:
+            # The graded band: ∫ L dd / area(h(d)) with h = hc + g d is L / (√3/4 · g · hc),
+            # with L bounded by π times the extent.
+            band = np.pi * extent / (np.sqrt(3) / 4 * settings.grading * settings.contact_size)
+            base += int(band)
     else:
         return 0
     return int(base * 4**times)
+
+
+def _contact_grading(case: Case):
+    """The size field h(x) = min(size, contact_size + grading · distance(x, ΓC)).
+
+    The distance is to points sampled on the contact edges of the geometry at a quarter
+    of contact_size, so it is exact to that spacing.
+    """
+    from scipy.spatial import cKDTree
+
+    settings = case.mesh
+    samples = []
+    for loop in (case.geometry.outer, *case.geometry.holes):
+        k = len(loop.vertices)
+        for i, (name, arc) in enumerate(zip(loop.edge_names, loop.edge_arcs)):
+            if name not in case.contact_parts:
+                continue
+            start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
+            if arc is None:
+                length = np.linalg.norm(end - start)
+                t = np.linspace(0.0, 1.0, max(2, int(4 * length / settings.contact_size) + 2))
+                samples.append(start + t[:, None] * (end - start))
+            else:
+                center = np.asarray(arc.center)
+                radius = np.linalg.norm(start - center)
+                a0 = np.arctan2(*(start - center)[::-1])
+                a1 = np.arctan2(*(end - center)[::-1])
+                sweep = (a1 - a0) % (2 * np.pi) if arc.ccw else -((a0 - a1) % (2 * np.pi))
+                n = max(2, int(4 * radius * abs(sweep) / settings.contact_size) + 2)
+                angle = a0 + sweep * np.linspace(0.0, 1.0, n)
+                samples.append(center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
+    tree = cKDTree(np.concatenate(samples))
+
+    def size(points: np.ndarray) -> np.ndarray:
+        distance, _ = tree.query(points)
+        return np.minimum(settings.size, settings.contact_size + settings.grading * distance)
+
+    return size
 
 
 def _mesh_origin(case: Case) -> str:
@@ -105,7 +148,8 @@ def _mesh_geometry(case: Case) -> Mesh:
         )
     elif isinstance(geometry, PolygonGeometry):
         mesh = triangulate_domain(
-            geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle
+            geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
+            size=_contact_grading(case) if settings.contact_size is not None else None,
         )
     else:
         assert isinstance(geometry, MeshFileGeometry)

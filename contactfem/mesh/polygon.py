@@ -468,7 +468,8 @@ def _refine_to_size(result: dict, holes: np.ndarray | None, size: SizeField, min
         vertices = np.asarray(result["vertices"])
         tri = np.asarray(result["triangles"])
         corners = vertices[tri]
-        area = 0.5 * np.abs(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
         target = np.sqrt(3) / 4 * size(corners.mean(axis=1)) ** 2
         if np.all(area <= 1.5 * target):
             break
