@@ -59,3 +59,17 @@ def test_cli_compare_and_converge_write_json_csv_and_pngs(tmp_path):
     assert csv[0].startswith("level,method,h") and len(csv) == 3
     for name in ("convergence_h.png", "convergence_time.png"):
         assert (out / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_square_rates_lie_between_the_theorem_and_p1():
+    """The square has clamped–free corners (left end of the top, and the lift-off zone
+    meeting the clamp at the origin) and a contact/separation point, so u is only in
+    H^{3/2+ν} for some 0 < ν < 1/2. Theorem 3.7 then gives ‖u − u_h‖₁ = O(h^{1/2+ν}), at
+    least h^{1/2}; P1 can never beat h¹. The fitted H¹ rate over h = 1/8 … 1/32 (reference
+    two refinements finer) must lie in [0.45, 1.05], and so must the energy-norm rate."""
+    study = convergence_study(case_from(square_case_dict(8)), levels=3, extra=2, methods=("positive",))
+    rows = study["rows"]
+    h = np.log([r["h"] for r in rows])
+    for norm in ("displacement_h1", "displacement_energy"):
+        slope = np.polyfit(h, np.log([r[norm] for r in rows]), 1)[0]
+        assert 0.45 <= slope <= 1.05, (norm, slope)
