@@ -80,6 +80,7 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
                 x0, y0 = x[keep][0], y[keep][0]
                 axis.loglog(x, y0 * (x / x0) ** theoretical_rate, "k--", lw=0.8,
                             label=f"h^{theoretical_rate:g}")
+            axis.xaxis.set_minor_formatter(plt.NullFormatter())
             axis.set_title(_LABELS[norm], fontsize=10)
             axis.set_xlabel(x_label, fontsize=8)
             axis.legend(fontsize=7)
