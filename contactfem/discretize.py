@@ -189,6 +189,7 @@ class DiscreteProblem:
     dirichlet_dofs: np.ndarray
     dirichlet_values: np.ndarray
     contact: ContactBoundary
+    refinements: int = 0  # uniform refinements of the case's own mesh (for mesh sequencing)
 
     @property
     def n_unknowns(self) -> int:

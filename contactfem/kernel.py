@@ -94,6 +94,8 @@ class KernelResult:
     c: float
     history: list[Iteration] = field(default_factory=list)
     cycle_detected_at: int | None = None
+    factorizations: int = 0
+    column_solves: int = 0
 
     @property
     def iterations(self) -> int:
@@ -152,6 +154,7 @@ def solve_contact(
     mass_solver = _mass_solver(mass) if m else None
 
     active = (gap <= 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
+    linear = ActiveSetSolver(stiffness, load, normal_dofs, gap, backend)
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     history: list[Iteration] = []
@@ -163,9 +166,7 @@ def solve_contact(
     for iteration in range(1, max_iterations + 1):
         started = time.perf_counter()
         seen[np.packbits(active).tobytes()] = iteration
-        displacement, reaction = _solve_with_fixed_normals(
-            stiffness, load, normal_dofs[active], gap[active], backend
-        )
+        displacement, reaction = linear.solve(active)
         reaction_at_contact = np.zeros(m)
         reaction_at_contact[active] = reaction
         multiplier = mass_solver(reaction_at_contact) if m else multiplier
@@ -250,26 +251,122 @@ def solve_contact(
         c=c,
         history=history,
         cycle_detected_at=cycle_detected_at,
+        factorizations=linear.factorizations,
+        column_solves=linear.column_solves,
     )
 
 
-def _solve_with_fixed_normals(
-    stiffness: sp.csr_matrix, load: np.ndarray, fixed: np.ndarray, values: np.ndarray, backend: str
-) -> tuple[np.ndarray, np.ndarray]:
-    """Solve K u = F with u[fixed] = values; return u and r = (F − K u)[fixed].
+class ActiveSetSolver:
+    """Solves K u = F with the normal unknowns of an active set fixed to their gaps,
+    reusing one factorisation across active sets.
 
-    r is the force each constraint carries: K u + r = F holds on the fixed rows.
+    The matrix is factorised once with the normals of a reference set A0 fixed. For
+    another set A, the nodes of A0 ∖ A (released: their normal unknown becomes free) and
+    of A ∖ A0 (added: fixed through a Lagrange multiplier) are few, and the solve reduces
+    to a dense system over them: with K00 the factorised block and Z = K00⁻¹ [K0r, E],
+
+        [K_rr − K_r0 Z_r    −K_r0 Z_d] [u_r]   [b_r − K_r0 z0]
+        [   −Eᵀ Z_r          −Eᵀ Z_d ] [ μ ] = [G_d − Eᵀ z0 ],   z0 = K00⁻¹ b0,
+
+    then u_0 = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor
+    and is kept for later iterations; beyond ``max_changes`` changed nodes the matrix is
+    factorised anew with the current set as reference.
     """
-    n = stiffness.shape[0]
-    free = np.ones(n, dtype=bool)
-    free[fixed] = False
-    displacement = np.zeros(n)
-    displacement[fixed] = values
-    rhs = load[free] - stiffness[free][:, fixed] @ values
-    if free.any():
-        displacement[free] = factorize(stiffness[free][:, free], backend).solve(rhs)
-    reaction = load[fixed] - stiffness[fixed] @ displacement
-    return displacement, reaction
+
+    def __init__(self, stiffness: sp.csr_matrix, load: np.ndarray, normal_dofs: np.ndarray,
+                 gap: np.ndarray, backend: str, max_changes: int = 64) -> None:
+        self.stiffness = stiffness
+        self.load = load
+        self.normal_dofs = normal_dofs
+        self.gap = gap
+        self.backend = backend
+        self.max_changes = max_changes
+        self.factorizations = 0
+        self.column_solves = 0
+        self.reference: np.ndarray | None = None
+
+    def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
+        changes = 0 if self.reference is None else np.count_nonzero(active != self.reference)
+        if self.reference is None or changes > self.max_changes or (changes and self.factor is None):
+            self._factorize(active)
+        released = np.flatnonzero(self.reference & ~active)
+        added = np.flatnonzero(~self.reference & active)
+        u = self._solve_changed(released, added)
+        fixed = self.normal_dofs[active]
+        reaction = self.load[fixed] - self.stiffness[fixed] @ u
+        return u, reaction
+
+    def _factorize(self, active: np.ndarray) -> None:
+        n = self.stiffness.shape[0]
+        fixed = self.normal_dofs[active]
+        free = np.ones(n, dtype=bool)
+        free[fixed] = False
+        self.reference = active.copy()
+        self.free = np.flatnonzero(free)
+        self.position = np.full(n, -1, dtype=np.int64)
+        self.position[self.free] = np.arange(len(self.free))
+        rows = self.stiffness[self.free]
+        self.rows_free = rows  # K[free, :], reused for the columns of released nodes
+        self.factor = factorize(rows[:, self.free], self.backend) if len(self.free) else None
+        self.factorizations += 1
+        self.fixed_values = np.zeros(n)
+        self.fixed_values[fixed] = self.gap[active]
+        rhs = self.load[self.free] - rows @ self.fixed_values
+        self.base = self.factor.solve(rhs) if self.factor is not None else np.zeros(0)
+        self.columns: dict[int, np.ndarray] = {}
+
+    def _columns(self, nodes: np.ndarray) -> np.ndarray:
+        """K00⁻¹ K0j for released nodes and K00⁻¹ e_j for added ones, cached per node."""
+        missing = [int(j) for j in nodes if int(j) not in self.columns]
+        if missing:
+            rhs = np.zeros((len(self.free), len(missing)))
+            for k, j in enumerate(missing):
+                dof = self.normal_dofs[j]
+                if self.reference[j]:
+                    rhs[:, k] = self.rows_free[:, dof].toarray().ravel()
+                else:
+                    rhs[self.position[dof], k] = 1.0
+            solved = self.factor.solve(rhs)
+            solved = solved.reshape(len(self.free), len(missing))
+            self.column_solves += len(missing)
+            for k, j in enumerate(missing):
+                self.columns[j] = solved[:, k]
+        if len(nodes) == 0:
+            return np.zeros((len(self.free), 0))
+        return np.stack([self.columns[int(j)] for j in nodes], axis=1)
+
+    def _solve_changed(self, released: np.ndarray, added: np.ndarray) -> np.ndarray:
+        n = self.stiffness.shape[0]
+        u = self.fixed_values.copy()
+        if self.factor is None:
+            return u
+        z_r, z_d = self._columns(released), self._columns(added)
+        dofs_r = self.normal_dofs[released]
+        slots_d = self.position[self.normal_dofs[added]]
+        # Released normals lose their fixed value: b0 gains K_0r G_r, so z0 gains Z_r G_r.
+        gap_r = self.fixed_values[dofs_r]
+        z0 = self.base + z_r @ gap_r
+        values = self.fixed_values.copy()
+        values[dofs_r] = 0.0
+        if len(released) or len(added):
+            rows_r = self.stiffness[dofs_r]
+            k_r0 = rows_r[:, self.free]
+            k_rr = rows_r[:, dofs_r].toarray()
+            b_r = self.load[dofs_r] - rows_r @ values
+            top = np.hstack([k_rr - k_r0 @ z_r, -(k_r0 @ z_d)])
+            bottom = np.hstack([-z_r[slots_d], -z_d[slots_d]])
+            rhs = np.concatenate([b_r - k_r0 @ z0, self.gap[added] - z0[slots_d]])
+            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+            u_r, mu = solution[: len(released)], solution[len(released):]
+            x0 = z0 - z_r @ u_r - z_d @ mu
+            u = values
+            u[dofs_r] = u_r
+        else:
+            x0 = z0
+            u = values
+        u[self.free] = x0
+        return u
 
 
 def _mass_solver(mass: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:

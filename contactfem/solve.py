@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -20,10 +20,11 @@ from contactfem.assembly import stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.errors import SolverError
-from contactfem.kernel import Iteration, KernelResult, Status, solve_contact
+from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact
 from contactfem.linalg import resolve_backend
 from contactfem.methods import get_method
 from contactfem.report import SCHEMA_VERSION, contact_zone, equilibrium, sign_conditions
+from contactfem.sequencing import predict_active_set
 from contactfem.result import ContactFields, Solution
 
 Progress = Callable[[str], None]
@@ -39,6 +40,7 @@ class Outcome:
     kernel: KernelResult
     backend: str
     timings: dict[str, float] = field(default_factory=dict)
+    sequencing: dict = field(default_factory=dict)
     report: dict = field(default_factory=dict)
 
 
@@ -81,9 +83,15 @@ def solve_case(
         history.append(record)
 
     history: list[Iteration] = []
+    c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
+    started = time.perf_counter()
+    initial_active, sequencing = predict_active_set(case, problem, c, progress=say)
+    if sequencing:
+        sequencing["seconds"] = time.perf_counter() - started
     kernel = solve_contact(
         reduced.system,
-        c=case.solver.c,
+        c=c,
+        initial_active=initial_active,
         tolerance=case.solver.tolerance,
         max_iterations=case.solver.max_iterations,
         backend=backend,
@@ -117,7 +125,8 @@ def solve_case(
         newton=_history_arrays(kernel.history),
     )
     timings["postprocess"] = time.perf_counter() - clock
-    outcome = Outcome(case=case, problem=problem, solution=solution, kernel=kernel, backend=backend, timings=timings)
+    outcome = Outcome(case=case, problem=problem, solution=solution, kernel=kernel, backend=backend,
+                      timings=timings, sequencing=sequencing)
     outcome.report = build_report(outcome)
     return outcome
 
@@ -139,7 +148,7 @@ def prepare(
     say(f"  {mesh.n_points} nodes, {mesh.n_triangles} triangles ({timings['mesh']:.2f} s)")
     clock = time.perf_counter()
     say("assembling")
-    problem = build_problem(case, mesh)
+    problem = replace(build_problem(case, mesh), refinements=case.mesh.refine if refine is None else refine)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes ({timings['assemble']:.2f} s)")
     return problem
@@ -178,6 +187,9 @@ def build_report(outcome: Outcome) -> dict:
             "c": kernel.c,
             "tolerance": case.solver.tolerance,
             "cycle_detected_at": kernel.cycle_detected_at,
+            "factorizations": kernel.factorizations,
+            "column_solves": kernel.column_solves,
+            "sequencing": outcome.sequencing,
         },
         "newton": [
             {"iteration": i + 1, **{k: getattr(r, k) for k in

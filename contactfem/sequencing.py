@@ -1,0 +1,71 @@
+"""Mesh sequencing: predict the active set of a large case from the same case on a coarser mesh.
+
+The coarse solution, itself predicted from a coarser one while it is large, is read along
+ΓC as functions of the abscissa on the obstacle: its pressure λ and its normal
+displacement u_n. At each fine contact node the indicator of the active set iteration,
+λ ω + c (u_n − g), is evaluated with those interpolated values and the fine gap; the
+nodes where it is positive start active. Only nodes near the ends of the contact zone
+can be mispredicted, so the fine iteration starts a node or two from its answer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+
+# Below this many unknowns a cold start is cheaper than solving a coarser case first.
+SEQUENCING_THRESHOLD = 20_000
+
+
+def coarser(case: Case, refinements: int) -> tuple[Case, int] | None:
+    """The same case on a mesh about twice as coarse, with its refinement count; None if none."""
+    if refinements >= 1:
+        return case, refinements - 1
+    settings = case.mesh
+    if isinstance(case.geometry, RectangleGeometry):
+        nx, ny = settings.divisions
+        if nx % 2 or ny % 2 or min(nx, ny) < 8:
+            return None
+        return replace(case, mesh=replace(settings, divisions=(nx // 2, ny // 2))), 0
+    if isinstance(case.geometry, PolygonGeometry):
+        contact_size = None if settings.contact_size is None else 2 * settings.contact_size
+        return replace(case, mesh=replace(settings, size=2 * settings.size, contact_size=contact_size)), 0
+    assert isinstance(case.geometry, MeshFileGeometry)
+    return None
+
+
+def predict_active_set(case: Case, problem, c: float, progress=None) -> tuple[np.ndarray | None, dict]:
+    """Initial active set (m,) for ``problem`` from a coarser solve, and what it cost.
+
+    Returns (None, {}) when the problem is small or no coarser mesh can be made.
+    """
+    from contactfem.solve import prepare, solve_case  # the pipeline sits above this module
+
+    if problem.n_unknowns < SEQUENCING_THRESHOLD:
+        return None, {}
+    coarse = coarser(case, problem.refinements)
+    if coarse is None:
+        return None, {}
+    coarse_case, coarse_refine = coarse
+    coarse_problem = prepare(coarse_case, refine=coarse_refine)
+    if coarse_problem.n_unknowns >= problem.n_unknowns:
+        return None, {}
+    outcome = solve_case(coarse_case, method="positive", problem=coarse_problem)
+    coarse_contact = outcome.problem.contact
+    s_coarse = coarse_contact.abscissa
+    fine = problem.contact
+    pressure = np.interp(fine.abscissa, s_coarse, outcome.solution.contact.multiplier)
+    normal = np.interp(fine.abscissa, s_coarse, outcome.solution.contact.normal_displacement)
+    indicator = pressure * fine.masses.lumped + c * (normal - fine.gap)
+    active = indicator > 0
+    if progress is not None:
+        progress(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
+    return active, {
+        "coarse_unknowns": coarse_problem.n_unknowns,
+        "coarse_iterations": outcome.kernel.iterations,
+        "predicted_active": int(active.sum()),
+        "levels": 1 + outcome.report["solver"].get("sequencing", {}).get("levels", 0),
+    }
