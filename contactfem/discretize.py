@@ -203,67 +203,62 @@ class DiscreteProblem:
 
 @dataclass(frozen=True, eq=False)
 class ReducedSystem:
-    """A :class:`ContactSystem` and the map back to mesh displacements."""
+    """A :class:`ContactSystem` in rotated unknowns and the map back to mesh displacements.
+
+    The system keeps every unknown (supports are fixed unknowns of the kernel, not sliced
+    out). At a contact node with both components free, (u_x, u_y) = u_n n + u_t t: its x
+    slot holds u_n and its y slot u_t. A contact node on a roller (one component
+    prescribed) keeps its prescribed slot, and its free slot c, along which the normal
+    lies, holds u_n (u_c = n_c u_n with n_c = ±1).
+    """
 
     system: ContactSystem
-    free_dofs: np.ndarray
     rotation: sp.csr_matrix
     problem: DiscreteProblem
 
     @classmethod
     def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
         n_dof = 2 * problem.mesh.n_points
-        free = np.ones(n_dof, dtype=bool)
-        free[problem.dirichlet_dofs] = False
-        free_dofs = np.flatnonzero(free)
-        position = np.full(n_dof, -1, dtype=np.int64)
-        position[free_dofs] = np.arange(len(free_dofs))
-
-        k = problem.stiffness
-        k_ff = k[free_dofs][:, free_dofs]
-        lifted = k[free_dofs][:, problem.dirichlet_dofs] @ problem.dirichlet_values
-        load = problem.load[free_dofs] - lifted
-
-        # At a contact node with both components free, (u_x, u_y) = u_n n + u_t t: its x
-        # slot becomes u_n, its y slot u_t. A node on a roller (one component prescribed)
-        # keeps only its other component, which lies along n: that slot is n_c u_n.
         contact = problem.contact
         n, t = contact.normal, contact.tangent
-        px = position[2 * contact.nodes]
-        py = position[2 * contact.nodes + 1]
-        both = (px >= 0) & (py >= 0)
-        roller_slot = np.where(px >= 0, px, py)[~both]
-        roller_sign = np.where(px >= 0, n[0], n[1])[~both]
-        size = len(free_dofs)
-        plain = np.ones(size, dtype=bool)
-        plain[np.concatenate([px[both], py[both], roller_slot])] = False
-        plain_idx = np.flatnonzero(plain)
-        bx, by = px[both], py[both]
+        supported = np.zeros(n_dof, dtype=bool)
+        supported[problem.dirichlet_dofs] = True
+        x_dof, y_dof = 2 * contact.nodes, 2 * contact.nodes + 1
+        both = ~supported[x_dof] & ~supported[y_dof]
+        roller_slot = np.where(supported[x_dof], y_dof, x_dof)[~both]
+        roller_sign = np.where(supported[x_dof], n[1], n[0])[~both]
+        bx, by = x_dof[both], y_dof[both]
+        # E = Q − I is supported on the contact unknowns only, so QᵀKQ = K + EᵀK + KE + EᵀKE
+        # costs a few sparse products with thin matrices instead of two full ones.
+        rows = np.concatenate([bx, bx, by, by, roller_slot])
+        cols = np.concatenate([bx, by, bx, by, roller_slot])
         k = len(bx)
-        rows = np.concatenate([plain_idx, bx, bx, by, by, roller_slot])
-        cols = np.concatenate([plain_idx, bx, by, bx, by, roller_slot])
-        vals = np.concatenate([np.ones(len(plain_idx)), np.full(k, n[0]), np.full(k, t[0]),
-                               np.full(k, n[1]), np.full(k, t[1]), roller_sign])
-        normal_dofs = np.where(both, px, 0)
+        vals = np.concatenate([np.full(k, n[0] - 1.0), np.full(k, t[0]), np.full(k, n[1]),
+                               np.full(k, t[1] - 1.0), roller_sign - 1.0])
+        shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
+        shift.eliminate_zeros()
+        stiffness = problem.stiffness
+        k_shift = (stiffness @ shift).tocsr()
+        rotated = stiffness + k_shift + k_shift.T + shift.T @ k_shift
+        rotated = sp.csr_matrix(rotated)
+        rotated.sum_duplicates()
+        rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
+        normal_dofs = np.where(both, x_dof, 0)
         normal_dofs[~both] = roller_slot
-        rotation = sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
-        stiffness = (rotation.T @ k_ff @ rotation).tocsr()
-        stiffness.sum_duplicates()
         system = ContactSystem(
-            stiffness=stiffness,
-            load=rotation.T @ load,
+            stiffness=rotated,
+            load=rotation.T @ problem.load,
             normal_dofs=normal_dofs,
             gap=contact.gap,
             multiplier_mass=method.multiplier_mass(contact.masses),
+            fixed_dofs=problem.dirichlet_dofs,
+            fixed_values=problem.dirichlet_values,
         )
-        return cls(system=system, free_dofs=free_dofs, rotation=rotation, problem=problem)
+        return cls(system=system, rotation=rotation, problem=problem)
 
     def displacement(self, reduced: np.ndarray) -> np.ndarray:
         """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
-        u = np.zeros(2 * self.problem.mesh.n_points)
-        u[self.free_dofs] = self.rotation @ reduced
-        u[self.problem.dirichlet_dofs] = self.problem.dirichlet_values
-        return u.reshape(-1, 2)
+        return (self.rotation @ reduced).reshape(-1, 2)
 
 
 def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:

@@ -50,8 +50,8 @@ class ContactSystem:
     Attributes
     ----------
     stiffness : (n, n) sparse SPD
-        Stiffness with Dirichlet unknowns eliminated and contact nodes in normal/tangent
-        coordinates.
+        Stiffness with contact nodes in normal/tangent coordinates; supports are given by
+        ``fixed_dofs`` (or already eliminated).
     load : (n,)
     normal_dofs : (m,) int
         Index of the normal unknown of each contact node.
@@ -59,6 +59,10 @@ class ContactSystem:
         Initial gap G of each contact node (negative: the body starts inside the obstacle).
     multiplier_mass : (m, m) sparse SPD
         B: how the method's multiplier μ becomes nodal forces Bμ.
+    fixed_dofs : (k,) int, optional
+        Unknowns prescribed by supports, kept in the system (no slicing of K).
+    fixed_values : (k,), optional
+        Their values.
     """
 
     stiffness: sp.spmatrix
@@ -66,6 +70,8 @@ class ContactSystem:
     normal_dofs: np.ndarray
     gap: np.ndarray
     multiplier_mass: sp.spmatrix
+    fixed_dofs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    fixed_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -154,7 +160,8 @@ def solve_contact(
     mass_solver = _mass_solver(mass) if m else None
 
     active = (gap <= 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
-    linear = ActiveSetSolver(stiffness, load, normal_dofs, gap, backend)
+    linear = ActiveSetSolver(system, backend)
+    equations = linear.free_rows
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     history: list[Iteration] = []
@@ -175,14 +182,15 @@ def solve_contact(
         normal = displacement[normal_dofs]
         indicator = nodal_force + c * (normal - gap)
 
-        force_scale = max(np.abs(load).max(initial=0.0), np.abs(nodal_force).max(initial=0.0),
-                          np.abs(stiffness @ displacement).max(initial=0.0), np.finfo(float).tiny)
+        force_scale = max(np.abs(load[equations]).max(initial=0.0), np.abs(nodal_force).max(initial=0.0),
+                          np.abs((stiffness @ displacement)[equations]).max(initial=0.0), np.finfo(float).tiny)
         threshold = DEGENERACY_TOLERANCE * max(force_scale, np.abs(indicator).max(initial=0.0))
         new_active = (indicator > threshold) | (active & (indicator >= -threshold))
 
         contact_load = np.zeros(len(load))
         np.add.at(contact_load, normal_dofs, nodal_force)
-        equilibrium = np.abs(stiffness @ displacement + contact_load - load).max(initial=0.0) / force_scale
+        residual = (stiffness @ displacement + contact_load - load)[equations]
+        equilibrium = np.abs(residual).max(initial=0.0) / force_scale
         complementarity = (
             np.abs(nodal_force - np.maximum(0.0, indicator)).max(initial=0.0) / force_scale
         )
@@ -257,38 +265,56 @@ def solve_contact(
 
 
 class ActiveSetSolver:
-    """Solves K u = F with the normal unknowns of an active set fixed to their gaps,
+    """Solves K u = F with supports and the normal unknowns of an active set fixed,
     reusing one factorisation across active sets.
 
-    The matrix is factorised once with the normals of a reference set A0 fixed. For
-    another set A, the nodes of A0 ∖ A (released: their normal unknown becomes free) and
-    of A ∖ A0 (added: fixed through a Lagrange multiplier) are few, and the solve reduces
-    to a dense system over them: with K00 the factorised block and Z = K00⁻¹ [K0r, E],
+    Fixed unknowns are not sliced out: their rows and columns are masked to the identity
+    inside K's own sparsity pattern, which costs one pass over the nonzeros. The matrix is
+    factorised once with the normals of a reference set A0 fixed. For another set A, the
+    nodes of A0 ∖ A (released: their normal unknown becomes free) and of A ∖ A0 (added:
+    fixed through a Lagrange multiplier) are few, and the solve reduces to a dense system
+    over them: with K00 the factorised matrix and Z = K00⁻¹ [K0r, E],
 
         [K_rr − K_r0 Z_r    −K_r0 Z_d] [u_r]   [b_r − K_r0 z0]
         [   −Eᵀ Z_r          −Eᵀ Z_d ] [ μ ] = [G_d − Eᵀ z0 ],   z0 = K00⁻¹ b0,
 
-    then u_0 = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor
-    and is kept for later iterations; beyond ``max_changes`` changed nodes the matrix is
+    then u = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor and
+    is kept for later iterations; beyond ``max_changes`` changed nodes the matrix is
     factorised anew with the current set as reference.
     """
 
-    def __init__(self, stiffness: sp.csr_matrix, load: np.ndarray, normal_dofs: np.ndarray,
-                 gap: np.ndarray, backend: str, max_changes: int = 64) -> None:
-        self.stiffness = stiffness
-        self.load = load
-        self.normal_dofs = normal_dofs
-        self.gap = gap
+    def __init__(self, system: ContactSystem, backend: str, max_changes: int = 64) -> None:
+        self.stiffness = sp.csr_matrix(system.stiffness)
+        self.stiffness.sort_indices()
+        self.load = np.asarray(system.load, dtype=float)
+        self.normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
+        self.gap = np.asarray(system.gap, dtype=float)
         self.backend = backend
         self.max_changes = max_changes
+        n = self.stiffness.shape[0]
+        self.supported = np.zeros(n, dtype=bool)
+        self.supported[system.fixed_dofs] = True
+        self.support_values = np.zeros(n)
+        self.support_values[system.fixed_dofs] = system.fixed_values
+        k = self.stiffness
+        self.entry_rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
+        self.diagonal = np.flatnonzero(self.entry_rows == k.indices)
+        if len(self.diagonal) != n:
+            raise ValueError("the stiffness matrix must store its whole diagonal")
         self.factorizations = 0
         self.column_solves = 0
         self.reference: np.ndarray | None = None
+        self.factor = None
+
+    @property
+    def free_rows(self) -> np.ndarray:
+        """Rows of the residual that are equations (not supports), for residual checks."""
+        return ~self.supported
 
     def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
         changes = 0 if self.reference is None else np.count_nonzero(active != self.reference)
-        if self.reference is None or changes > self.max_changes or (changes and self.factor is None):
+        if self.reference is None or changes > self.max_changes:
             self._factorize(active)
         released = np.flatnonzero(self.reference & ~active)
         added = np.flatnonzero(~self.reference & active)
@@ -298,74 +324,67 @@ class ActiveSetSolver:
         return u, reaction
 
     def _factorize(self, active: np.ndarray) -> None:
-        n = self.stiffness.shape[0]
-        fixed = self.normal_dofs[active]
-        free = np.ones(n, dtype=bool)
-        free[fixed] = False
+        k = self.stiffness
+        fixed = self.supported.copy()
+        fixed[self.normal_dofs[active]] = True
         self.reference = active.copy()
-        self.free = np.flatnonzero(free)
-        self.position = np.full(n, -1, dtype=np.int64)
-        self.position[self.free] = np.arange(len(self.free))
-        rows = self.stiffness[self.free]
-        self.rows_free = rows  # K[free, :], reused for the columns of released nodes
-        self.factor = factorize(rows[:, self.free], self.backend) if len(self.free) else None
+        self.free = ~fixed
+        self.values = self.support_values.copy()
+        self.values[self.normal_dofs[active]] = self.gap[active]
+        keep = self.free[self.entry_rows] & self.free[k.indices]
+        data = np.where(keep, k.data, 0.0)
+        data[self.diagonal[fixed]] = 1.0
+        masked = sp.csr_matrix((data, k.indices, k.indptr), shape=k.shape)
+        self.factor = factorize(masked, self.backend)
         self.factorizations += 1
-        self.fixed_values = np.zeros(n)
-        self.fixed_values[fixed] = self.gap[active]
-        rhs = self.load[self.free] - rows @ self.fixed_values
-        self.base = self.factor.solve(rhs) if self.factor is not None else np.zeros(0)
+        rhs = self.load - k @ self.values
+        rhs[fixed] = self.values[fixed]
+        self.base = self.factor.solve(rhs)
         self.columns: dict[int, np.ndarray] = {}
 
     def _columns(self, nodes: np.ndarray) -> np.ndarray:
         """K00⁻¹ K0j for released nodes and K00⁻¹ e_j for added ones, cached per node."""
+        n = self.stiffness.shape[0]
         missing = [int(j) for j in nodes if int(j) not in self.columns]
         if missing:
-            rhs = np.zeros((len(self.free), len(missing)))
+            rhs = np.zeros((n, len(missing)))
             for k, j in enumerate(missing):
                 dof = self.normal_dofs[j]
                 if self.reference[j]:
-                    rhs[:, k] = self.rows_free[:, dof].toarray().ravel()
+                    row = self.stiffness[dof]  # = column dof, K being symmetric
+                    rhs[row.indices, k] = row.data
+                    rhs[~self.free, k] = 0.0
                 else:
-                    rhs[self.position[dof], k] = 1.0
-            solved = self.factor.solve(rhs)
-            solved = solved.reshape(len(self.free), len(missing))
+                    rhs[dof, k] = 1.0
+            solved = np.asarray(self.factor.solve(rhs)).reshape(n, len(missing))
             self.column_solves += len(missing)
             for k, j in enumerate(missing):
                 self.columns[j] = solved[:, k]
         if len(nodes) == 0:
-            return np.zeros((len(self.free), 0))
+            return np.zeros((n, 0))
         return np.stack([self.columns[int(j)] for j in nodes], axis=1)
 
     def _solve_changed(self, released: np.ndarray, added: np.ndarray) -> np.ndarray:
-        n = self.stiffness.shape[0]
-        u = self.fixed_values.copy()
-        if self.factor is None:
-            return u
+        if len(released) == 0 and len(added) == 0:
+            return self.base.copy()
         z_r, z_d = self._columns(released), self._columns(added)
         dofs_r = self.normal_dofs[released]
-        slots_d = self.position[self.normal_dofs[added]]
+        dofs_d = self.normal_dofs[added]
         # Released normals lose their fixed value: b0 gains K_0r G_r, so z0 gains Z_r G_r.
-        gap_r = self.fixed_values[dofs_r]
-        z0 = self.base + z_r @ gap_r
-        values = self.fixed_values.copy()
+        z0 = self.base + z_r @ self.values[dofs_r]
+        values = self.values.copy()
         values[dofs_r] = 0.0
-        if len(released) or len(added):
-            rows_r = self.stiffness[dofs_r]
-            k_r0 = rows_r[:, self.free]
-            k_rr = rows_r[:, dofs_r].toarray()
-            b_r = self.load[dofs_r] - rows_r @ values
-            top = np.hstack([k_rr - k_r0 @ z_r, -(k_r0 @ z_d)])
-            bottom = np.hstack([-z_r[slots_d], -z_d[slots_d]])
-            rhs = np.concatenate([b_r - k_r0 @ z0, self.gap[added] - z0[slots_d]])
-            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
-            u_r, mu = solution[: len(released)], solution[len(released):]
-            x0 = z0 - z_r @ u_r - z_d @ mu
-            u = values
-            u[dofs_r] = u_r
-        else:
-            x0 = z0
-            u = values
-        u[self.free] = x0
+        rows_r = self.stiffness[dofs_r]
+        k_r0 = rows_r.multiply(self.free[None, :]).tocsr()
+        k_rr = rows_r[:, dofs_r].toarray()
+        b_r = self.load[dofs_r] - rows_r @ values
+        top = np.hstack([k_rr - k_r0 @ z_r, -(k_r0 @ z_d)])
+        bottom = np.hstack([-z_r[dofs_d], -z_d[dofs_d]])
+        rhs = np.concatenate([b_r - k_r0 @ z0, self.gap[added] - z0[dofs_d]])
+        solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+        u_r, mu = solution[: len(released)], solution[len(released):]
+        u = z0 - z_r @ u_r - z_d @ mu
+        u[dofs_r] = u_r
         return u
 
 

@@ -108,11 +108,16 @@ def test_equilibrium_of_forces_and_moments(both_methods):
 def condensed(outcome):
     """The contact problem reduced to the normal unknowns: d = d0 − S (B μ), S = P K⁻¹ Pᵀ."""
     system = outcome.problem.contact_system(get_method(outcome.solution.method)).system
-    k = system.stiffness.toarray()
-    pick = np.zeros((len(system.normal_dofs), k.shape[0]))
-    pick[np.arange(len(system.normal_dofs)), system.normal_dofs] = 1.0
+    full = system.stiffness.toarray()
+    free = np.setdiff1d(np.arange(full.shape[0]), system.fixed_dofs)
+    k = full[np.ix_(free, free)]
+    load = system.load[free] - full[np.ix_(free, system.fixed_dofs)] @ system.fixed_values
+    position = np.full(full.shape[0], -1)
+    position[free] = np.arange(len(free))
+    pick = np.zeros((len(system.normal_dofs), len(free)))
+    pick[np.arange(len(system.normal_dofs)), position[system.normal_dofs]] = 1.0
     schur = pick @ np.linalg.solve(k, pick.T)
-    d0 = pick @ np.linalg.solve(k, system.load)
+    d0 = pick @ np.linalg.solve(k, load)
     return schur, d0, system.gap, system.multiplier_mass.toarray()
 
 
