@@ -22,12 +22,19 @@ class Factorization(Protocol):
     def solve(self, rhs: np.ndarray) -> np.ndarray: ...
 
 
+def _symmetric_csc(matrix: sp.spmatrix) -> sp.csc_matrix:
+    """CSC form of a symmetric matrix: a CSR matrix's transpose is one, without a copy."""
+    if sp.isspmatrix_csr(matrix) or isinstance(matrix, sp.csr_array):
+        return matrix.T.tocsc(copy=False)
+    return sp.csc_matrix(matrix)
+
+
 class _Cholmod:
     def __init__(self, matrix: sp.spmatrix) -> None:
         from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
 
         try:
-            self._factor = cholesky(sp.csc_matrix(matrix), ordering_method="amd")
+            self._factor = cholesky(_symmetric_csc(matrix), ordering_method="amd")
         except CholmodNotPositiveDefiniteError as error:
             raise SolverError(f"the stiffness matrix is not positive definite ({error})") from error
 
@@ -52,7 +59,7 @@ class _SuperLU:
     def __init__(self, matrix: sp.spmatrix) -> None:
         try:
             self._lu = spla.splu(
-                sp.csc_matrix(matrix),
+                _symmetric_csc(matrix),
                 permc_spec="MMD_AT_PLUS_A",
                 diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
