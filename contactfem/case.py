@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from contactfem.exact import ExactSolution
 
 METHODS = ("positive", "standard")
-PART_KINDS = ("clamped", "free", "contact")
+PART_KINDS = ("clamped", "free", "contact", "symmetry")
 PART_LOADS = ("traction", "pressure", "displacement")
 DIAGONALS = ("right", "left", "alternate", "crossed")
 OUTPUT_FILES = ("vtu", "h5", "json")
@@ -636,9 +636,9 @@ def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None,
             if kind == "displacement" and all(v is None for v in values):
                 raise r.fail(f"{key}.displacement", value, "at least one component must be prescribed")
         parts.append(BoundaryPart(name, kind, values))
-    if not any(p.is_dirichlet for p in parts):
+    if not any(p.is_dirichlet or p.kind == "symmetry" for p in parts):
         raise CaseError(
-            f"{r.filename}: boundary: no clamped or displacement part; the body could move "
+            f"{r.filename}: boundary: no clamped, displacement or symmetry part; the body could move "
             "rigidly, so the problem is ill-posed (give at least one part: clamped)"
         )
     if not any(p.kind == "contact" for p in parts):

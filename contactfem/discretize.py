@@ -7,7 +7,7 @@ lacks, loads that are not finite) are raised here as :class:`CaseError` naming t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -190,6 +190,9 @@ class DiscreteProblem:
     dirichlet_values: np.ndarray
     contact: ContactBoundary
     refinements: int = 0  # uniform refinements of the case's own mesh (for mesh sequencing)
+    # Nodes held on a symmetry line (u · n_s = 0) and the line's unit normal at each.
+    symmetry_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    symmetry_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def n_unknowns(self) -> int:
@@ -220,45 +223,80 @@ class ReducedSystem:
     def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
         n_dof = 2 * problem.mesh.n_points
         contact = problem.contact
-        n, t = contact.normal, contact.tangent
+        n_o, t_o = contact.normal, contact.tangent
         supported = np.zeros(n_dof, dtype=bool)
         supported[problem.dirichlet_dofs] = True
-        x_dof, y_dof = 2 * contact.nodes, 2 * contact.nodes + 1
-        both = ~supported[x_dof] & ~supported[y_dof]
-        roller_slot = np.where(supported[x_dof], y_dof, x_dof)[~both]
-        roller_sign = np.where(supported[x_dof], n[1], n[0])[~both]
-        bx, by = x_dof[both], y_dof[both]
-        # E = Q − I is supported on the contact unknowns only, so QᵀKQ = K + EᵀK + KE + EᵀKE
-        # costs a few sparse products with thin matrices instead of two full ones.
-        rows = np.concatenate([bx, bx, by, by, roller_slot])
-        cols = np.concatenate([bx, by, bx, by, roller_slot])
-        k = len(bx)
-        vals = np.concatenate([np.full(k, n[0] - 1.0), np.full(k, t[0]), np.full(k, n[1]),
-                               np.full(k, t[1] - 1.0), roller_sign - 1.0])
+        nodes, normal_slot, a, b = _frames(problem, supported)
+        # Each framed node's slots hold u · a (x slot) and u · b (y slot): Q's 2x2 block is
+        # [a b]. E = Q − I lives on those nodes only, so QᵀKQ = K + EᵀK + KE + EᵀKE costs a
+        # few products with thin matrices instead of two full ones.
+        x, y = 2 * nodes, 2 * nodes + 1
+        rows = np.concatenate([x, x, y, y])
+        cols = np.concatenate([x, y, x, y])
+        vals = np.concatenate([a[:, 0] - 1.0, b[:, 0], a[:, 1], b[:, 1] - 1.0])
         shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
         shift.eliminate_zeros()
         stiffness = problem.stiffness
         k_shift = (stiffness @ shift).tocsr()
-        rotated = stiffness + k_shift + k_shift.T + shift.T @ k_shift
-        rotated = sp.csr_matrix(rotated)
+        rotated = sp.csr_matrix(stiffness + k_shift + k_shift.T + shift.T @ k_shift)
         rotated.sum_duplicates()
         rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
-        normal_dofs = np.where(both, x_dof, 0)
-        normal_dofs[~both] = roller_slot
+        fixed_dofs = np.concatenate([problem.dirichlet_dofs, 2 * problem.symmetry_nodes])
+        fixed_values = np.concatenate([problem.dirichlet_values, np.zeros(len(problem.symmetry_nodes))])
+        order = np.argsort(fixed_dofs)
         system = ContactSystem(
             stiffness=rotated,
             load=rotation.T @ problem.load,
-            normal_dofs=normal_dofs,
+            normal_dofs=normal_slot,
             gap=contact.gap,
             multiplier_mass=method.multiplier_mass(contact.masses),
-            fixed_dofs=problem.dirichlet_dofs,
-            fixed_values=problem.dirichlet_values,
+            fixed_dofs=fixed_dofs[order],
+            fixed_values=fixed_values[order],
         )
         return cls(system=system, rotation=rotation, problem=problem)
 
     def displacement(self, reduced: np.ndarray) -> np.ndarray:
         """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
         return (self.rotation @ reduced).reshape(-1, 2)
+
+
+def _frames(problem: DiscreteProblem, supported: np.ndarray):
+    """Local frames (a, b) of the nodes whose unknowns are rotated, and the contact normal slots.
+
+    - contact node with both components free: a = n, b = t (u_n in the x slot);
+    - contact node with one component prescribed (a roller, n along the free axis): the
+      prescribed axis stays, the free slot holds u_n;
+    - symmetry node: a = n_s (its x slot is fixed to 0), b = t_s, or b = n when it is also a
+      contact node (n along the symmetry line), its y slot then holding u_n.
+    Returns nodes (k,), normal_slot (m,) aligned with the contact nodes, a (k, 2), b (k, 2).
+    """
+    contact = problem.contact
+    n_o, t_o = contact.normal, contact.tangent
+    c = contact.nodes
+    sx, sy = supported[2 * c], supported[2 * c + 1]
+    sym_index = np.full(problem.mesh.n_points, -1)
+    sym_index[problem.symmetry_nodes] = np.arange(len(problem.symmetry_nodes))
+    on_symmetry = sym_index[c] >= 0
+    m = len(c)
+    a = np.tile(n_o, (m, 1))
+    b = np.tile(t_o, (m, 1))
+    slot = 2 * c
+    roller_x = sx & ~sy  # u_x prescribed, normal along y
+    a[roller_x] = (1.0, 0.0)
+    b[roller_x] = (0.0, n_o[1])
+    slot = np.where(roller_x, 2 * c + 1, slot)
+    roller_y = sy & ~sx  # u_y prescribed, normal along x
+    a[roller_y] = (n_o[0], 0.0)
+    b[roller_y] = (0.0, 1.0)
+    a[on_symmetry] = problem.symmetry_normals[sym_index[c[on_symmetry]]]
+    b[on_symmetry] = n_o
+    slot = np.where(on_symmetry, 2 * c + 1, slot)
+    # Symmetry nodes that are not contact nodes: a = n_s, b = t_s.
+    others = np.setdiff1d(problem.symmetry_nodes, c)
+    normals = problem.symmetry_normals[sym_index[others]]
+    tangents = np.stack([-normals[:, 1], normals[:, 0]], axis=1)
+    nodes = np.concatenate([c, others])
+    return nodes, slot, np.concatenate([a, normals]), np.concatenate([b, tangents])
 
 
 def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:
@@ -295,13 +333,14 @@ def build_problem(case: Case, mesh: Mesh) -> DiscreteProblem:
             else:
                 load += traction_vector(points, edges, pressure=part.values[0])
 
-    dirichlet_dofs, dirichlet_values = _supports(case, mesh)
-    contact = _contact_boundary(case, mesh, dirichlet_dofs)
+    dirichlet_dofs, dirichlet_values, symmetry_nodes, symmetry_normals = _supports(case, mesh)
+    contact = _contact_boundary(case, mesh, dirichlet_dofs, symmetry_nodes, symmetry_normals)
     if exact is not None:
         check_exact_contact(case, mesh, contact.edges)
     return DiscreteProblem(
         mesh=mesh, law=law, stiffness=stiffness, load=load,
         dirichlet_dofs=dirichlet_dofs, dirichlet_values=dirichlet_values, contact=contact,
+        symmetry_nodes=symmetry_nodes, symmetry_normals=symmetry_normals,
     )
 
 
@@ -335,24 +374,70 @@ def _supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
                 )
             values[dofs] = prescribed
             owner[dofs] = index
+    prescribed = owner.reshape(-1, 2) >= 0
+    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh, prescribed)
+    # A node on two symmetry lines that are not parallel cannot move at all.
+    unique, first, counts = np.unique(symmetry_nodes, return_index=True, return_counts=True)
+    pinned = unique[counts > 1]
+    if len(pinned):
+        values[np.concatenate([2 * pinned, 2 * pinned + 1])] = 0.0
+        owner[np.concatenate([2 * pinned, 2 * pinned + 1])] = len(case.parts)
+    keep = np.isin(unique, pinned, invert=True)
+    symmetry_nodes, symmetry_normals = unique[keep], symmetry_normals[first[keep]]
     dofs = np.flatnonzero(owner >= 0)
-    _refuse_rigid_motion(case, mesh, dofs)
-    return dofs, values[dofs]
+    _refuse_rigid_motion(case, mesh, dofs, symmetry_nodes, symmetry_normals)
+    return dofs, values[dofs], symmetry_nodes, symmetry_normals
 
 
-def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray) -> None:
+def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes of the symmetry parts (without prescribed components) and their line's normal.
+
+    A symmetry part must be straight: all its edges on one line, whose outward unit normal
+    n_s is the direction held (u · n_s = 0).
+    """
+    nodes, normals = [], []
+    for part in case.parts:
+        if part.kind != "symmetry":
+            continue
+        edges = mesh.edges_of(part.name)
+        if len(edges) == 0:
+            raise CaseError(f"{case.source.name}: boundary.{part.name}: the mesh has no edge on this part")
+        _, outward = edge_geometry(mesh.points, edges)
+        normal = outward.mean(axis=0)
+        normal /= np.linalg.norm(normal)
+        points = mesh.points[np.unique(edges)]
+        offset = (points - points[0]) @ normal
+        extent = np.ptp(mesh.points, axis=0).max()
+        if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
+            raise CaseError(
+                f"{case.source.name}: boundary.{part.name} = symmetry: the part is not straight; "
+                "a symmetry support needs all its edges on one line"
+            )
+        part_nodes = np.unique(edges)
+        part_nodes = part_nodes[~prescribed[part_nodes].any(axis=1)]
+        nodes.append(part_nodes)
+        normals.append(np.tile(normal, (len(part_nodes), 1)))
+    if not nodes:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    return np.concatenate(nodes), np.concatenate(normals)
+
+
+def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
+                         symmetry_normals: np.ndarray) -> None:
     """The supports must pin the three rigid motions: translations along x and y, rotation."""
-    nodes, components = dofs // 2, dofs % 2
-    p = mesh.points[nodes]
+    # Each constraint holds u(p) · d = 0 for a point p and direction d: a prescribed
+    # component (d = e_x or e_y) or a symmetry line (d = n_s).
+    directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals])
+    p = mesh.points[np.concatenate([dofs // 2, symmetry_nodes])]
     centre = p.mean(axis=0) if len(p) else np.zeros(2)
-    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc), restricted to the prescribed unknowns.
-    modes = np.zeros((len(dofs), 3))
-    modes[components == 0, 0] = 1.0
-    modes[components == 1, 1] = 1.0
-    modes[:, 2] = np.where(components == 0, -(p[:, 1] - centre[1]), p[:, 0] - centre[0])
+    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc), seen through each constraint.
+    modes = np.zeros((len(p), 3))
+    modes[:, 0] = directions[:, 0]
+    modes[:, 1] = directions[:, 1]
+    modes[:, 2] = -(p[:, 1] - centre[1]) * directions[:, 0] + (p[:, 0] - centre[0]) * directions[:, 1]
     scale = np.ptp(mesh.points, axis=0).max()
     modes[:, 2] /= scale
-    singular = np.linalg.svd(modes, compute_uv=False) if len(dofs) else np.zeros(0)
+    singular = np.linalg.svd(modes, compute_uv=False) if len(modes) else np.zeros(0)
     rank = int((singular > 1e-8 * max(singular.max(initial=0.0), 1.0)).sum())
     if rank < 3:
         names = ", ".join(case.dirichlet_parts)
@@ -362,7 +447,8 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray) -> None:
         )
 
 
-def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray) -> ContactBoundary:
+def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetry_nodes: np.ndarray,
+                      symmetry_normals: np.ndarray) -> ContactBoundary:
     normal = np.asarray(case.obstacle.normal, dtype=float)
     tangent = np.array([-normal[1], normal[0]])
     edges = mesh.edges_of(list(case.contact_parts))
@@ -386,6 +472,9 @@ def _contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray) -> Con
     prescribed[dirichlet_dofs // 2, dirichlet_dofs % 2] = True
     roller_keeps_normal = np.where(prescribed[:, 0], abs(normal[1]), abs(normal[0])) > 1 - 1e-12
     supported = prescribed.all(axis=1) | (prescribed.any(axis=1) & ~roller_keeps_normal)
+    # On a symmetry line the node keeps contact only if the obstacle's normal runs along the line.
+    along_line = np.abs(symmetry_normals @ np.array([-normal[1], normal[0]])) > 1 - 1e-12
+    supported[symmetry_nodes[~along_line]] = True
     gamma_nodes = np.unique(edges)
     nodes = gamma_nodes[~supported[gamma_nodes]]
     abscissa = mesh.points[nodes] @ tangent

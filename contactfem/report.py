@@ -71,7 +71,8 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     """Force and moment balance: applied loads + contact force + support reactions = 0.
 
     The reactions are what the supports must add for K u to balance: R = K u − F − f_c
-    on the prescribed unknowns, f_c = −n Λ being the obstacle's push on each contact node.
+    on the prescribed unknowns and at the nodes of symmetry lines, f_c = −n Λ being the
+    obstacle's push on each contact node.
     """
     points = problem.mesh.points
     u = displacement.ravel()
@@ -81,7 +82,8 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     contact_force[2 * nodes + 1] = -problem.contact.normal[1] * nodal_force
     internal = problem.stiffness @ u
     reactions = np.zeros_like(u)
-    d = problem.dirichlet_dofs
+    symmetry = problem.symmetry_nodes
+    d = np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1])
     reactions[d] = internal[d] - problem.load[d] - contact_force[d]
     centre = points.mean(axis=0)
 
