@@ -37,6 +37,10 @@ def hertz_comparison(outcome: Outcome, radius: float) -> dict:
     right = _zone_end(s, pressure_nodes, last, inward=-1)
     centre = 0.5 * (left + right)
     discrete_half_width = 0.5 * (right - left)
+    # The zone as the active nodes show it: ends halfway to the first free node.
+    zone_left = 0.5 * (s[first] + s[max(first - 1, 0)])
+    zone_right = 0.5 * (s[last] + s[min(last + 1, len(s) - 1)])
+    zone_half_width = 0.5 * (zone_right - zone_left)
 
     samples = np.linspace(s.min(), s.max(), 40_001)
     pressure_h = np.interp(samples, s, contact.multiplier)
@@ -47,6 +51,8 @@ def hertz_comparison(outcome: Outcome, radius: float) -> dict:
         "half_width": float(half_width),
         "discrete_half_width": float(discrete_half_width),
         "half_width_error": float((discrete_half_width - half_width) / half_width),
+        "zone_half_width": float(zone_half_width),
+        "zone_half_width_error": float((zone_half_width - half_width) / half_width),
         "peak_pressure": float(peak),
         "discrete_peak_pressure": float(contact.multiplier.max()),
         "peak_pressure_error": float((contact.multiplier.max() - peak) / peak),
