@@ -31,6 +31,16 @@ OUTPUT_FILES = ("vtu", "h5", "json")
 BACKENDS = ("auto", "cholmod", "pardiso", "superlu")
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
+#: Bound on the magnitude of coordinates, moduli and solver.c (and below it, of the
+#: smallest body extent and modulus): products of six such numbers, as in the stiffness
+#: times a displacement times a length, stay far inside float64's 1e±308.
+SCALE_LIMIT = 1e50
+#: The finest uniform mesh: the same bound as mesh.divisions (100 000 per side).
+MAX_DIVISIONS = 100_000
+#: Largest lambda/mu (plane strain): beyond it, nu = lambda/(2(lambda + mu)) > 0.499999995,
+#: the P1 stiffness is singular to round-off (its condition number grows like lambda/mu) and
+#: the solution is pure locking. A warning starts far earlier (report.LOCKING_WARNING_RATIO).
+MAX_LAME_RATIO = 1e8
 
 
 # --------------------------------------------------------------------------- the case
@@ -261,7 +271,8 @@ class _Reader:
     def point(self, value: Any, key: str) -> tuple[float, float]:
         if not isinstance(value, (list, tuple)) or len(value) != 2:
             raise self.fail(key, value, "expected a point [x, y]")
-        return (self.number(value[0], f"{key}[0]"), self.number(value[1], f"{key}[1]"))
+        return (self.number(value[0], f"{key}[0]", low=-SCALE_LIMIT, high=SCALE_LIMIT),
+                self.number(value[1], f"{key}[1]", low=-SCALE_LIMIT, high=SCALE_LIMIT))
 
     def expression(self, value: Any, key: str) -> Expression:
         try:
@@ -373,6 +384,7 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
         upper = r.point(spec["upper"], f"{key}.upper")
         if not (upper[0] > lower[0] and upper[1] > lower[1]):
             raise r.fail(f"{key}.upper", list(upper), f"must lie above and right of lower {list(lower)}")
+        _check_extent(r, f"{key}.upper", np.array([lower, upper]))
         names = r.mapping(spec.get("names", {}), f"{key}.names", SIDES)
         side_names = {side: r.name(names.get(side, side), f"{key}.names.{side}") for side in SIDES}
         return RectangleGeometry(lower, upper, side_names), tuple(dict.fromkeys(side_names.values()))
@@ -438,6 +450,7 @@ def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
         problem = polygon_problems(points)
         if problem is not None and not (has_arc and problem.startswith("zero area")):
             raise r.fail(f"{key}.vertices", points.tolist(), problem)
+    _check_extent(r, f"{key}.vertices", points)
     return Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
 
 
@@ -461,6 +474,17 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
     if not inside.all():
         raise r.fail(key, loop.vertices[~inside][0].tolist(), "hole vertex outside the outer polygon")
     return loop
+
+
+def _check_extent(r: _Reader, key: str, points: np.ndarray) -> None:
+    """The body must be resolvable in float64: both sides of its bounding box at least
+    1/SCALE_LIMIT and 1e-9 of its distance from the origin (or the mesh degenerates)."""
+    span = np.ptp(points, axis=0)
+    far = float(np.abs(points).max())
+    least = max(1.0 / SCALE_LIMIT, 1e-9 * far)
+    if span.min() < least and not (len(points) < 3 and span.max() >= least):
+        raise r.fail(key, points.tolist(), f"the body's extent {span.min():.3g} is too small: it must be at "
+                     f"least {least:.3g} (1e-50, and 1e-9 of the distance from the origin)")
 
 
 def _points_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -495,6 +519,9 @@ def _mesh_settings(r: _Reader, data: Any, geometry: Geometry) -> MeshSettings:
         extent = _extent(geometry)
         if extent is not None and size > extent:
             raise r.fail("mesh.size", size, f"must not exceed the body's extent {extent:g}")
+        if extent is not None and size < extent / MAX_DIVISIONS:
+            raise r.fail("mesh.size", size, f"must be at least the body's extent / {MAX_DIVISIONS} = "
+                         f"{extent / MAX_DIVISIONS:g} (use mesh.refine for finer meshes)")
     if isinstance(geometry, MeshFileGeometry) and (divisions or size):
         raise r.fail("mesh.size", data.get("size"), "a mesh file is used as it is; use mesh.refine to refine it")
     diagonal = r.choice(data.get("diagonal", "right"), "mesh.diagonal", DIAGONALS)
@@ -513,8 +540,9 @@ def _mesh_settings(r: _Reader, data: Any, geometry: Geometry) -> MeshSettings:
         if not isinstance(geometry, PolygonGeometry):
             raise r.fail("mesh.contact_size", data["contact_size"],
                          "graded meshes need a polygon geometry (Triangle); a rectangle can be given as a polygon")
-        contact_size = r.number(data["contact_size"], "mesh.contact_size", low=0, high=size, low_open=True,
-                                expected=f"must be in (0, mesh.size = {size:g}]")
+        least = _extent(geometry) / MAX_DIVISIONS
+        contact_size = r.number(data["contact_size"], "mesh.contact_size", low=least, high=size,
+                                expected=f"must be in [extent / {MAX_DIVISIONS} = {least:g}, mesh.size = {size:g}]")
     elif "grading" in data:
         raise r.fail("mesh.grading", data["grading"], "only meaningful with mesh.contact_size")
     grading = r.number(data.get("grading", 0.25), "mesh.grading", low=0.01, high=10.0,
@@ -546,6 +574,8 @@ def _material(r: _Reader, data: Any) -> Material:
             if key not in data:
                 raise CaseError(f"{r.filename}: material.{key}: missing (required with {'nu' if key == 'E' else 'E'})")
         young = r.number(data["E"], "material.E", low=0, low_open=True, expected="must be > 0")
+        if not 1 / SCALE_LIMIT <= young <= SCALE_LIMIT:
+            raise r.fail("material.E", young, f"must be in [{1 / SCALE_LIMIT:g}, {SCALE_LIMIT:g}] (use other units)")
         nu = r.number(data["nu"], "material.nu", low=0, high=0.5, high_open=True, expected="must be in [0, 0.5)")
         lam = young * nu / ((1 + nu) * (1 - 2 * nu))
         mu = young / (2 * (1 + nu))
@@ -554,9 +584,16 @@ def _material(r: _Reader, data: Any) -> Material:
             if key not in data:
                 raise CaseError(f"{r.filename}: material.{key}: missing (required with {'mu' if key == 'lambda' else 'lambda'})")
         mu = r.number(data["mu"], "material.mu", low=0, low_open=True, expected="must be > 0")
+        if not 1 / SCALE_LIMIT <= mu <= SCALE_LIMIT:
+            raise r.fail("material.mu", mu, f"must be in [{1 / SCALE_LIMIT:g}, {SCALE_LIMIT:g}] (use other units)")
         lam = r.number(data["lambda"], "material.lambda", low=0, expected="must be >= 0")
         young = mu * (3 * lam + 2 * mu) / (lam + mu)
         nu = lam / (2 * (lam + mu))
+    if lam > MAX_LAME_RATIO * mu:
+        key = "material.nu" if has_young else "material.lambda"
+        raise r.fail(key, nu if has_young else lam,
+                     f"lambda/mu = {lam / mu:.3g} exceeds {MAX_LAME_RATIO:g} (nu > 0.499999995): P1 triangles "
+                     "lock and the stiffness is singular to round-off; the material is too close to incompressible")
     return Material(lame_lambda=lam, lame_mu=mu, plane=plane, young=young, poisson=nu)
 
 
@@ -682,7 +719,8 @@ def _solver(r: _Reader, data: Any) -> SolverSettings:
                          expected="must be in [1e-15, 1e-2]")
     max_iterations = r.integer(data.get("max_iterations", 50), "solver.max_iterations", low=1, high=10_000)
     c = data.get("c", "auto")
-    c = None if c == "auto" else r.number(c, "solver.c", low=0, low_open=True, expected="must be > 0 or auto")
+    c = None if c == "auto" else r.number(c, "solver.c", low=1 / SCALE_LIMIT, high=SCALE_LIMIT,
+                                          expected=f"must be in [{1 / SCALE_LIMIT:g}, {SCALE_LIMIT:g}] or auto")
     backend = r.choice(data.get("backend", "auto"), "solver.backend", BACKENDS)
     return SolverSettings(method=method, tolerance=tolerance, max_iterations=max_iterations, c=c, backend=backend)
 

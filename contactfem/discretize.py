@@ -43,9 +43,16 @@ def build_mesh(case: Case, refine: int | None = None) -> Mesh:
             f"named {missing[0]!r}; it has {', '.join(mesh.part_names)}"
         )
     times = case.mesh.refine if refine is None else refine
+    if isinstance(case.geometry, MeshFileGeometry):
+        # Only now is the mesh file's size known: refuse its refinements before they allocate.
+        _refuse_oversized(case, refine, base=mesh.n_triangles)
     if times:
         mesh = refine_uniform(mesh, times)
-    check_mesh(mesh)
+    try:
+        check_mesh(mesh)
+    except MeshError as error:  # e.g. slivers of a rectangle of aspect 1e9: name the key
+        kind = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
+        raise MeshError(f"{case.source.name}: geometry.{kind[type(case.geometry)]}: {error}") from None
     return mesh
 
 
@@ -121,14 +128,18 @@ def _mesh_origin(case: Case) -> str:
     return "the mesh"
 
 
-def _refuse_oversized(case: Case, refine: int | None) -> None:
+def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
+    """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before refining."""
     import os
 
     try:
         memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         memory = 16 * 2**30
-    triangles = estimate_triangles(case, refine)
+    if base is None:
+        triangles = estimate_triangles(case, refine)
+    else:
+        triangles = base * 4 ** (case.mesh.refine if refine is None else refine)
     limit = memory // BYTES_PER_TRIANGLE
     if triangles > limit:
         raise CaseError(
@@ -585,10 +596,15 @@ def _check_finite(case: Case, key: str, fields: tuple[Expression | None, ...], w
 
 
 def _refuse_non_finite(case: Case, key: str, field: Expression, values: np.ndarray, where: np.ndarray) -> None:
-    bad = ~np.isfinite(values)
+    from contactfem.case import SCALE_LIMIT
+
+    # Values beyond SCALE_LIMIT would overflow once integrated and solved (NaN residuals).
+    bad = ~(np.abs(values) <= SCALE_LIMIT)
     if bad.any():
         x, y = where[np.argmax(bad)]
+        value = values.flat[np.argmax(bad)]
+        what = "not finite" if not np.isfinite(value) else f"{value:.3g} exceeds {SCALE_LIMIT:g} in magnitude"
         raise CaseError(
-            f"{case.source.name}: {key} = {field.text!r}: not finite at ({x:g}, {y:g}); "
+            f"{case.source.name}: {key} = {field.text!r}: {what} at ({x:g}, {y:g}); "
             "expected finite values on the whole part"
         )

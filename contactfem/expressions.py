@@ -320,6 +320,23 @@ def to_sympy(expression: Expression) -> Any:
     return _Sympy(sympy, *sympy_symbols()).value(tree)
 
 
+def _sympy_power(s: Any) -> Callable[[Any, Any], Any]:
+    """sympy's Pow, refusing a number raised to a number whose value is beyond float64.
+
+    sympy evaluates integer powers exactly, so ``9**9**9`` would build a number of 370
+    million digits (minutes and gigabytes); the numeric form gives inf for it anyway.
+    """
+
+    def power(a: Any, b: Any) -> Any:
+        if getattr(a, "is_Number", False) and getattr(b, "is_Number", False) and a != 0:
+            magnitude = float(b) * math.log10(abs(float(a))) if abs(float(a)) not in (0.0, math.inf) else math.inf
+            if not math.isfinite(magnitude) or abs(magnitude) > 308:
+                raise ExpressionError(f"number {a}**{b} is outside the range of float64")
+        return s.Pow(a, b)
+
+    return power
+
+
 class _Sympy:
     """Maps checked ast nodes to sympy objects (only the whitelisted node types)."""
 
@@ -329,7 +346,7 @@ class _Sympy:
         s = sympy
         self.binary = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
                        ast.Mult: lambda a, b: a * b, ast.Div: lambda a, b: a / b,
-                       ast.Pow: lambda a, b: s.Pow(a, b), ast.Mod: lambda a, b: s.Mod(a, b)}
+                       ast.Pow: _sympy_power(s), ast.Mod: lambda a, b: s.Mod(a, b)}
         self.compare = {ast.Lt: s.Lt, ast.LtE: s.Le, ast.Gt: s.Gt, ast.GtE: s.Ge, ast.Eq: s.Eq, ast.NotEq: s.Ne}
         self.functions: dict[str, Callable[..., Any]] = {
             "sin": s.sin, "cos": s.cos, "tan": s.tan, "arcsin": s.asin, "arccos": s.acos, "arctan": s.atan,

@@ -91,3 +91,60 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
         finally:
             plt.close(figure)
     return written
+
+
+def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 900), title: str = "") -> Path:
+    """Contact pressure and gap g0 − u_n along ΓC of one result (``read_hdf5``'s dict).
+
+    The abscissa is the arc length along ΓC from its first contact node (the nodes are
+    stored sorted along ΓC); the active nodes are marked and the contact zone shaded.
+    The PNG is exactly ``size`` pixels.
+    """
+    plt = _pyplot()
+    points = np.asarray(data["mesh"]["points"], dtype=float)
+    contact = data["contact"]
+    nodes = np.asarray(contact["nodes"], dtype=np.int64)
+    active = np.asarray(contact["active"], dtype=bool)
+    xy = points[nodes]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]) if len(xy) else xy[:, 0]
+    multiplier = np.asarray(contact["multiplier"], dtype=float)
+    gap = np.asarray(contact["gap"], dtype=float) - np.asarray(contact["normal_displacement"], dtype=float)
+    method = data["attrs"].get("method", "")
+    symbol = {"positive": "λh (positive, method 4)", "standard": "θh (standard, method 5)"}.get(method, "multiplier")
+    dpi = 100
+    figure, (top, bottom) = plt.subplots(2, 1, figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi, sharex=True)
+    for axis in (top, bottom):
+        for start, stop in _runs(active):
+            axis.axvspan(s[start], s[stop], color="tab:red", alpha=0.12, lw=0)
+        axis.axhline(0.0, color="k", lw=0.8)
+    top.plot(s, multiplier, "-o", ms=3, color="tab:blue", label=symbol)
+    top.plot(s[active], multiplier[active], "o", ms=5, color="tab:red", label="active nodes (in contact)")
+    top.set_ylabel("contact pressure")
+    top.legend(fontsize=9)
+    top.set_title(title or "contact boundary ΓC")
+    bottom.plot(s, gap, "-", color="tab:green", label="gap g0 − u_n")
+    bottom.plot(s[active], gap[active], "o", ms=5, color="tab:red")
+    bottom.set_ylabel("gap g0 − u_n (length)")
+    bottom.set_xlabel("arc length along ΓC")
+    bottom.legend(fontsize=9)
+    figure.tight_layout()
+    try:
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, format="png", dpi=dpi)
+        return path
+    finally:
+        plt.close(figure)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [start, stop] of consecutive True entries (a single node gives start = stop)."""
+    runs, start = [], None
+    for i, value in enumerate(np.asarray(mask, dtype=bool)):
+        if value and start is None:
+            start = i
+        if not value and start is not None:
+            runs.append((start, i - 1))
+            start = None
+    if start is not None:
+        runs.append((start, len(mask) - 1))
+    return runs

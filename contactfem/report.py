@@ -10,6 +10,26 @@ from contactfem.discretize import DiscreteProblem
 
 SCHEMA_VERSION = 1
 
+#: Plane strain λ/μ above which report["warnings"] flags volumetric locking: 1e3 ⇔
+#: ν > 0.4995. P1 displacements then lose accuracy in proportion to λ/μ (the discrete
+#: divergence-free space is too small), the stiffness's condition number grows like λ/μ
+#: and benchmarks/extremes.py measures the normalised displacement falling off from this
+#: point on. Plane stress cannot lock (its effective λ is at most 2μ).
+LOCKING_WARNING_RATIO = 1e3
+
+
+def material_warnings(material) -> list[str]:
+    """Warnings about the material for report["warnings"] (empty when there are none)."""
+    ratio = material.lame_lambda / material.lame_mu
+    if material.plane == "strain" and ratio > LOCKING_WARNING_RATIO:
+        return [
+            f"nearly incompressible material in plane strain: nu = {material.poisson:.6g}, lambda/mu = "
+            f"{ratio:.3g} > {LOCKING_WARNING_RATIO:g} (nu > 0.4995); P1 triangles lock, so the displacement "
+            "is underestimated by an amount that grows with lambda/mu; use plane stress if it applies, "
+            "or treat the result with care"
+        ]
+    return []
+
 
 def sign_conditions(
     method: str, gap: np.ndarray, normal_displacement: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray

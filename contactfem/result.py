@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,6 +60,9 @@ class Solution:
         Per Newton iteration (1-based), equal-length arrays: ``active`` (size of the
         active set), ``added``, ``removed`` (nodes entering / leaving it),
         ``equilibrium_residual`` and ``complementarity_residual`` (relative).
+    cell_fields : dict of str to (n_triangles,) ndarray
+        Extra per-triangle fields, e.g. ``error_indicator`` (η_T of the residual
+        estimator, set by ``contactfem adapt``); empty by default.
     """
 
     method: str
@@ -69,3 +72,4 @@ class Solution:
     von_mises: np.ndarray
     contact: ContactFields
     newton: dict[str, np.ndarray]
+    cell_fields: dict[str, np.ndarray] = field(default_factory=dict)

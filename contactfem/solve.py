@@ -23,7 +23,7 @@ from contactfem.errors import SolverError
 from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact
 from contactfem.linalg import resolve_backend
 from contactfem.methods import get_method
-from contactfem.report import SCHEMA_VERSION, contact_zone, equilibrium, sign_conditions
+from contactfem.report import SCHEMA_VERSION, contact_zone, equilibrium, material_warnings, sign_conditions
 from contactfem.sequencing import predict_active_set
 from contactfem.result import ContactFields, Solution
 
@@ -207,6 +207,7 @@ def build_report(outcome: Outcome) -> dict:
         },
         "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force),
         "errors": _exact_errors(case, problem, solution),
+        "warnings": material_warnings(case.material),
         "timings": dict(outcome.timings),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
@@ -251,6 +252,8 @@ def write_outputs(outcome: Outcome, directory: Path, files: tuple[str, ...] | No
             attributes={"contactfem_version": __version__, "plane": outcome.case.material.plane,
                         "backend": outcome.backend},
         ))
+        from contactfem.io.xdmf import write_xdmf  # solution.xdmf for ParaView, beside solution.h5
+        written += write_xdmf(outcome.solution, directory)
     outcome.timings["write"] = time.perf_counter() - clock
     outcome.report["timings"] = dict(outcome.timings)
     if "json" in files:

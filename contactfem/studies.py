@@ -77,6 +77,7 @@ def convergence_study(
     extra: int = 1,
     methods: tuple[str, ...] = METHOD_NAMES,
     progress: Progress | None = None,
+    on_outcome=None,
 ) -> dict:
     """Solve on ``levels`` nested meshes (the case's mesh refined 0 … levels−1 times).
 
@@ -107,6 +108,8 @@ def convergence_study(
         setup = time.perf_counter() - started
         for name in methods:
             outcome = solve_case(case, method=name, problem=problem)
+            if on_outcome is not None:  # on_outcome(level, method, outcome), e.g. to keep the fields
+                on_outcome(level, name, outcome)
             if exact is not None:
                 errors = exact_errors(outcome.solution, problem, exact)
             else:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from contactfem.assembly import (
@@ -121,3 +122,106 @@ def test_boundary_mass_integrates_products_of_hat_functions():
     x = mesh.points[:, 0]
     assert ones @ mass @ ones == pytest.approx(3.0, rel=1e-14)
     assert x @ mass @ x == pytest.approx(9.0, rel=1e-14)
+
+
+# ------------------------------------------------- edge-wise assembly vs a reference
+
+
+def reference_stiffness(points: np.ndarray, triangles: np.ndarray, law: Elasticity) -> sp.csr_matrix:
+    """Textbook assembly: Bᵀ D B |T| per element (Voigt notation), 36 entries each, summed by COO."""
+    p = points[triangles]  # (t, 3, 2)
+    edge = p[:, [1, 2, 0]] - p[:, [2, 0, 1]]  # edge opposite vertex i, from j to k
+    u, v = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    twice_area = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    gx = -edge[:, :, 1] / twice_area[:, None]  # ∂φ_i/∂x = (y_j − y_k) / 2|T|
+    gy = edge[:, :, 0] / twice_area[:, None]
+    b = np.zeros((len(triangles), 3, 6))
+    b[:, 0, 0::2] = gx
+    b[:, 1, 1::2] = gy
+    b[:, 2, 0::2] = gy
+    b[:, 2, 1::2] = gx
+    d = np.array([[law.lam + 2 * law.mu, law.lam, 0.0], [law.lam, law.lam + 2 * law.mu, 0.0], [0.0, 0.0, law.mu]])
+    ke = np.einsum("tki,kl,tlj,t->tij", b, d, b, 0.5 * twice_area)
+    dofs = (2 * triangles[:, :, None] + np.arange(2)).reshape(-1, 6)
+    rows = np.repeat(dofs, 6, axis=1).ravel()
+    cols = np.tile(dofs, (1, 6)).ravel()
+    n = 2 * len(points)
+    return sp.coo_matrix((ke.ravel(), (rows, cols)), shape=(n, n)).tocsr()
+
+
+def assert_same_matrix(k: sp.csr_matrix, ref: sp.csr_matrix) -> None:
+    assert isinstance(k, sp.csr_matrix)
+    assert k.shape == ref.shape
+    ref.sum_duplicates()
+    # Same pattern, explicit zeros of the element matrices included.
+    np.testing.assert_array_equal(k.indptr, ref.indptr)
+    np.testing.assert_array_equal(k.indices, ref.indices)
+    scale = np.abs(ref.data).max()
+    np.testing.assert_allclose(k.data, ref.data, rtol=0, atol=1e-12 * scale)
+    # Canonical form, checked from scratch rather than trusted from the flags.
+    fresh = sp.csr_matrix((k.data, k.indices, k.indptr), shape=k.shape)
+    assert fresh.has_sorted_indices and fresh.has_canonical_format
+    assert abs(k - k.T).max() == 0.0
+
+
+def comparison_meshes():
+    yield "structured right", structured_rectangle((0.0, 0.0), (2.0, 1.0), 7, 5)
+    yield "structured crossed", structured_rectangle((-1.0, 0.5), (0.0, 1.5), 4, 6, diagonal="crossed")
+    yield "structured alternate", structured_rectangle((3.0, -2.0), (4.0, 0.0), 5, 8, diagonal="alternate")
+    outer = Loop(np.array([[0.0, 0.0], [2.0, 0.0], [2.3, 1.4], [0.4, 1.9], [-0.2, 0.8]]), ("a",) * 5, (None,) * 5)
+    hole = Loop(np.array([[0.6, 0.6], [0.9, 1.2], [1.3, 0.7]]), ("h",) * 3, (None,) * 3)
+    yield "unstructured", triangulate_domain(outer, [hole], max_edge=0.15)
+
+
+@pytest.mark.parametrize("plane", ["strain", "stress"])
+@pytest.mark.parametrize("name, mesh", list(comparison_meshes()), ids=lambda v: v if isinstance(v, str) else "")
+def test_stiffness_equals_the_elementwise_reference(name, mesh, plane):
+    law = Elasticity.from_young(3.0e5, 0.28, plane)
+    k = stiffness_matrix(mesh.points, mesh.triangles, law)
+    assert k.indices.dtype == np.int32 and k.indptr.dtype == np.int32
+    assert_same_matrix(k, reference_stiffness(mesh.points, mesh.triangles, law))
+
+
+def test_stiffness_with_shuffled_nodes_clockwise_triangles_and_an_unused_node():
+    """Random node numbering, some triangles clockwise (negative area, as the closed
+    form gives), int32 triangles and a node in no triangle (its rows stay empty)."""
+    mesh = list(comparison_meshes())[-1][1]
+    rng = np.random.default_rng(3)
+    n = mesh.n_points
+    new_of_old = rng.permutation(n + 1)[:n]  # node n in the new numbering may be unused
+    points = np.empty((n + 1, 2))
+    points[new_of_old] = mesh.points
+    unused = np.setdiff1d(np.arange(n + 1), new_of_old)
+    points[unused] = [10.0, 10.0]
+    triangles = new_of_old[mesh.triangles].astype(np.int32)
+    flip = rng.random(len(triangles)) < 0.3
+    triangles[flip] = triangles[flip][:, ::-1]
+    triangles = triangles[rng.permutation(len(triangles))]
+    k = stiffness_matrix(points, triangles, LAW)
+    assert_same_matrix(k, reference_stiffness(points, triangles.astype(np.int64), LAW))
+    rows = 2 * unused
+    assert k[rows].nnz == 0 and k[rows + 1].nnz == 0
+
+
+def test_stiffness_of_a_single_triangle_and_of_unusual_input():
+    points = np.array([[0.0, 0.0], [1.0, 0.2], [0.3, 0.9]])
+    triangles = np.array([[0, 1, 2]])
+    assert_same_matrix(stiffness_matrix(points, triangles, LAW), reference_stiffness(points, triangles, LAW))
+    # Integer coordinates take the element-wise path and give the same matrix.
+    k_int = stiffness_matrix(np.array([[0, 0], [2, 0], [0, 1]]), triangles, LAW)
+    k_float = stiffness_matrix(np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 1.0]]), triangles, LAW)
+    assert_same_matrix(k_int, k_float.copy())
+    empty = stiffness_matrix(points, np.zeros((0, 3), dtype=np.int64), LAW)
+    assert empty.shape == (6, 6) and empty.nnz == 0
+
+
+def test_counting_sort_is_a_stable_sort():
+    from contactfem.assembly import _counting_sort
+
+    rng = np.random.default_rng(0)
+    keys = rng.integers(0, 50, size=1000).astype(np.int32)
+    payload = rng.integers(-5, 5, size=1000).astype(np.int32)
+    order, sorted_payload, starts = _counting_sort(keys, 60, payload, np.arange(1001, dtype=np.int32))
+    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+    np.testing.assert_array_equal(sorted_payload, payload[order])
+    np.testing.assert_array_equal(starts, np.searchsorted(keys[order], np.arange(61)))

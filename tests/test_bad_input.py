@@ -412,7 +412,7 @@ def test_failed_run_leaves_existing_results_untouched(tmp_path, modify, code):
     assert {"solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "report.json"} <= set(before)
 
     bad = write_case(tmp_path, modify)
-    result = run("solve", bad, "--out", out)
+    result = run("solve", bad, "--out", out, "--overwrite")
     assert_no_traceback(result)
     assert result.exit_code == code, result.stderr
     lines = result.stderr.splitlines()

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import os
 import secrets
+import shutil
+import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,6 +19,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "ensure_directory",
+    "staged_directory",
 ]
 
 #: Every temporary file starts with this, so leftovers of a killed process are easy to spot.
@@ -203,3 +207,75 @@ def atomic_write_text(final: Path | str, text: str, encoding: str = "utf-8") -> 
         If the file cannot be written.
     """
     return atomic_write_bytes(final, text.encode(encoding))
+
+
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold back SIGINT for the duration of the block, then deliver it (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    except (ValueError, OSError):  # no signal support here: nothing to defer
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        raise KeyboardInterrupt
+
+
+@contextmanager
+def staged_directory(directory: Path | str, replaces: tuple[str, ...] = (), last: str | None = None) -> Iterator[Path]:
+    """Yield a fresh staging directory whose files land together in ``directory`` on success.
+
+    The staging directory is a hidden sibling of ``directory`` (same file system), named
+    ``.tmp-<pid>-<random>.<name>``. When the block completes, each of its files is moved
+    onto ``directory`` with :func:`os.replace` (``last`` moved last, e.g. the report that
+    marks a complete result), with SIGINT held back until the moves are done; then the
+    files named in ``replaces`` that the run did not write are deleted, so that no stale
+    file of an earlier run stays next to the new ones. If the block raises (an error,
+    KeyboardInterrupt), nothing in ``directory`` changes. The staging directory is always
+    removed.
+
+    Raises
+    ------
+    OutputError
+        If a directory cannot be created or a file cannot be moved.
+    """
+    directory = ensure_directory(directory)
+    staging = None
+    for _ in range(100):
+        candidate = directory.parent / f"{TEMP_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.{directory.name}"
+        try:
+            candidate.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise _wrap(candidate, exc) from exc
+        staging = candidate
+        break
+    if staging is None:
+        raise OutputError(f"cannot write {directory}: no free temporary name next to it")
+    try:
+        yield staging
+        names = sorted(p.name for p in staging.iterdir())
+        if last in names:
+            names.remove(last)
+            names.append(last)
+        with _sigint_deferred():
+            try:
+                for name in names:
+                    os.replace(staging / name, directory / name)
+                for name in replaces:
+                    if name not in names:
+                        _remove_quietly(directory / name)
+            except OSError as exc:
+                raise _wrap(directory, exc) from exc
+            _fsync_directory(directory)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)

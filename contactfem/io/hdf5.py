@@ -26,8 +26,10 @@ Layout, schema version 1::
     /contact/active        (m,) uint8, 0/1
     /newton/<key>          (n_iterations,) one dataset per key of Solution.newton
 
-Datasets of more than 100 000 entries are gzip-compressed at level 1; smaller ones are
-stored contiguous. Readers must check ``format`` and ``schema_version``.
+Every dataset is stored contiguous and uncompressed: writing and reading then cost no
+more than the copy itself (gzip level 1 took several seconds for a 2 M triangle mesh),
+and any HDF5 reader can open the file without filter plugins. Readers must check
+``format`` and ``schema_version``.
 """
 
 from __future__ import annotations
@@ -45,19 +47,14 @@ __all__ = ["write_hdf5", "read_hdf5", "FORMAT", "SCHEMA_VERSION"]
 
 FORMAT = "contactfem-solution"
 SCHEMA_VERSION = 1
-# Level-1 gzip shrinks big float arrays noticeably at little cost; below this size the
-# saving is not worth the chunking and CPU time.
-_COMPRESS_ABOVE = 100_000
 _RESERVED_ATTRS = ("format", "schema_version", "method", "case_hash")
 _ATTR_TYPES = (str, int, float, np.integer, np.floating, np.bool_)
 
 
 def _dataset(group: Any, name: str, data: np.ndarray, dtype: Any) -> Any:
+    # No copy when the array already has the dtype and C layout (the usual case).
     array = np.ascontiguousarray(data, dtype=dtype)
-    options: dict[str, Any] = {}
-    if array.size > _COMPRESS_ABOVE:
-        options = {"compression": "gzip", "compression_opts": 1}
-    return group.create_dataset(name, data=array, **options)
+    return group.create_dataset(name, data=array)
 
 
 def _check_attributes(attributes: dict[str, str | int | float]) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from pathlib import Path
 
@@ -90,7 +92,10 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     try:
         # The Gmsh reader itself, not meshio.read: on a ReadError meshio.read prints
         # the error and calls sys.exit(1).
-        raw = meshio.gmsh.read(path)
+        # meshio prints its warnings ("$MeshFormat not closed ...") on stderr: keep them
+        # off, the refusal below or the checks after it say what is wrong in one line.
+        with contextlib.redirect_stderr(io.StringIO()):
+            raw = meshio.gmsh.read(path)
     except Exception as exc:  # noqa: BLE001 - meshio's parsers raise almost anything on bad input
         text = str(exc).strip()
         reason = text.splitlines()[0] if text else "not a Gmsh .msh file (no valid $MeshFormat header)"

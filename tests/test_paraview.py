@@ -1,0 +1,130 @@
+"""The outputs as ParaView itself reads them: pvpython (Debian's python3-paraview) opens the
+VTU, PVD and XDMF files of a solved shipped case and of `compare`, and every array's name,
+components, type and values are checked against solution.h5. Skipped without pvpython.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactfem.io import read_hdf5
+
+from test_cli import invoke
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBE = Path(__file__).with_name("pvpython_probe.py")
+PVPYTHON = shutil.which("pvpython")
+
+pytestmark = pytest.mark.skipif(PVPYTHON is None, reason="pvpython not installed (apt-get install python3-paraview)")
+
+
+@pytest.fixture(scope="module")
+def probed(tmp_path_factory):
+    """Solve cases/square.yaml and compare it, then let pvpython read every ParaView file."""
+    tmp = tmp_path_factory.mktemp("paraview")
+    case = ROOT / "cases" / "square.yaml"
+    assert invoke("solve", case, "--out", tmp / "solve", "--quiet").exit_code == 0
+    assert invoke("compare", case, "--out", tmp / "compare", "--quiet").exit_code == 0
+    files = [tmp / "solve" / n for n in ("solution.vtu", "contact.vtu", "solution.pvd", "solution.xdmf")]
+    files.append(tmp / "compare" / "compare.pvd")
+    out = tmp / "probe.json"
+    run = subprocess.run([PVPYTHON, str(PROBE), str(out), *map(str, files)], capture_output=True, text=True,
+                         timeout=300, cwd=tmp)
+    assert run.returncode == 0, run.stdout + run.stderr
+    report = json.loads(out.read_text())
+    return {Path(k).relative_to(tmp).as_posix(): v for k, v in report.items()}, tmp
+
+
+def _values(info) -> np.ndarray:
+    return np.reshape(info["values"], (-1, info["components"]))
+
+
+def _check_body(block, data, stress_layout):
+    points, triangles = data["mesh"]["points"], data["mesh"]["triangles"]
+    fields = data["fields"]
+    assert block["points"] == len(points) and block["cells"] == len(triangles)
+    assert block["cell_types"] == [5]  # VTK_TRIANGLE
+    xyz = np.asarray(block["coordinates"])
+    assert np.allclose(xyz[:, :2], points) and np.all(xyz[:, 2] == 0)
+    assert set(block["point_data"]) == {"displacement"}
+    assert set(block["cell_data"]) == {"stress", "stress_xx", "stress_yy", "stress_xy", "stress_zz", "von_mises"}
+    for kind in ("point_data", "cell_data"):
+        assert all(info["type"] == "double" for info in block[kind].values())
+    u = _values(block["point_data"]["displacement"])
+    assert u.shape == (len(points), 3)
+    assert np.allclose(u[:, :2], fields["displacement"], rtol=1e-12, atol=0) and np.all(u[:, 2] == 0)
+    xx, yy, xy, zz = fields["stress"].T
+    zero = np.zeros_like(xx)
+    expected = {"vtk6": [xx, yy, zz, xy, zero, zero],  # VTK symmetric order
+                "full9": [xx, xy, zero, xy, yy, zero, zero, zero, zz]}[stress_layout]
+    assert np.allclose(_values(block["cell_data"]["stress"]), np.column_stack(expected), rtol=1e-12, atol=0)
+    for name, column in (("stress_xx", xx), ("stress_yy", yy), ("stress_xy", xy), ("stress_zz", zz),
+                         ("von_mises", fields["von_mises"])):
+        assert block["cell_data"][name]["components"] == 1
+        assert np.allclose(_values(block["cell_data"][name])[:, 0], column, rtol=1e-12, atol=0)
+
+
+def _check_contact(block, data):
+    contact = data["contact"]
+    assert block["cell_types"] == [3]  # VTK_LINE
+    assert block["cells"] == len(contact["edges"])
+    names = block["point_data"]
+    assert set(names) == {"mesh_node", "contact_pressure", "nodal_force", "normal_displacement", "gap",
+                          "active", "contact_node", "displacement"}
+    assert names["active"]["type"] == names["contact_node"]["type"] == "unsigned char"
+    assert names["displacement"]["components"] == 3
+    node = _values(names["mesh_node"])[:, 0].astype(int)
+    where = {n: i for i, n in enumerate(node)}
+    rows = [where[n] for n in contact["nodes"]]
+    for vtu_name, h5_name in (("contact_pressure", "multiplier"), ("nodal_force", "nodal_force"),
+                              ("normal_displacement", "normal_displacement"), ("gap", "gap"),
+                              ("active", "active")):
+        assert np.allclose(_values(names[vtu_name])[rows, 0], contact[h5_name], rtol=1e-12, atol=0), vtu_name
+    assert np.allclose(np.asarray(block["coordinates"])[:, :2], data["mesh"]["points"][node])
+
+
+def test_vtu_files_as_paraview_reads_them(probed):
+    report, tmp = probed
+    data = read_hdf5(tmp / "solve" / "solution.h5")
+    (body,) = report["solve/solution.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
+    _check_body(body, data, "vtk6")
+    (contact,) = report["solve/contact.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
+    _check_contact(contact, data)
+
+
+def test_pvd_groups_body_and_contact(probed):
+    report, tmp = probed
+    data = read_hdf5(tmp / "solve" / "solution.h5")
+    found = report["solve/solution.pvd"]["PVDReader"]
+    assert found["times"] == [0.0]
+    body, contact = found["steps"]["0.0"]
+    _check_body(body, data, "vtk6")
+    _check_contact(contact, data)
+
+
+@pytest.mark.parametrize("reader", ["Xdmf3ReaderS", "XDMFReader"])
+def test_xdmf_reads_the_hdf5_archive(probed, reader):
+    report, tmp = probed
+    data = read_hdf5(tmp / "solve" / "solution.h5")
+    (body,) = report["solve/solution.xdmf"][reader]["steps"]["none"]
+    _check_body(body, data, "full9")
+
+
+def test_compare_series_has_one_time_step_per_method(probed):
+    report, tmp = probed
+    found = report["compare/compare.pvd"]["PVDReader"]
+    assert found["times"] == [0.0, 1.0]
+    figures = json.loads((tmp / "compare" / "compare.json").read_text())
+    pressures = {}
+    for step, method in (("0.0", "positive"), ("1.0", "standard")):
+        body, contact = found["steps"][step]
+        assert body["cell_types"] == [5] and contact["cell_types"] == [3]
+        pressures[method] = _values(contact["point_data"]["contact_pressure"])[:, 0]
+    assert pressures["positive"].min() >= 0
+    assert np.isclose(pressures["standard"].min(), min(figures["min_theta"], 0.0), rtol=1e-12)
