@@ -17,7 +17,7 @@ import numpy as np
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 
 # Below this many unknowns a cold start is cheaper than solving a coarser case first.
-SEQUENCING_THRESHOLD = 20_000
+SEQUENCING_THRESHOLD = 5_000
 
 
 def coarser(case: Case, refinements: int) -> tuple[Case, int] | None:
@@ -27,7 +27,7 @@ def coarser(case: Case, refinements: int) -> tuple[Case, int] | None:
     settings = case.mesh
     if isinstance(case.geometry, RectangleGeometry):
         nx, ny = settings.divisions
-        if nx % 2 or ny % 2 or min(nx, ny) < 8:
+        if nx % 2 or ny % 2:
             return None
         return replace(case, mesh=replace(settings, divisions=(nx // 2, ny // 2))), 0
     if isinstance(case.geometry, PolygonGeometry):
