@@ -74,11 +74,8 @@ def stiffness_matrix(points: np.ndarray, triangles: np.ndarray, law: Elasticity)
     if not _edge_assembly_applies(points, triangles):
         return _stiffness_matrix_by_elements(points, triangles, law)
     n_points = len(points)
-    # 4 (n + 2 n_edges) entries with n_edges < 3 n_triangles bounds the nnz.
-    if 4 * (n_points + 6 * len(triangles)) < np.iinfo(np.int32).max:
-        index_type = np.int32
-    else:
-        index_type = np.int64
+    # 4 (n + 2 n_edges) entries with n_edges <= 3 n_triangles bounds the nnz.
+    index_type = np.int32 if 4 * (n_points + 6 * len(triangles)) <= _INT32_LIMIT else np.int64
     tri = np.ascontiguousarray(triangles, dtype=index_type)
     edges = _mesh_edges(tri, n_points)
     if edges is None:  # a triangle repeats a node
@@ -87,14 +84,17 @@ def stiffness_matrix(points: np.ndarray, triangles: np.ndarray, law: Elasticity)
     x = np.ascontiguousarray(points[:, 0], dtype=np.float64)
     y = np.ascontiguousarray(points[:, 1], dtype=np.float64)
     edge_blocks, node_blocks = _pair_blocks(x, y, tri, edge_of, flipped, len(edge_lo), law)
-    del edge_of, flipped
-    used = np.bincount(tri.ravel(), minlength=n_points) > 0
-    del tri
-    return _block_csr(used, edge_lo, edge_hi, edge_blocks, node_blocks)
+    del edge_of, flipped, tri
+    return _block_csr(n_points, edge_lo, edge_hi, edge_blocks, node_blocks)
+
+
+# Largest index (and entry count) that int32 CSR arrays can hold.
+_INT32_LIMIT = np.iinfo(np.int32).max
 
 
 def _edge_assembly_applies(points: np.ndarray, triangles: np.ndarray) -> bool:
-    """Whether the edge-wise assembly reproduces the element-wise one exactly.
+    """Whether the edge-wise assembly takes this input (it gives the element-wise matrix
+    up to round-off).
 
     Anything unusual (other dtypes, empty or malformed input, out-of-range nodes) goes
     through the straightforward element-wise assembly, which keeps its behaviour.
@@ -262,7 +262,7 @@ def _pair_blocks(
 
 
 def _block_csr(
-    used: np.ndarray,
+    n_points: int,
     edge_lo: np.ndarray,
     edge_hi: np.ndarray,
     edge_blocks: tuple[np.ndarray, ...],
@@ -271,12 +271,12 @@ def _block_csr(
     """The interleaved 2n x 2n CSR matrix from the 2x2 blocks of the nodes and edges.
 
     Node row i holds, in column order, the blocks (i, lo) of the edges with hi = i, the
-    diagonal block (if i is in a triangle), then the blocks (i, hi) of the edges with
-    lo = i. Dof rows 2i and 2i+1 both have 2 L_i entries (L_i blocks in node row i), so
-    with p the node-level position of a block in row i, its first-row pair of entries
-    starts at entry 2 (p + ptr[i]) and its second-row pair at 2 (p + ptr[i + 1]).
+    diagonal block (if i is on an edge, i.e. in a triangle), then the blocks (i, hi) of
+    the edges with lo = i; a node in no triangle has empty rows. Dof rows 2i and 2i+1
+    both have 2 L_i entries (L_i blocks in node row i), so with p the node-level position
+    of a block in row i, its first-row pair of entries starts at entry 2 (p + ptr[i]) and
+    its second-row pair at 2 (p + ptr[i + 1]).
     """
-    n_points = len(used)
     n_edges = len(edge_lo)
     index_type = edge_lo.dtype
     ramp = np.arange(n_edges + 1, dtype=index_type)
@@ -285,6 +285,7 @@ def _block_csr(
     lower_count = np.diff(lower_start)
     upper_start = np.searchsorted(edge_lo, np.arange(n_points + 1, dtype=index_type)).astype(index_type)
     upper_count = np.diff(upper_start)
+    used = (lower_count + upper_count) > 0
     has_diagonal = used.astype(index_type)
     ptr = np.zeros(n_points + 1, dtype=index_type)
     np.cumsum(lower_count + has_diagonal + upper_count, out=ptr[1:])
@@ -298,11 +299,13 @@ def _block_csr(
     first, second = data[0::2], data[1::2]
     column = indices[0::2]
 
-    def put(row: np.ndarray, position: np.ndarray, col: np.ndarray, xx, xy, yx, yy) -> None:
-        # position: node-level index of each block; row: its node row.
+    def put(row: np.ndarray, position: np.ndarray, col: np.ndarray, xx, xy, yx, yy, take=None) -> None:
+        # position: node-level index of each block; row: its node row; the values are
+        # taken at ``take`` one array at a time, which keeps the peak memory down.
         top = position + ptr[:-1][row]
         bottom = position + ptr[1:][row]
-        first[top], second[top], first[bottom], second[bottom] = xx, xy, yx, yy
+        for target, where, values in ((first, top, xx), (second, top, xy), (first, bottom, yx), (second, bottom, yy)):
+            target[where] = values if take is None else values[take]
         column[top] = column[bottom] = 2 * col
 
     exx, exy, eyx, eyy = edge_blocks
@@ -312,12 +315,11 @@ def _block_csr(
         exx, exy, eyx, eyy)
     # Lower blocks (hi, lo) = (lo, hi)ᵀ, taken in (hi, lo) order.
     row = np.repeat(np.arange(n_points, dtype=index_type), lower_count)
-    put(row, ramp + (ptr[:-1] - lower_start[:-1])[row], lower_col,
-        exx[lower], eyx[lower], exy[lower], eyy[lower])
+    put(row, ramp + (ptr[:-1] - lower_start[:-1])[row], lower_col, exx, eyx, exy, eyy, take=lower)
     del row, lower, lower_col
     nodes = np.flatnonzero(used).astype(index_type)
-    dxx, dxy, dyy = (v[nodes] for v in node_blocks)
-    put(nodes, (ptr[:-1] + lower_count)[nodes], nodes, dxx, dxy, dxy, dyy)
+    dxx, dxy, dyy = node_blocks
+    put(nodes, (ptr[:-1] + lower_count)[nodes], nodes, dxx, dxy, dxy, dyy, take=nodes)
     np.add(column, 1, out=indices[1::2])
 
     n_dof = 2 * n_points

@@ -147,7 +147,7 @@ def solve_contact(
     backend : str
         Sparse direct solver backend (see :mod:`contactfem.linalg`).
     initial_active : (m,) bool, optional
-        Starting active set; default: the nodes that touch or overlap the obstacle (G ≤ 0).
+        Starting active set; default: the nodes that start inside the obstacle (G < 0).
     on_iteration : callable, optional
         Called with each :class:`Iteration` record (progress reporting).
     safeguard : bool
@@ -163,7 +163,11 @@ def solve_contact(
     c = default_c(system) if c is None else float(c)
     mass_solver = _mass_solver(mass) if m else None
 
-    active = (gap <= 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
+    # The textbook start u = 0, Bμ = 0 gives the indicator c (0 − G): only nodes starting
+    # inside the obstacle. Starting from every touching node instead saves a step on
+    # bodies pressed flat but makes bending-dominated ones (a slender beam lifting off)
+    # release one node per step.
+    active = (gap < 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
     linear = ActiveSetSolver(system, backend)
     equations = linear.free_rows
     stiffness_norm = linear.norm
@@ -351,6 +355,9 @@ class ActiveSetSolver:
                 break
             u, residual = u + correction, trial
         fixed = self.normal_dofs[active]
+        # Active normals satisfy u_n = G through the Schur system only to round-off; they
+        # are constraints, so they are returned exactly (complementarity holds exactly).
+        u[fixed] = self.gap[active]
         reaction = self.load[fixed] - self.stiffness[fixed] @ u
         return u, reaction
 

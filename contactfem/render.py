@@ -169,6 +169,7 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
             legend.append(["contact zone (active)", "#d62728"])
 
         obstacle = _obstacle(case)
+        caption = f"{title}\nmethod: {method}\ndisplacement magnified x {factor:.3g}"
         if obstacle is not None:
             point, normal = obstacle
             tangent = np.array([-normal[1], normal[0]])
@@ -182,9 +183,13 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
             plotter.add_mesh(band, color="#c8c8c8")
             plotter.add_mesh(_lines(pv, np.array([a, b]), np.array([[0, 1]])), color="black", line_width=3)
             legend.append(["rigid obstacle", "black"])
+            # The gaps are not magnified with the displacement: where ΓC started away from
+            # the obstacle, the magnified body can appear to cross its (true) line.
+            crossing = float(((deformed[nodes] - point) @ normal).max()) if len(nodes) else 0.0
+            if crossing > 1e-6 * extent:
+                caption += "\nobstacle at its true position: gaps are not magnified,\nso the body may appear to cross it"
 
-        plotter.add_text(f"{title}\nmethod: {method}\ndisplacement magnified x {factor:.3g}",
-                         position="upper_left", font_size=12, color="black")
+        plotter.add_text(caption, position="upper_left", font_size=12, color="black")
         if legend:
             plotter.add_legend(legend, bcolor="white", border=True, loc="lower left", size=(0.3, 0.12))
         plotter.view_xy()

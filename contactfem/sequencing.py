@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.errors import SolverError
 
 # Below this many unknowns a cold start is cheaper than solving a coarser case first.
 SEQUENCING_THRESHOLD = 5_000
@@ -53,7 +54,11 @@ def predict_active_set(case: Case, problem, c: float, progress=None) -> tuple[np
     coarse_problem = prepare(coarse_case, refine=coarse_refine)
     if coarse_problem.n_unknowns >= problem.n_unknowns:
         return None, {}
-    outcome = solve_case(coarse_case, method="positive", problem=coarse_problem)
+    try:
+        outcome = solve_case(coarse_case, method="positive", problem=coarse_problem)
+    except SolverError:
+        # A prediction is only a starting point: without one the fine solve starts cold.
+        return None, {}
     coarse_contact = outcome.problem.contact
     s_coarse = coarse_contact.abscissa
     fine = problem.contact

@@ -225,3 +225,13 @@ def test_counting_sort_is_a_stable_sort():
     np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
     np.testing.assert_array_equal(sorted_payload, payload[order])
     np.testing.assert_array_equal(starts, np.searchsorted(keys[order], np.arange(61)))
+
+
+def test_stiffness_with_int64_indices_for_huge_meshes(monkeypatch):
+    """Above the int32 range the edge-wise assembly runs on int64 indices, same matrix."""
+    import contactfem.assembly as assembly
+
+    mesh = list(comparison_meshes())[-1][1]
+    monkeypatch.setattr(assembly, "_INT32_LIMIT", 100)
+    k = stiffness_matrix(mesh.points, mesh.triangles, LAW)
+    assert_same_matrix(k, reference_stiffness(mesh.points, mesh.triangles, LAW))

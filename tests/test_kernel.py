@@ -50,8 +50,8 @@ def test_two_coupled_unknowns_one_in_contact():
     """K = [[2,−1],[−1,2]], F = (1, −1), G = 0.
 
     Free solution K⁻¹F = (1/3, −1/3) violates u1 ≤ 0. With u1 = 0: 2 u2 = −1, u2 = −1/2 ≤ 0,
-    and μ1 = F1 − (K u)1 = 1 − 1/2 = 1/2 ≥ 0. The start (all touching nodes active) must
-    drop node 2, whose force would be F2 − 0 = −1 < 0: two solves, then a repeat.
+    and μ1 = F1 − (K u)1 = 1 − 1/2 = 1/2 ≥ 0. From the empty start, the free solution
+    penetrates at node 1 only, which becomes active: two solves, the second repeating its set.
     """
     result = solve_contact(system([[2, -1], [-1, 2]], [1, -1], [0, 0]))
     assert result.status is Status.CONVERGED
