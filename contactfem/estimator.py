@@ -68,6 +68,7 @@ import numpy as np
 from contactfem.assembly import edge_geometry
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem
+from contactfem.quadrature import TRIANGLE_POINTS, TRIANGLE_WEIGHTS
 from contactfem.result import Solution
 
 #: Names of the parts of η², in the order of the formula above.
@@ -123,7 +124,7 @@ def estimate(case: Case, problem: DiscreteProblem, solution: Solution) -> Estima
         area = mesh.triangle_areas()
         corners = points[triangles]
         total = np.zeros(n_tri)
-        for weight, bary in zip(_TRIANGLE_WEIGHTS, _TRIANGLE_POINTS):
+        for weight, bary in zip(TRIANGLE_WEIGHTS, TRIANGLE_POINTS):
             q = np.einsum("i,tia->ta", bary, corners)
             f = force(q[:, 0], q[:, 1])
             total += weight * np.sum(f * f, axis=1)
@@ -156,7 +157,7 @@ def estimate(case: Case, problem: DiscreteProblem, solution: Solution) -> Estima
     blength, bnormal = edge_geometry(points, bedges)
     btraction = np.einsum("eab,eb->ea", sigma[btri], bnormal)  # σ_T ν, constant on each edge
 
-    gauss_s, gauss_w = np.polynomial.legendre.leggauss(5)
+    gauss_s, gauss_w = np.polynomial.legendre.leggauss(5)  # on [-1, 1]
     gauss_s, gauss_w = 0.5 * (gauss_s + 1.0), 0.5 * gauss_w
     a, b = points[bedges[:, 0]], points[bedges[:, 1]]
     parts = {p.name: p for p in case.parts}
@@ -232,14 +233,3 @@ def _traction(part, kind: str, exact, q: np.ndarray, normal: np.ndarray) -> np.n
     if kind == "pressure":
         return -normal * np.broadcast_to(part.values[0](x, y), x.shape)[:, None]
     return np.zeros_like(q)  # free, unlisted, or the free component of a displacement part
-
-
-# Strang–Fix / Dunavant 7-point rule, exact for degree 5 (as contactfem.norms).
-_A1, _B1 = 0.059715871789770, 0.470142064105115
-_A2, _B2 = 0.797426985353087, 0.101286507323456
-_TRIANGLE_POINTS = np.array([
-    [1 / 3, 1 / 3, 1 / 3],
-    [_A1, _B1, _B1], [_B1, _A1, _B1], [_B1, _B1, _A1],
-    [_A2, _B2, _B2], [_B2, _A2, _B2], [_B2, _B2, _A2],
-])
-_TRIANGLE_WEIGHTS = np.array([0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3)

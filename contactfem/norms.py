@@ -10,7 +10,7 @@ quadrature is of degree 5 on triangles and 5-point Gauss on ΓC edges.
 
 from __future__ import annotations
 
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -26,6 +26,7 @@ from contactfem.assembly import (
 from contactfem.discretize import DiscreteProblem
 from contactfem.linalg import factorize
 from contactfem.mesh import prolongation
+from contactfem.quadrature import TRIANGLE_POINTS, TRIANGLE_WEIGHTS, gauss_on_unit_interval
 from contactfem.result import Solution
 
 NORM_NAMES = (
@@ -89,7 +90,7 @@ def exact_errors(solution: Solution, problem: DiscreteProblem, exact: ExactSolut
     u_corners = solution.displacement[mesh.triangles]  # (t, 3, 2)
     grad_h = np.einsum("tia,tib->tab", u_corners, gradients)  # (t, 2, 2)
     l2 = semi = energy = 0.0
-    for weight, bary in zip(_TRIANGLE_WEIGHTS, _TRIANGLE_POINTS):
+    for weight, bary in zip(TRIANGLE_WEIGHTS, TRIANGLE_POINTS):
         q = np.einsum("i,tia->ta", bary, corners)
         u_h = np.einsum("i,tia->ta", bary, u_corners)
         e = exact.displacement(q[:, 0], q[:, 1]) - u_h
@@ -105,7 +106,7 @@ def exact_errors(solution: Solution, problem: DiscreteProblem, exact: ExactSolut
     mu = nodal_multiplier(solution)
     load = np.zeros(mesh.n_points)
     multiplier_l2 = 0.0
-    for s, w in zip(*_gauss_on_unit_interval()):
+    for s, w in zip(*gauss_on_unit_interval()):
         q = (1 - s) * a + s * b
         difference = exact.pressure(q[:, 0], q[:, 1]) - ((1 - s) * mu[edges[:, 0]] + s * mu[edges[:, 1]])
         multiplier_l2 += w * np.sum(length * difference**2)
@@ -154,22 +155,3 @@ def _energy_density(gradient_error: np.ndarray, law: Elasticity) -> np.ndarray:
     strain = 0.5 * (gradient_error + gradient_error.transpose(0, 2, 1))
     trace = strain[:, 0, 0] + strain[:, 1, 1]
     return law.lam * trace**2 + 2 * law.mu * np.sum(strain * strain, axis=(1, 2))
-
-
-def _gauss_on_unit_interval(n: int = 5) -> tuple[np.ndarray, np.ndarray]:
-    nodes, weights = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (nodes + 1), 0.5 * weights
-
-
-# Strang–Fix / Dunavant 7-point rule, exact for degree 5 (weights sum to 1, times |T|).
-_A1, _B1 = 0.059715871789770, 0.470142064105115
-_A2, _B2 = 0.797426985353087, 0.101286507323456
-_TRIANGLE_POINTS = np.array([
-    [1 / 3, 1 / 3, 1 / 3],
-    [_A1, _B1, _B1], [_B1, _A1, _B1], [_B1, _B1, _A1],
-    [_A2, _B2, _B2], [_B2, _A2, _B2], [_B2, _B2, _A2],
-])
-_TRIANGLE_WEIGHTS = np.array([0.225] + [0.132394152788506] * 3 + [0.125939180544827] * 3)
-
-# A field evaluated on arrays, as the case's expressions are.
-Field = Callable[[np.ndarray, np.ndarray], np.ndarray]
