@@ -25,8 +25,14 @@ RESULT_FILES = ("solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "r
 
 def _fail(error: ContactFemError) -> None:
     code = EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError)) else EXIT_FAILURE
-    click.echo(f"error: {error}", err=True)
+    click.echo(f"error: {_printable(str(error))}", err=True)
     sys.exit(code)
+
+
+def _printable(text: str) -> str:
+    """Escape control and separator characters a case file may carry into a message
+    (a key with a record separator would otherwise split the one-line error)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _interruptible(command):

@@ -289,3 +289,18 @@ def test_numbers_at_the_edge_of_float64(results):
         data = copy.deepcopy(BASE)
         data["material"]["nu"] = float(value)
         check(results, dump(data), "material")
+
+
+def test_control_characters_in_keys_stay_on_one_line(tmp_path):
+    """Found by the fuzzer: a key holding U+001E (a record separator, which splitlines()
+    breaks at) made the refusal two lines. Messages escape such characters."""
+    from conftest import CASES
+
+    data = yaml.safe_load((CASES / "square.yaml").read_text(encoding="utf-8"))
+    data["boundary"]["bottom"] = {"\x1e": None}
+    case = tmp_path / "fuzzed.yaml"
+    case.write_text(yaml.safe_dump(data), encoding="utf-8")
+    result = runner().invoke(main, ["solve", str(case), "--out", str(tmp_path / "out"), "--quiet"])
+    assert result.exit_code == 2
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and "\\x1e" in lines[0] and "boundary.bottom" in lines[0]
