@@ -249,7 +249,9 @@ class ReducedSystem:
         shift.eliminate_zeros()
         stiffness = problem.stiffness
         k_shift = (stiffness @ shift).tocsr()
-        rotated = sp.csr_matrix(stiffness + k_shift + k_shift.T + shift.T @ k_shift)
+        # The three corrections live on the framed rows and columns: sum them first, then
+        # add to K once (each full-size sparse addition costs as much as the others together).
+        rotated = sp.csr_matrix(stiffness + (k_shift + k_shift.T + shift.T @ k_shift))
         rotated.sum_duplicates()
         rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
         fixed_dofs = np.concatenate([problem.dirichlet_dofs, 2 * problem.symmetry_nodes])
