@@ -27,7 +27,10 @@ METHODS = ("positive", "standard")
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
 PART_LOADS = ("traction", "pressure", "displacement")
 DIAGONALS = ("right", "left", "alternate", "crossed")
-OUTPUT_FILES = ("vtu", "h5", "json")
+OUTPUT_FILES = ("vtu", "h5", "json", "xdmf")
+# Written unless the case lists its own: xdmf (an XDMF view of the HDF5 plus a companion
+# file) is an extra a case asks for.
+DEFAULT_OUTPUT_FILES = ("vtu", "h5", "json")
 BACKENDS = ("auto", "cholmod", "pardiso", "superlu")
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
@@ -730,7 +733,7 @@ def _output(r: _Reader, data: Any, source: Path) -> OutputSettings:
     directory = data.get("directory", f"results/{source.stem}")
     if not isinstance(directory, str) or not directory.strip():
         raise r.fail("output.directory", directory, "expected a directory path")
-    files = data.get("files", list(OUTPUT_FILES))
+    files = data.get("files", list(DEFAULT_OUTPUT_FILES))
     if not isinstance(files, list) or not files:
         raise r.fail("output.files", files, f"expected a non-empty list from {', '.join(OUTPUT_FILES)}")
     chosen = tuple(r.choice(f, f"output.files[{i}]", OUTPUT_FILES) for i, f in enumerate(files))

@@ -252,7 +252,10 @@ def write_outputs(outcome: Outcome, directory: Path, files: tuple[str, ...] | No
             attributes={"contactfem_version": __version__, "plane": outcome.case.material.plane,
                         "backend": outcome.backend},
         ))
+    if "xdmf" in files:
         from contactfem.io.xdmf import write_xdmf  # solution.xdmf for ParaView, beside solution.h5
+
+        say("writing XDMF")
         written += write_xdmf(outcome.solution, directory)
     outcome.timings["write"] = time.perf_counter() - clock
     outcome.report["timings"] = dict(outcome.timings)
