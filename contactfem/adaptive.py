@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -247,7 +248,7 @@ def interpolate_p1(mesh: Mesh, values: np.ndarray, where: np.ndarray) -> np.ndar
     return np.einsum("qi,qi...->q...", bary, values[mesh.triangles[found]])
 
 
-def write_estimator_vtu(solution: Solution, path) -> "Path":
+def write_estimator_vtu(solution: Solution, path: Path) -> Path:
     """``estimator.vtu``: the triangles with cell data ``error_indicator`` (η_T), point data
     ``displacement`` (z = 0), written atomically with meshio. Kept apart from
     ``solution.vtu`` (contactfem/io/vtu.py does not write ``Solution.cell_fields`` yet)."""

@@ -388,8 +388,8 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
             cells.append(f"{row[norm]:.3e} {rate:>6}")
         click.echo(f"  {row['method']:<9}{row['h']:>9.4f}{row['unknowns']:>10}{row['iterations']:>7}"
                    f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells))
-    click.echo(f"  (observed rates between consecutive levels in parentheses; the paper predicts "
-               f"h^(1/2+ν), ν ≤ 1/2, for the H1 and H-1/2 errors)")
+    click.echo("  (observed rates between consecutive levels in parentheses; the paper predicts "
+               "h^(1/2+ν), ν ≤ 1/2, for the H1 and H-1/2 errors)")
     click.echo(f"  wrote {directory}/convergence.json, convergence.csv, convergence_h.png, convergence_time.png, "
                f"convergence-<method>.pvd (ParaView: one time step per level)")
 

@@ -234,7 +234,6 @@ class ReducedSystem:
     def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
         n_dof = 2 * problem.mesh.n_points
         contact = problem.contact
-        n_o, t_o = contact.normal, contact.tangent
         supported = np.zeros(n_dof, dtype=bool)
         supported[problem.dirichlet_dofs] = True
         nodes, normal_slot, a, b = _frames(problem, supported)
@@ -590,11 +589,11 @@ def _edge_samples(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
 
 
 def _check_finite(case: Case, key: str, fields: tuple[Expression | None, ...], where: np.ndarray) -> None:
-    for i, field in enumerate(fields):
-        if field is None:
+    for i, expression in enumerate(fields):
+        if expression is None:
             continue
-        values = np.broadcast_to(field(where[:, 0], where[:, 1]), len(where))
-        _refuse_non_finite(case, f"{key}[{i}]" if len(fields) > 1 else key, field, values, where)
+        values = np.broadcast_to(expression(where[:, 0], where[:, 1]), len(where))
+        _refuse_non_finite(case, f"{key}[{i}]" if len(fields) > 1 else key, expression, values, where)
 
 
 def _refuse_non_finite(case: Case, key: str, field: Expression, values: np.ndarray, where: np.ndarray) -> None:

@@ -9,7 +9,6 @@ must not create or touch the output directory.
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 from typing import Callable
 

@@ -18,7 +18,7 @@ from contactfem.cli import main
 from contactfem.errors import CaseError
 from contactfem.exact import ExactSolution, Program, evaluate
 from contactfem.expressions import Expression, ExpressionError, compile_expression, sympy_symbols, to_sympy
-from contactfem.norms import NORM_NAMES, observed_rates
+from contactfem.norms import NORM_NAMES
 from contactfem.solve import prepare, solve_case
 from test_expressions import VALID
 
