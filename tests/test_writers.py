@@ -132,32 +132,27 @@ def test_solution_vtu_arrays(tmp_path: Path) -> None:
     np.testing.assert_array_equal(vtu.cell_data["von_mises"][0], solution.von_mises)
 
 
-def test_solution_vtu_is_binary_xml(tmp_path: Path) -> None:
-    write_vtu(_solution(), tmp_path)
-    root = ET.parse(tmp_path / "solution.vtu").getroot()
-    assert root.tag == "VTKFile" and root.get("type") == "UnstructuredGrid"
-    formats = {a.get("format") for a in root.iter("DataArray")}
-    assert formats == {"binary"}
+def _vtu_header(path: Path) -> ET.Element:
+    """The XML part of a VTU with raw appended data (the binary tail is not XML)."""
+    data = path.read_bytes()
+    return ET.fromstring(data[: data.index(b"<AppendedData")] + b"</VTKFile>")
 
 
-def test_solution_vtu_is_uncompressed_unless_an_array_is_too_big(tmp_path: Path, monkeypatch) -> None:
-    from contactfem.io import vtu
-
+def test_vtu_files_hold_raw_appended_data_with_64_bit_counts(tmp_path: Path) -> None:
+    """Raw appended arrays behind UInt64 byte counts: no encoding, no compressor, and no
+    4 GB limit that would force one; meshio reads the values back exactly."""
     solution = _solution()
-    write_vtu(solution, tmp_path / "raw")
+    write_vtu(solution, tmp_path)
     for name in ["solution.vtu", "contact.vtu"]:
-        assert ET.parse(tmp_path / "raw" / name).getroot().get("compressor") is None
-    # An array beyond meshio's UInt32 byte count falls back to zlib blocks.
-    monkeypatch.setattr(vtu, "_RAW_ARRAY_LIMIT", 8 * 6 * 8 - 1)  # the (8, 6) stress tensor
-    write_vtu(solution, tmp_path / "zlib")
-    root = ET.parse(tmp_path / "zlib" / "solution.vtu").getroot()
-    assert root.get("compressor") == "vtkZLibDataCompressor"
-    assert ET.parse(tmp_path / "zlib" / "contact.vtu").getroot().get("compressor") is None
-    for directory in ["raw", "zlib"]:
-        data = meshio.read(tmp_path / directory / "solution.vtu")
-        np.testing.assert_array_equal(data.cells[0].data, solution.mesh.triangles)
-        np.testing.assert_array_equal(data.cell_data["von_mises"][0], solution.von_mises)
-        np.testing.assert_array_equal(data.cell_data["stress"][0][:, 3], solution.stress[:, 2])
+        root = _vtu_header(tmp_path / name)
+        assert root.tag == "VTKFile" and root.get("type") == "UnstructuredGrid"
+        assert root.get("header_type") == "UInt64" and root.get("compressor") is None
+        assert {a.get("format") for a in root.iter("DataArray")} == {"appended"}
+        assert b'<AppendedData encoding="raw">' in (tmp_path / name).read_bytes()
+    data = meshio.read(tmp_path / "solution.vtu")
+    np.testing.assert_array_equal(data.cells[0].data, solution.mesh.triangles)
+    np.testing.assert_array_equal(data.cell_data["von_mises"][0], solution.von_mises)
+    np.testing.assert_array_equal(data.cell_data["stress"][0][:, 3], solution.stress[:, 2])
 
 
 def test_contact_vtu(tmp_path: Path) -> None:
@@ -255,15 +250,17 @@ def test_write_vtu_into_a_read_only_directory_is_an_output_error(tmp_path: Path)
 
 
 def test_failed_vtu_write_keeps_the_old_file(tmp_path: Path, monkeypatch) -> None:
+    from contactfem.io import vtu
+
     old = b"old solution, must survive\n"
     (tmp_path / "solution.vtu").write_bytes(old)
-    real_write = meshio.write
+    real_stream = vtu._stream
 
-    def write_then_fail(filename, mesh, *args, **kwargs):
-        real_write(filename, mesh, *args, **kwargs)  # a complete temporary file...
+    def write_then_fail(path, header, arrays):
+        real_stream(path, header, arrays)  # a complete temporary file...
         raise RuntimeError("disk on fire")  # ...then a failure before the rename
 
-    monkeypatch.setattr(meshio, "write", write_then_fail)
+    monkeypatch.setattr(vtu, "_stream", write_then_fail)
     with pytest.raises(RuntimeError, match="disk on fire"):
         write_vtu(_solution(), tmp_path)
     assert (tmp_path / "solution.vtu").read_bytes() == old
@@ -272,14 +269,16 @@ def test_failed_vtu_write_keeps_the_old_file(tmp_path: Path, monkeypatch) -> Non
 
 
 def test_oserror_during_vtu_write_becomes_output_error(tmp_path: Path, monkeypatch) -> None:
+    from contactfem.io import vtu
+
     old = b"old"
     (tmp_path / "solution.vtu").write_bytes(old)
 
-    def half_write(filename, mesh, *args, **kwargs):
-        Path(filename).write_bytes(b"<VTKFile trunc")
+    def half_write(path, header, arrays):
+        Path(path).write_bytes(b"<VTKFile trunc")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(meshio, "write", half_write)
+    monkeypatch.setattr(vtu, "_stream", half_write)
     with pytest.raises(OutputError, match=r"cannot write .*solution\.vtu: No space left"):
         write_vtu(_solution(), tmp_path)
     assert (tmp_path / "solution.vtu").read_bytes() == old
