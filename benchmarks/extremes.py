@@ -79,36 +79,14 @@ class Extreme:
 
 def rotated_square_msh(path: Path, n: int, angle: float) -> Path:
     """The unit square's structured n × n mesh, rotated by ``angle`` about the origin (gmsh 2.2)."""
-    import meshio
+    from dataclasses import replace
 
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    from contactfem.mesh import structured_rectangle, write_gmsh
+
+    square = structured_rectangle((0.0, 0.0), (1.0, 1.0), n, n)
     c, s = math.cos(angle), math.sin(angle)
-    px, py = x.ravel(), y.ravel()
-    points = np.column_stack([c * px - s * py, s * px + c * py, np.zeros(px.size)])
-
-    def node(i: int, j: int) -> int:
-        return j * (n + 1) + i
-
-    triangles = []
-    for j in range(n):
-        for i in range(n):
-            a, b, cc, d = node(i, j), node(i + 1, j), node(i + 1, j + 1), node(i, j + 1)
-            triangles += [[a, b, cc], [a, cc, d]]
-    sides = [[[node(i, 0), node(i + 1, 0)] for i in range(n)],
-             [[node(n, j), node(n, j + 1)] for j in range(n)],
-             [[node(i + 1, n), node(i, n)] for i in range(n)],
-             [[node(0, j + 1), node(0, j)] for j in range(n)]]
-    cells = [("triangle", np.array(triangles))]
-    physical = [np.full(len(triangles), 5)]
-    field_data = {"body": np.array([5, 2])}
-    for tag, (name, lines) in enumerate(zip(("bottom", "right", "top", "left"), sides), start=1):
-        cells.append(("line", np.array(lines)))
-        physical.append(np.full(len(lines), tag))
-        field_data[name] = np.array([tag, 1])
-    mesh = meshio.Mesh(points, cells, cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
-                       field_data=field_data)
-    meshio.write(path, mesh, file_format="gmsh22", binary=False)
-    return path
+    rotated = square.points @ np.array([[c, s], [-s, c]])  # rows R p
+    return write_gmsh(replace(square, points=rotated), path)
 
 
 def rotated_case(n: int, angle: float) -> dict:

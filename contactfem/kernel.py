@@ -154,8 +154,6 @@ def solve_contact(
         When the active set repeats, go on with least-index single changes (default);
         False stops with status CYCLING instead.
     """
-    stiffness = sp.csr_matrix(system.stiffness)
-    load = np.asarray(system.load, dtype=float)
     normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
     gap = np.asarray(system.gap, dtype=float)
     mass = sp.csc_matrix(system.multiplier_mass)
@@ -169,6 +167,7 @@ def solve_contact(
     # release one node per step.
     active = (gap < 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
     linear = ActiveSetSolver(system, backend)
+    stiffness, load = linear.stiffness, linear.load
     equations = linear.free_rows
     stiffness_norm = linear.norm
     seen: dict[bytes, int] = {}

@@ -6,6 +6,7 @@ Nothing here prints or touches files; progress goes through an optional callback
 
 from __future__ import annotations
 
+import itertools
 import json
 import platform
 import time
@@ -74,15 +75,15 @@ def solve_case(
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
     reduced = problem.contact_system(contact_method)
 
+    numbers = itertools.count(1)
+
     def on_iteration(record: Iteration) -> None:
         say(
-            f"  Newton {len(history) + 1}: {record.active} active (+{record.added} -{record.removed}), "
+            f"  Newton {next(numbers)}: {record.active} active (+{record.added} -{record.removed}), "
             f"residuals {record.equilibrium_residual:.1e} / {record.complementarity_residual:.1e}, "
             f"{record.seconds:.2f} s"
         )
-        history.append(record)
 
-    history: list[Iteration] = []
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     started = time.perf_counter()
     initial_active, sequencing = predict_active_set(case, problem, c, progress=say)

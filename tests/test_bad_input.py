@@ -12,8 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-import meshio
-import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
@@ -109,34 +107,10 @@ def test_polygon_base_is_valid(tmp_path):
 
 def write_square_msh(path: Path, names=("bottom", "right", "top", "left"), n: int = 4) -> Path:
     """A Gmsh 2.2 mesh of the unit square with a physical line per side."""
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
-    points = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    from contactfem.mesh import structured_rectangle, write_gmsh
 
-    def node(i: int, j: int) -> int:
-        return j * (n + 1) + i
-
-    triangles = []
-    for j in range(n):
-        for i in range(n):
-            a, b, c, d = node(i, j), node(i + 1, j), node(i + 1, j + 1), node(i, j + 1)
-            triangles += [[a, b, c], [a, c, d]]
-    sides = [
-        [[node(i, 0), node(i + 1, 0)] for i in range(n)],
-        [[node(n, j), node(n, j + 1)] for j in range(n)],
-        [[node(i + 1, n), node(i, n)] for i in range(n)],
-        [[node(0, j + 1), node(0, j)] for j in range(n)],
-    ]
-    cells = [("triangle", np.array(triangles))]
-    physical = [np.full(len(triangles), 5)]
-    field_data = {"body": np.array([5, 2])}
-    for tag, (name, lines) in enumerate(zip(names, sides), start=1):
-        cells.append(("line", np.array(lines)))
-        physical.append(np.full(len(lines), tag))
-        field_data[name] = np.array([tag, 1])
-    mesh = meshio.Mesh(points, cells, cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
-                       field_data=field_data)
-    meshio.write(path, mesh, file_format="gmsh22", binary=False)
-    return path
+    sides = dict(zip(("bottom", "right", "top", "left"), names))
+    return write_gmsh(structured_rectangle((0.0, 0.0), (1.0, 1.0), n, n, side_names=sides), path)
 
 
 def use_mesh_file(name: str) -> Callable[[dict], None]:

@@ -577,3 +577,17 @@ def test_check_mesh_other_defects():
         check_mesh(dataclasses.replace(mesh, boundary_edges=mesh.boundary_edges[:, ::-1].copy()))
     with pytest.raises(MeshError, match="edge_parts"):
         check_mesh(dataclasses.replace(mesh, edge_parts=mesh.edge_parts + 5))
+
+
+def test_write_gmsh_round_trips_through_read_gmsh(tmp_path):
+    """write_gmsh is read_gmsh's inverse: same points, triangles, boundary edges and names."""
+    from contactfem.mesh import write_gmsh
+
+    mesh = structured_rectangle((0.0, 0.0), (2.0, 1.0), 6, 3, diagonal="alternate",
+                                side_names={"bottom": "base", "right": "side", "top": "lid", "left": "side"})
+    back = read_gmsh(write_gmsh(mesh, tmp_path / "mesh.msh"))
+    np.testing.assert_array_equal(back.points, mesh.points)
+    np.testing.assert_array_equal(back.triangles, mesh.triangles)
+    assert set(back.part_names) == set(mesh.part_names)
+    for name in mesh.part_names:
+        assert sorted(map(tuple, back.edges_of(name))) == sorted(map(tuple, mesh.edges_of(name)))

@@ -11,6 +11,8 @@ the half has half the boundary mass and carries half the nodal force.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -62,30 +64,15 @@ def test_half_with_symmetry_support_equals_the_whole(method):
 def test_slanted_symmetry_line_matches_the_axis_aligned_one(tmp_path):
     """The half body, rotated by 30° with its obstacle and loads, read from a gmsh file: the
     symmetry line is then slanted, and the displacement is the rotated axis-aligned one."""
-    import meshio
     import yaml
 
-    from contactfem.mesh import structured_rectangle
+    from contactfem.mesh import structured_rectangle, write_gmsh
 
     angle = np.deg2rad(30.0)
     c, s = float(np.cos(angle)), float(np.sin(angle))
     rotation = np.array([[c, -s], [s, c]])
     mesh = structured_rectangle((0.0, 0.0), (1.0, 1.0), N, N, diagonal="alternate")
-    points = mesh.points @ rotation.T
-    lines, tags = [], []
-    for tag, name in enumerate(mesh.part_names, start=1):
-        edges = mesh.edges_of(name)
-        lines.append(edges)
-        tags.append(np.full(len(edges), tag))
-    msh = meshio.Mesh(
-        np.column_stack([points, np.zeros(len(points))]),
-        [("triangle", mesh.triangles), ("line", np.concatenate(lines))],
-        cell_data={"gmsh:physical": [np.full(mesh.n_triangles, 99), np.concatenate(tags)],
-                   "gmsh:geometrical": [np.full(mesh.n_triangles, 1), np.concatenate(tags)]},
-        field_data={**{name: np.array([tag, 1]) for tag, name in enumerate(mesh.part_names, start=1)},
-                    "body": np.array([99, 2])},
-    )
-    meshio.write(tmp_path / "half.msh", msh, file_format="gmsh22", binary=False)
+    write_gmsh(replace(mesh, points=mesh.points @ rotation.T), tmp_path / "half.msh")
     # Original coordinates of a rotated point: (x0, y0) = Rᵀ (x, y); the traction rotates too.
     x0 = f"({c!r}*x + {s!r}*y)"
     g = f"where(abs({x0}) < 0.3, -100, 60)"

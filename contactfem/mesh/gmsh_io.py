@@ -16,7 +16,7 @@ from contactfem.mesh.core import Mesh
 from contactfem.mesh.quality import check_mesh
 from contactfem.mesh.refine import _undirected_keys, boundary_edges
 
-__all__ = ["read_gmsh", "UNNAMED_PART"]
+__all__ = ["read_gmsh", "write_gmsh", "UNNAMED_PART"]
 
 #: Part name of boundary edges that no physical line covers.
 UNNAMED_PART = "unnamed"
@@ -196,3 +196,25 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     except MeshError as exc:
         raise MeshError(f"mesh {path}: {exc}") from None
     return mesh
+
+
+def write_gmsh(mesh: Mesh, path: str | os.PathLike[str]) -> Path:
+    """Write ``mesh`` as a Gmsh 2.2 ASCII file that :func:`read_gmsh` reads back.
+
+    The triangles form one physical surface; the boundary edges of each part form a
+    physical line named after the part (tags 1, 2, … in the order of ``part_names``).
+    """
+    surface = len(mesh.part_names) + 1
+    cells = [("triangle", np.asarray(mesh.triangles, dtype=np.int64))]
+    physical = [np.full(mesh.n_triangles, surface)]
+    field_data = {"body": np.array([surface, 2])}
+    for tag, name in enumerate(mesh.part_names, start=1):
+        edges = mesh.edges_of(name)
+        cells.append(("line", np.asarray(edges, dtype=np.int64)))
+        physical.append(np.full(len(edges), tag))
+        field_data[name] = np.array([tag, 1])
+    points = np.column_stack([mesh.points, np.zeros(mesh.n_points)])
+    out = meshio.Mesh(points, cells, cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
+                      field_data=field_data)
+    meshio.write(path, out, file_format="gmsh22", binary=False)
+    return Path(path)
