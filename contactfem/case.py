@@ -18,12 +18,13 @@ import yaml
 
 from contactfem.errors import CaseError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
+from contactfem.linalg import BACKEND_CHOICES
+from contactfem.methods import METHOD_NAMES
 from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems
 
 if TYPE_CHECKING:
     from contactfem.exact import ExactSolution
 
-METHODS = ("positive", "standard")
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
 PART_LOADS = ("traction", "pressure", "displacement")
 DIAGONALS = ("right", "left", "alternate", "crossed")
@@ -31,7 +32,6 @@ OUTPUT_FILES = ("vtu", "h5", "json", "xdmf")
 # Written unless the case lists its own: xdmf (an XDMF view of the HDF5 plus a companion
 # file) is an extra a case asks for.
 DEFAULT_OUTPUT_FILES = ("vtu", "h5", "json")
-BACKENDS = ("auto", "cholmod", "pardiso", "superlu")
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
 #: Bound on the magnitude of coordinates, moduli and solver.c (and below it, of the
@@ -717,14 +717,14 @@ def _obstacle(r: _Reader, data: Any) -> Obstacle:
 def _solver(r: _Reader, data: Any) -> SolverSettings:
     data = r.mapping(data if data is not None else {}, "solver",
                      ("method", "tolerance", "max_iterations", "c", "backend"))
-    method = r.choice(data.get("method", "positive"), "solver.method", METHODS)
+    method = r.choice(data.get("method", "positive"), "solver.method", METHOD_NAMES)
     tolerance = r.number(data.get("tolerance", 1e-10), "solver.tolerance", low=1e-15, high=1e-2,
                          expected="must be in [1e-15, 1e-2]")
     max_iterations = r.integer(data.get("max_iterations", 50), "solver.max_iterations", low=1, high=10_000)
     c = data.get("c", "auto")
     c = None if c == "auto" else r.number(c, "solver.c", low=1 / SCALE_LIMIT, high=SCALE_LIMIT,
                                           expected=f"must be in [{1 / SCALE_LIMIT:g}, {SCALE_LIMIT:g}] or auto")
-    backend = r.choice(data.get("backend", "auto"), "solver.backend", BACKENDS)
+    backend = r.choice(data.get("backend", "auto"), "solver.backend", BACKEND_CHOICES)
     return SolverSettings(method=method, tolerance=tolerance, max_iterations=max_iterations, c=c, backend=backend)
 
 

@@ -78,6 +78,8 @@ _BACKENDS: dict[str, tuple[str | None, Callable[[sp.spmatrix], Factorization]]] 
 }
 
 BACKEND_NAMES = tuple(_BACKENDS)
+#: What a case or the command line may ask for: a backend by name, or ``auto`` (the fastest installed).
+BACKEND_CHOICES = ("auto", *BACKEND_NAMES)
 
 
 def available_backends() -> list[str]:
@@ -94,7 +96,7 @@ def resolve_backend(name: str = "auto") -> str:
     if name == "auto":
         return available[0]
     if name not in _BACKENDS:
-        raise SolverError(f"unknown solver backend {name!r}; pick one of auto, {', '.join(_BACKENDS)}")
+        raise SolverError(f"unknown solver backend {name!r}; pick one of {', '.join(BACKEND_CHOICES)}")
     if name not in available:
         raise SolverError(
             f"solver backend {name!r} is not installed (available: {', '.join(available)}); "

@@ -56,6 +56,9 @@ METHODS: dict[str, ContactMethod] = {
     ),
 }
 
+#: The methods' names, in the order reports and studies list them.
+METHOD_NAMES: tuple[str, ...] = tuple(METHODS)
+
 
 def get_method(name: str) -> ContactMethod:
     """The method registered under ``name`` (``positive`` or ``standard``)."""
