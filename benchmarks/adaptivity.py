@@ -39,6 +39,7 @@ from contactfem.case import load_case  # noqa: E402
 from contactfem.discretize import build_mesh, build_problem  # noqa: E402
 from contactfem.estimator import estimate  # noqa: E402
 from contactfem.mesh.adapt import bisect_uniform, label_longest_edge  # noqa: E402
+from contactfem.report import exact_errors
 from contactfem.solve import prepare, solve_case  # noqa: E402
 
 
@@ -54,9 +55,9 @@ def manufactured(quick: bool) -> dict:
         started = time.perf_counter()
         problem = prepare(case, refine=level)
         outcome = solve_case(case, method="positive", problem=problem)
-        result = estimate(case, problem, outcome.solution)
+        result = estimate(problem, outcome.solution)
         seconds = time.perf_counter() - started
-        error = outcome.report["errors"]["displacement_energy"]
+        error = exact_errors(problem, outcome.solution)["displacement_energy"]
         uniform.append({"level": level, "unknowns": problem.n_unknowns, "seconds": seconds, "eta": result.total,
                         "eta_terms": result.summary()["terms"], "energy_error": error,
                         "effectivity": result.total / error})
@@ -85,7 +86,7 @@ def square(quick: bool) -> dict:
 
     run = adapt(case, theta=0.5, max_unknowns=reference_unknowns, mesh=initial, on_step=keep,
                 progress=lambda m: log("square adaptive " + m))
-    reference = Reference(run.outcome.problem, run.outcome.solution)
+    reference = Reference(run.result.problem, run.result.solution)
     adaptive = []
     for row, problem, solution in kept:
         error = reference.errors(problem, solution)["displacement_energy"]
@@ -95,11 +96,11 @@ def square(quick: bool) -> dict:
                          "min_angle": row["min_angle"], "h_min": row["h_min"]})
     effectivity = float(np.mean([r["effectivity"] for r in adaptive]))
     floor = run.estimate.total / effectivity
-    log(f"square reference: {run.outcome.problem.n_unknowns} unknowns, eta {run.estimate.total:.4g}, "
+    log(f"square reference: {run.result.problem.n_unknowns} unknowns, eta {run.estimate.total:.4g}, "
         f"estimated error {floor:.4g}")
 
     warm = build_problem(case, initial)
-    estimate(case, warm, solve_case(case, method="positive", problem=warm).solution)  # first-call costs
+    estimate(warm, solve_case(case, method="positive", problem=warm).solution)  # first-call costs
     uniform = []
     mesh = initial
     for level in range(4 if quick else 6):
@@ -108,7 +109,7 @@ def square(quick: bool) -> dict:
         started = time.perf_counter()
         problem = build_problem(case, mesh)
         outcome = solve_case(case, method="positive", problem=problem)
-        result = estimate(case, problem, outcome.solution)
+        result = estimate(problem, outcome.solution)
         seconds = time.perf_counter() - started
         error = reference.overlay_errors(problem, outcome.solution)["displacement_energy"]
         uniform.append({"level": level, "divisions": 8 * 2**level, "unknowns": problem.n_unknowns,
@@ -137,7 +138,7 @@ def square(quick: bool) -> dict:
     return {
         "case": "cases/square.yaml (divisions 8x8)",
         "reference": {"kind": "last mesh of the adaptive run (NVB, nested with every adaptive step)",
-                      "unknowns": run.outcome.problem.n_unknowns, "eta": run.estimate.total,
+                      "unknowns": run.result.problem.n_unknowns, "eta": run.estimate.total,
                       "estimated_energy_error": floor, "steps": len(run.steps),
                       "seconds": run.steps[-1]["cumulative_seconds"]},
         "uniform": uniform,
@@ -226,8 +227,8 @@ def main() -> None:
     case = load_case(ROOT / "cases" / "square.yaml")
     case = replace(case, mesh=replace(case.mesh, divisions=(8, 8)))
     small = adapt(case, theta=0.5, max_unknowns=5000)
-    written.append(mesh_plot(args.out, small.outcome.problem.mesh,
-                             f"square, adaptive mesh ({small.outcome.problem.n_unknowns} unknowns)"))
+    written.append(mesh_plot(args.out, small.result.problem.mesh,
+                             f"square, adaptive mesh ({small.result.problem.n_unknowns} unknowns)"))
     results["plots"] = written
     (args.out / "adaptivity.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
     log(f"wrote {args.out / 'adaptivity.json'} and {', '.join(written)}")

@@ -48,11 +48,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from contactfem.methods import METHOD_NAMES
+
 ROOT = Path(__file__).resolve().parents[1]
 CASE_FILE = ROOT / "cases" / "square.yaml"
 DEFAULT_SIZES = [64, 128, 256, 512, 1024]
 QUICK_SIZES = [32, 64, 128, 256]
-METHODS = ("positive", "standard")
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "performance.json"
 GETFEM_SCRIPT = ROOT / "benchmarks" / "getfem_square.py"
 RECORD_PREFIX = "PERFORMANCE-RECORDS "
@@ -76,16 +77,18 @@ def peak_rss_gb() -> float:
 
 def warm_up(methods: list[str]) -> None:
     """Run the whole pipeline once on a small square so that no timed stage pays for imports."""
+    from contactfem.io.registry import result_data, write_result
     from contactfem.linalg import factorize
     from contactfem.methods import get_method
-    from contactfem.solve import prepare, solve_case, write_outputs
+    from contactfem.report import build_report
+    from contactfem.solve import prepare, solve_case
 
     case = square_case(8)
     problem = prepare(case)
     for method in methods:
         outcome = solve_case(case, method=method, problem=problem)
         with tempfile.TemporaryDirectory() as directory:
-            write_outputs(outcome, Path(directory))
+            write_result(result_data(case, outcome, build_report(case, outcome)), Path(directory), case.output.files)
     reduced = problem.contact_system(get_method("positive"))
     matrix, rhs = linear_system(reduced.system)
     factorize(matrix, outcome.backend).solve(rhs)
@@ -122,9 +125,11 @@ def linear_system(system):
 
 def measure(divisions: int, method: str) -> dict:
     """Time one (N, method) pipeline end to end, then the linear-solve baseline."""
+    from contactfem.io.registry import result_data, write_result
     from contactfem.linalg import factorize
     from contactfem.methods import get_method
-    from contactfem.solve import prepare, solve_case, write_outputs
+    from contactfem.report import build_report
+    from contactfem.solve import prepare, solve_case
 
     directory = Path(tempfile.mkdtemp(prefix="contactfem-perf-"))
     try:
@@ -134,21 +139,22 @@ def measure(divisions: int, method: str) -> dict:
         timings: dict[str, float] = {}
         problem = prepare(case, timings=timings)
         outcome = solve_case(case, method=method, problem=problem)
-        write_outputs(outcome, directory)
+        _, report = write_result(result_data(case, outcome, build_report(case, outcome)), directory,
+                                 case.output.files)
         end_to_end = time.perf_counter() - started
         output_bytes = sum(p.stat().st_size for p in directory.rglob("*") if p.is_file())
     finally:
         shutil.rmtree(directory, ignore_errors=True)
     peak = peak_rss_gb()
 
-    report = outcome.report
     stages = {
         "case_s": case_s,
         "mesh_s": timings["mesh"],
         "assemble_s": timings["assemble"],
         "solve_s": outcome.timings["solve"],
         "postprocess_s": outcome.timings["postprocess"],
-        "write_s": outcome.timings["write"],
+        "report_s": report["timings"]["report"],
+        "write_s": report["timings"]["write"],
     }
     record = {
         "N": divisions,
@@ -160,7 +166,7 @@ def measure(divisions: int, method: str) -> dict:
         "active_per_iteration": [int(r["active"]) for r in report["newton"]],
         "newton_seconds": [float(r["seconds"]) for r in report["newton"]],
         **stages,
-        # what end to end spends outside the named stages: mostly building the report
+        # what end to end spends outside the named stages
         "other_s": end_to_end - sum(stages.values()),
         "end_to_end_s": end_to_end,
         "output_bytes": output_bytes,
@@ -385,7 +391,7 @@ def fit_exponent(unknowns: list[float], seconds: list[float]) -> float | None:
 def scaling(records: list[dict], getfem: list[dict]) -> dict:
     good = [r for r in records if "error" not in r]
     result: dict = {}
-    for method in METHODS:
+    for method in METHOD_NAMES:
         rows = sorted((r for r in good if r["method"] == method), key=lambda r: r["N"])
         if not rows:
             continue
@@ -570,7 +576,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, help=f"divisions per side (default {DEFAULT_SIZES})")
     parser.add_argument("--quick", action="store_true", help=f"N = {QUICK_SIZES}, about a minute")
-    parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
+    parser.add_argument("--methods", nargs="+", choices=METHOD_NAMES, default=list(METHOD_NAMES))
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON file (default %(default)s)")
     parser.add_argument("--markdown", type=Path, help="markdown file (default: the JSON's path with .md)")
     parser.add_argument("--single", type=int, metavar="N",

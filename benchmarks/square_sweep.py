@@ -9,14 +9,16 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import tempfile
 import time
 from pathlib import Path
-import tempfile
 
 import yaml
 
 from contactfem.case import parse_case
-from contactfem.solve import prepare, solve_case, write_outputs
+from contactfem.io.registry import result_data, write_result
+from contactfem.report import build_report
+from contactfem.solve import prepare, solve_case
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,8 +38,8 @@ def run(divisions: int) -> list[dict]:
         started = time.perf_counter()
         outcome = solve_case(case, method=method, problem=problem)
         with tempfile.TemporaryDirectory() as directory:
-            write_outputs(outcome, Path(directory))
-        report = outcome.report
+            _, report = write_result(result_data(case, outcome, build_report(case, outcome)), Path(directory),
+                                     case.output.files)
         records.append({
             "N": divisions,
             "method": method,
@@ -48,7 +50,8 @@ def run(divisions: int) -> list[dict]:
             "assemble_s": timings["assemble"],
             "solve_s": outcome.timings["solve"],
             "postprocess_s": outcome.timings["postprocess"],
-            "write_s": outcome.timings["write"],
+            "report_s": report["timings"]["report"],
+            "write_s": report["timings"]["write"],
             "method_total_s": time.perf_counter() - started,
             "contact_force": report["contact_force"]["normal"],
             "contact_zone": [i["abscissa"] for i in report["contact_zone"]["intervals"]],

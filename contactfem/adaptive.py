@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -23,26 +22,31 @@ from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.estimator import Estimate, estimate
 from contactfem.mesh import Mesh
 from contactfem.mesh.adapt import bisect, dorfler_mark, label_longest_edge, min_angle
+from contactfem.norms import exact_errors
 from contactfem.result import Solution
-from contactfem.solve import Outcome, Progress, solve_case
+from contactfem.solve import Progress, SolveResult, solve_case
 
 #: error_of(problem, solution) -> {"displacement_energy": ..., ...}
 ErrorFunction = Callable[[DiscreteProblem, Solution], dict]
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class AdaptiveRun:
-    """The history (one JSON-ready dict per step), the last solve and its estimate."""
+    """The history (one JSON-ready dict per step), the last solve and its estimate.
 
+    ``result``'s solution carries η_T as the cell field ``error_indicator``.
+    """
+
+    case: Case
     steps: list[dict]
-    outcome: Outcome
+    result: SolveResult
     estimate: Estimate
     stop_reason: str
     settings: dict = field(default_factory=dict)
 
     def history(self) -> dict:
         """adapt.json's content."""
-        case = self.outcome.case
+        case = self.case
         return {
             "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
             "method": "positive",
@@ -53,13 +57,11 @@ class AdaptiveRun:
         }
 
 
-def with_estimator(outcome: Outcome, result: Estimate) -> Outcome:
-    """The outcome with η_T as the cell field ``error_indicator`` and η in its report."""
-    solution = replace(outcome.solution, cell_fields={**outcome.solution.cell_fields,
-                                                      "error_indicator": result.indicators})
-    outcome.solution = solution
-    outcome.report["estimator"] = result.summary()
-    return outcome
+def with_estimator(result: SolveResult, estimated: Estimate) -> SolveResult:
+    """The result whose solution carries η_T as the cell field ``error_indicator``."""
+    solution = replace(result.solution, cell_fields={**result.solution.cell_fields,
+                                                     "error_indicator": estimated.indicators})
+    return replace(result, solution=solution)
 
 
 def adapt(
@@ -96,9 +98,9 @@ def adapt(
     for step in range(max_steps):
         clock = time.perf_counter()
         outcome = solve_case(case, method="positive", problem=problem)
-        result = estimate(case, problem, outcome.solution)
+        estimated = estimate(problem, outcome.solution)
         seconds = pending + time.perf_counter() - clock
-        errors = _errors(case, outcome, error_of)
+        errors = _errors(outcome, error_of)
         energy = errors.get("displacement_energy") if errors else None
         mesh_now = problem.mesh
         diameters = mesh_now.triangle_diameters()
@@ -111,20 +113,20 @@ def adapt(
             "h_max": float(diameters.max()),
             "min_angle": min_angle(mesh_now),
             "newton_iterations": outcome.kernel.iterations,
-            "eta": result.total,
-            "eta_terms": result.summary()["terms"],
+            "eta": estimated.total,
+            "eta_terms": estimated.summary()["terms"],
             "seconds": seconds,
             "cumulative_seconds": time.perf_counter() - started,
             "errors": errors,
-            "effectivity": (result.total / energy) if energy else None,
+            "effectivity": (estimated.total / energy) if energy else None,
         }
         steps.append(row)
         if on_step is not None:
             on_step(row, problem, outcome.solution)
-        say(f"step {step}: {row['unknowns']} unknowns, eta {result.total:.4g}"
+        say(f"step {step}: {row['unknowns']} unknowns, eta {estimated.total:.4g}"
             + (f", energy error {energy:.4g} (effectivity {row['effectivity']:.3g})" if energy else "")
             + f", {seconds:.2f} s")
-        if target is not None and result.total <= target:
+        if target is not None and estimated.total <= target:
             stop = "target"
             break
         if max_seconds is not None and time.perf_counter() - started >= max_seconds:
@@ -133,7 +135,7 @@ def adapt(
         if step == max_steps - 1:
             break
         clock = time.perf_counter()
-        marked = dorfler_mark(result.indicators**2, theta)
+        marked = dorfler_mark(estimated.indicators**2, theta)
         refined = bisect(mesh_now, marked)
         next_problem = build_problem(case, refined)
         if max_unknowns is not None and next_problem.n_unknowns > max_unknowns:
@@ -142,17 +144,20 @@ def adapt(
         row["marked"] = int(marked.sum())
         problem = next_problem
         pending = time.perf_counter() - clock
-    outcome = with_estimator(outcome, result)
     settings = {"theta": theta, "target": target, "max_unknowns": max_unknowns,
                 "max_seconds": max_seconds, "max_steps": max_steps}
-    return AdaptiveRun(steps=steps, outcome=outcome, estimate=result, stop_reason=stop, settings=settings)
+    return AdaptiveRun(case=case, steps=steps, result=with_estimator(outcome, estimated), estimate=estimated,
+                       stop_reason=stop, settings=settings)
 
 
-def _errors(case: Case, outcome: Outcome, error_of: ErrorFunction | None) -> dict | None:
+def _errors(outcome: SolveResult, error_of: ErrorFunction | None) -> dict | None:
+    """The true errors of a step: ``error_of``'s, or against the problem's exact solution."""
     if error_of is not None:
         return error_of(outcome.problem, outcome.solution)
-    errors = outcome.report.get("errors")
-    return dict(errors) if errors else None
+    if outcome.problem.exact is None:
+        return None
+    errors = exact_errors(outcome.solution, outcome.problem, outcome.problem.exact)
+    return {name: (float(value) if np.isfinite(value) else None) for name, value in errors.items()}
 
 
 class Reference:
@@ -246,25 +251,3 @@ def interpolate_p1(mesh: Mesh, values: np.ndarray, where: np.ndarray) -> np.ndar
     b2 = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
     bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
     return np.einsum("qi,qi...->q...", bary, values[mesh.triangles[found]])
-
-
-def write_estimator_vtu(solution: Solution, path: Path) -> Path:
-    """``estimator.vtu``: the triangles with cell data ``error_indicator`` (η_T), point data
-    ``displacement`` (z = 0), written atomically with meshio. Kept apart from
-    ``solution.vtu`` (contactfem/io/vtu.py does not write ``Solution.cell_fields`` yet)."""
-    from pathlib import Path
-
-    import meshio
-
-    from contactfem.io.atomic import atomic_path
-
-    path = Path(path)
-    mesh = solution.mesh
-    points = np.column_stack([mesh.points, np.zeros(mesh.n_points)])
-    displacement = np.column_stack([solution.displacement, np.zeros(mesh.n_points)])
-    cell_data = {name: [np.asarray(values, dtype=float)] for name, values in solution.cell_fields.items()}
-    data = meshio.Mesh(points, [("triangle", mesh.triangles)], point_data={"displacement": displacement},
-                       cell_data=cell_data)
-    with atomic_path(path) as temp:
-        meshio.write(temp, data, file_format="vtu", binary=True, compression="zlib")
-    return path

@@ -8,6 +8,8 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from contactfem.mesh.topology import Topology, _counting_sort
+
 # A field given on points: f(x, y) -> array broadcast to x's shape.
 Field = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -60,7 +62,9 @@ def element_dofs(triangles: np.ndarray) -> np.ndarray:
     return (2 * triangles[:, :, None] + np.arange(2)).reshape(len(triangles), 6)
 
 
-def stiffness_matrix(points: np.ndarray, triangles: np.ndarray, law: Elasticity) -> sp.csr_matrix:
+def stiffness_matrix(
+    points: np.ndarray, triangles: np.ndarray, law: Elasticity, topology: Topology | None = None
+) -> sp.csr_matrix:
     """The 2n x 2n stiffness matrix of ∫ σ(u):ε(v), no boundary conditions.
 
     Element entries in closed form: K[(i,a),(j,b)] = |T| (λ g_i^a g_j^b + μ g_j^a g_i^b
@@ -68,6 +72,9 @@ def stiffness_matrix(points: np.ndarray, triangles: np.ndarray, law: Elasticity)
 
     The result is in canonical CSR form (sorted indices, no duplicates) with a full 2x2
     block for every node and every mesh edge, explicit zeros included.
+
+    ``topology`` is the :class:`~contactfem.mesh.topology.Topology` of ``triangles``
+    (e.g. ``mesh.topology``); without it the edges are computed here.
     """
     points = np.asarray(points)
     triangles = np.asarray(triangles)
@@ -77,14 +84,25 @@ def stiffness_matrix(points: np.ndarray, triangles: np.ndarray, law: Elasticity)
     # 4 (n + 2 n_edges) entries with n_edges <= 3 n_triangles bounds the nnz.
     index_type = np.int32 if 4 * (n_points + 6 * len(triangles)) <= _INT32_LIMIT else np.int64
     tri = np.ascontiguousarray(triangles, dtype=index_type)
-    edges = _mesh_edges(tri, n_points)
-    if edges is None:  # a triangle repeats a node
-        return _stiffness_matrix_by_elements(points, triangles, law)
-    edge_of, flipped, edge_lo, edge_hi = edges
+    if topology is None:
+        if _repeats_a_node(tri):
+            return _stiffness_matrix_by_elements(points, triangles, law)
+        topology = Topology.from_triangles(tri, n_points)
+    elif topology.n_points != n_points or topology.n_triangles != len(tri):
+        raise ValueError(
+            f"topology of {topology.n_triangles} triangles on {topology.n_points} nodes given for "
+            f"{len(tri)} triangles on {n_points} nodes"
+        )
+    # _block_csr builds the CSR index arrays in the dtype of edge_lo.
+    edge_lo = topology.edges[:, 0].astype(index_type, copy=False)
+    edge_hi = topology.edges[:, 1].astype(index_type, copy=False)
     x = np.ascontiguousarray(points[:, 0], dtype=np.float64)
     y = np.ascontiguousarray(points[:, 1], dtype=np.float64)
-    edge_blocks, node_blocks = _pair_blocks(x, y, tri, edge_of, flipped, len(edge_lo), law)
-    del edge_of, flipped, tri
+    edge_blocks, node_blocks = _pair_blocks(
+        x, y, tri, topology.half_edge_edge, topology.half_edge_flipped, topology.n_edges, law
+    )
+    # Frees the half-edge arrays of a topology built here before the matrix is allocated.
+    del topology, tri
     return _block_csr(n_points, edge_lo, edge_hi, edge_blocks, node_blocks)
 
 
@@ -134,68 +152,10 @@ def _stiffness_matrix_by_elements(points: np.ndarray, triangles: np.ndarray, law
     return matrix
 
 
-def _counting_sort(keys: np.ndarray, n_keys: int, payload: np.ndarray, ramp: np.ndarray):
-    """Stable sort of ``keys`` (values in [0, n_keys)) in O(len + n_keys).
-
-    A CSR matrix with one entry per row (row r, column keys[r]) converted to CSC lists
-    the rows column by column, in row order: scipy's csr_tocsc is a counting sort.
-
-    Returns
-    -------
-    order : positions of the keys in sorted order
-    payload[order]
-    starts : (n_keys + 1,) where each key's run begins in the sorted order
-    """
-    m = len(keys)
-    by_key = sp.csr_matrix((payload, keys, ramp[: m + 1]), shape=(m, n_keys)).tocsc()
-    return by_key.indices, by_key.data, by_key.indptr
-
-
-def _mesh_edges(tri: np.ndarray, n_points: int):
-    """The undirected edges of a triangulation, sorted by (low node, high node).
-
-    Parameters
-    ----------
-    tri : (n_triangles, 3) int32 or int64, C-contiguous
-    n_points : int
-
-    Returns
-    -------
-    None if a triangle repeats a node, otherwise:
-    edge_of : (3 n_triangles,) edge index of half-edge 3 t + k, from node k to node k+1 of t
-    flipped : (3 n_triangles,) bool, whether that half-edge runs from high to low node
-    edge_lo, edge_hi : (n_edges,) the edges' nodes, lo < hi, sorted lexicographically
-    """
-    index_type = tri.dtype
-    start = tri.ravel()
-    end = tri[:, [1, 2, 0]].ravel()
-    lo = np.minimum(start, end)
-    hi = np.maximum(start, end)
-    flipped = start > end
-    del end
-    if np.any(lo == hi):
-        return None
-    m = len(lo)
-    ramp = np.arange(m + 1, dtype=index_type)
-    # Radix sort by (lo, hi): by hi first, then stably by lo. No comparison sort, so
-    # this stays linear whatever the node numbering.
-    by_hi, lo_by_hi, _ = _counting_sort(hi, n_points, lo, ramp)
-    del lo
-    _, order, lo_starts = _counting_sort(lo_by_hi, n_points, by_hi, ramp)
-    del by_hi, lo_by_hi, ramp
-    hi_sorted = hi[order]
-    del hi
-    lo_sorted = np.repeat(np.arange(n_points, dtype=index_type), np.diff(lo_starts))
-    first = np.empty(m, dtype=bool)
-    first[0] = True
-    np.not_equal(hi_sorted[1:], hi_sorted[:-1], out=first[1:])
-    first[1:] |= lo_sorted[1:] != lo_sorted[:-1]
-    edge_sorted = np.cumsum(first, dtype=index_type)
-    edge_sorted -= 1
-    edge_of = np.empty(m, dtype=index_type)
-    edge_of[order] = edge_sorted
-    del order, edge_sorted
-    return edge_of, flipped, lo_sorted[first], hi_sorted[first]
+def _repeats_a_node(tri: np.ndarray) -> bool:
+    """Whether a triangle of ``tri`` (n, 3) names a node twice (it then has no edges)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    return bool(np.any((a == b) | (b == c) | (c == a)))
 
 
 # Triangles per block of the element loop: its temporaries stay in cache.
@@ -391,6 +351,24 @@ def traction_vector(
                             minlength=n_dof)
         load += np.bincount(2 * edges[:, 1] + component, length / 6 * (gb[:, component] + 2 * gm[:, component]),
                             minlength=n_dof)
+    return load
+
+
+def edge_load_vector(edges: np.ndarray, length: np.ndarray, traction: np.ndarray, n_points: int) -> np.ndarray:
+    """Load vector (2 n_points,) of ∫_E g·v over boundary edges (k, 2) of lengths (k,), from g
+    at the points of the edge rule, ``traction`` (q, k, 2) (see :mod:`contactfem.quadrature`)."""
+    from contactfem.quadrature import EDGE_RULE_POINTS, EDGE_RULE_WEIGHTS
+
+    n_dof = 2 * n_points
+    load = np.zeros(n_dof)
+    if len(edges) == 0:
+        return load
+    # ∫ g φ_a = L Σ_q w_q (1 − s_q) g_q and ∫ g φ_b = L Σ_q w_q s_q g_q.
+    at_start = length[:, None] * np.einsum("q,qkc->kc", EDGE_RULE_WEIGHTS * (1 - EDGE_RULE_POINTS), traction)
+    at_end = length[:, None] * np.einsum("q,qkc->kc", EDGE_RULE_WEIGHTS * EDGE_RULE_POINTS, traction)
+    for component in range(2):
+        load += np.bincount(2 * edges[:, 0] + component, at_start[:, component], minlength=n_dof)
+        load += np.bincount(2 * edges[:, 1] + component, at_end[:, component], minlength=n_dof)
     return load
 
 

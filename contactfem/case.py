@@ -3,12 +3,33 @@
 Every refusal is a :class:`CaseError` whose message names the file, the key, the value
 and what was expected, e.g. ``beam.yaml: material.nu = 0.5: must be in [0, 0.5)``.
 The format is documented in README.md ("The case file"); ``cases/`` holds commented examples.
+
+What is read is bounded before it is built, so that no file makes the reader run long or
+take much memory, and every refusal stays one line:
+
+- the file must be a regular file (not a directory, FIFO or device) of at most
+  :data:`MAX_CASE_BYTES`; at most that many bytes plus one are ever read from it;
+- it must be UTF-8 (a leading BOM is allowed) holding one YAML document, a mapping;
+- the YAML is composed node by node under a count: at most :data:`MAX_YAML_VALUES` values
+  and :data:`MAX_YAML_DEPTH` levels of nesting, with every alias counted at each of its
+  uses, as the data would be once expanded. Anchors and aliases are allowed (one traction
+  given to several parts), but an alias bomb ("billion laughs": a few hundred bytes that
+  expand to billions of values) or an alias to its own enclosing node is refused while
+  composing, before any Python object is built;
+- a key may appear only once in a mapping (YAML's merge key ``<<`` may still be overridden);
+- paths (the case file, ``geometry.mesh_file``, ``output.directory``) are checked as
+  text against the file system's limits (:data:`NAME_MAX` bytes per component,
+  :data:`PATH_MAX` in all) and for NUL characters before anything opens them;
+- a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops
+  (its checks compare every pair of edges).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -16,11 +37,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from contactfem.errors import CaseError
+from contactfem.errors import CaseError, MeshError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
+from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
 from contactfem.linalg import BACKEND_CHOICES
-from contactfem.methods import METHOD_NAMES
 from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems
+from contactfem.methods import METHOD_NAMES
 
 if TYPE_CHECKING:
     from contactfem.exact import ExactSolution
@@ -28,10 +50,6 @@ if TYPE_CHECKING:
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
 PART_LOADS = ("traction", "pressure", "displacement")
 DIAGONALS = ("right", "left", "alternate", "crossed")
-OUTPUT_FILES = ("vtu", "h5", "json", "xdmf")
-# Written unless the case lists its own: xdmf (an XDMF view of the HDF5 plus a companion
-# file) is an extra a case asks for.
-DEFAULT_OUTPUT_FILES = ("vtu", "h5", "json")
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
 #: Bound on the magnitude of coordinates, moduli and solver.c (and below it, of the
@@ -44,6 +62,38 @@ MAX_DIVISIONS = 100_000
 #: the P1 stiffness is singular to round-off (its condition number grows like lambda/mu) and
 #: the solution is pure locking. A warning starts far earlier (report.LOCKING_WARNING_RATIO).
 MAX_LAME_RATIO = 1e8
+#: The largest case file, in bytes. Cases are a few kB (a polygon of MAX_POLYGON_VERTICES
+#: vertices is under 100 kB); the bound keeps a mistaken argument (a log, /dev/zero) from
+#: being read whole.
+MAX_CASE_BYTES = 1 << 20
+#: The most YAML values (scalars, lists and mappings) a case may hold, each alias counted
+#: at every use. A full-size polygon needs under 10 000.
+MAX_YAML_VALUES = 100_000
+#: The deepest nesting of YAML values; the deepest key of the format
+#: (geometry.polygon.holes[i].edges[j].arc.center[k]) is 10 levels down.
+MAX_YAML_DEPTH = 32
+#: The most vertices of a polygon geometry, its holes included: the simplicity check
+#: compares every pair of edges (about a second and 100 MB at this bound).
+MAX_POLYGON_VERTICES = 2000
+
+
+def _os_limit(name: str, fallback: int) -> int:
+    try:
+        value = os.pathconf("/", name)
+    except (AttributeError, OSError, ValueError):
+        return fallback
+    return value if isinstance(value, int) and value > 0 else fallback
+
+
+#: Longest file name (one path component), in bytes of the file-system encoding.
+NAME_MAX = _os_limit("PC_NAME_MAX", 255)
+#: Longest path, in bytes, including the terminating NUL of the system call.
+PATH_MAX = _os_limit("PC_PATH_MAX", 4096)
+#: Room kept in an output directory's path for what is written under it: the staging
+#: sibling ``.tmp-<pid>-<8 hex>.<name>`` adds up to 22 bytes to the last component, and the
+#: files inside it (``.tmp-<pid>-<8 hex>.solution-xdmf.h5`` and the like) about 64 bytes.
+OUTPUT_NAME_RESERVE = 32
+OUTPUT_PATH_RESERVE = 128
 
 
 # --------------------------------------------------------------------------- the case
@@ -221,8 +271,9 @@ class _Reader:
             raise self.fail(key, data, "expected a mapping of keys to values")
         for name in data:
             if not isinstance(name, str) or name not in allowed:
+                shown = _short(name if isinstance(name, str) else _show(name), 64)
                 raise CaseError(
-                    f"{self.filename}: {_join(key, str(name))}: unknown key; "
+                    f"{self.filename}: {_join(key, shown)}: unknown key; "
                     f"expected one of {', '.join(allowed)}"
                 )
         for name in required:
@@ -267,8 +318,8 @@ class _Reader:
         return value
 
     def name(self, value: Any, key: str) -> str:
-        if not isinstance(value, str) or not value.strip() or len(value) > 64:
-            raise self.fail(key, value, "expected a part name (a non-empty string of at most 64 characters)")
+        if not isinstance(value, str) or not value.strip() or len(value) > 64 or not value.isprintable():
+            raise self.fail(key, value, "expected a part name (a non-empty string of at most 64 printable characters)")
         return value
 
     def point(self, value: Any, key: str) -> tuple[float, float]:
@@ -300,34 +351,140 @@ class _Reader:
 def load_case(path: str | Path) -> Case:
     """Read and validate a case file.
 
+    At most :data:`MAX_CASE_BYTES` + 1 bytes are read; directories, FIFOs and devices are
+    refused from their status, before anything is read (a FIFO is opened non-blocking).
+
     Raises
     ------
     CaseError
         If the file cannot be read or any key is missing, unknown, mistyped or out of range.
     """
     path = Path(path)
+    shown = _short(str(path))
+    problem = path_problem(path)
+    if problem is not None:
+        raise CaseError(f"{shown}: the case file's path {problem}")
+    data = _read_bounded(path, shown)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise CaseError(f"{path}: cannot read the case file ({_reason(error)})") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise CaseError(f"{_short(path.name)}: {_not_utf8(data, error)}") from None
     return parse_case(text, source=path)
+
+
+def path_problem(path: str | os.PathLike[str], *, name_reserve: int = 0, path_reserve: int = 0) -> str | None:
+    """Why the file system would refuse ``path`` before looking at it, or None.
+
+    Checked as text only (nothing is opened or looked up): no NUL character, encodable as
+    a file name, every component at most :data:`NAME_MAX` bytes (the last one at most
+    ``NAME_MAX - name_reserve``) and the whole at most ``PATH_MAX - 1 - path_reserve``
+    bytes. The result completes "the path ...", e.g. "contains a NUL character".
+    """
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        raw = text
+    else:
+        if "\x00" in text:
+            return "contains a NUL character"
+        try:
+            raw = os.fsencode(text)
+        except UnicodeEncodeError:
+            return "cannot be encoded as a file name (it holds a lone surrogate)"
+    if b"\x00" in raw:
+        return "contains a NUL character"
+    separators = {os.sep, os.altsep} - {None}
+    for separator in separators - {"/"}:
+        raw = raw.replace(os.fsencode(separator), b"/")
+    parts = raw.split(b"/")
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        limit = NAME_MAX - (name_reserve if last else 0)
+        if len(part) > limit:
+            kept = f" ({NAME_MAX} less {name_reserve} kept for the names made from it)" if last and name_reserve else ""
+            return (f"has a component of {len(part)} bytes ({_short(os.fsdecode(part), 40)!r}); "
+                    f"expected at most {limit} bytes per file or directory name{kept}")
+    limit = PATH_MAX - 1 - path_reserve
+    if len(raw) > limit:
+        kept = f" ({PATH_MAX - 1} less {path_reserve} kept for the files written under it)" if path_reserve else ""
+        return f"is {len(raw)} bytes long; expected at most {limit} bytes{kept}"
+    return None
+
+
+def _read_bounded(path: Path, shown: str) -> bytes:
+    """The bytes of a regular file of at most MAX_CASE_BYTES, reading no more than one byte past it."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError) as error:
+        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
+    _refuse_special(mode, shown)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags)
+    except (OSError, ValueError) as error:
+        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
+    chunks, size = [], 0
+    try:
+        info = os.fstat(fd)  # the file opened, which may differ from the one looked at
+        _refuse_special(info.st_mode, shown)
+        if info.st_size > MAX_CASE_BYTES:
+            size = info.st_size
+        while size <= MAX_CASE_BYTES:
+            chunk = os.read(fd, MAX_CASE_BYTES + 1 - size)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as error:
+        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
+    finally:
+        os.close(fd)
+    if size > MAX_CASE_BYTES:
+        raise CaseError(f"{shown}: the case file is larger than {MAX_CASE_BYTES} bytes (1 MiB); "
+                        "expected a YAML case of a few kB")
+    return b"".join(chunks)
+
+
+def _refuse_special(mode: int, shown: str) -> None:
+    if stat.S_ISDIR(mode):
+        raise CaseError(f"{shown}: is a directory; expected a YAML case file")
+    if not stat.S_ISREG(mode):
+        kinds = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                 (stat.S_ISSOCK, "a socket"))
+        kind = next((name for test, name in kinds if test(mode)), "not a regular file")
+        raise CaseError(f"{shown}: is {kind}, not a regular file; expected a YAML case file")
+
+
+def _not_utf8(data: bytes, error: UnicodeDecodeError) -> str:
+    for bom, encoding in ((b"\xff\xfe\x00\x00", "UTF-32"), (b"\x00\x00\xfe\xff", "UTF-32"),
+                          (b"\xff\xfe", "UTF-16"), (b"\xfe\xff", "UTF-16")):
+        if data.startswith(bom):
+            return f"the case file is {encoding} (it starts with a {encoding} byte order mark); expected UTF-8"
+    line = data.count(b"\n", 0, error.start) + 1
+    column = error.start - (data.rfind(b"\n", 0, error.start) + 1) + 1
+    return (f"byte 0x{data[error.start]:02x} at line {line}, column {column} is not UTF-8 ({error.reason}); "
+            "expected a UTF-8 text file")
 
 
 def parse_case(text: str, source: str | Path = "<case>") -> Case:
     """Validate the YAML ``text`` of a case; ``source`` names it in messages and anchors relative paths."""
     source = Path(source)
-    r = _Reader(source.name)
-    if len(text) > 10_000_000:
-        raise CaseError(f"{source.name}: the case file is larger than 10 MB")
+    r = _Reader(_short(source.name))
+    if not isinstance(text, str):
+        raise CaseError(f"{r.filename}: expected the case as text, got {type(text).__name__}")
+    if len(text) > MAX_CASE_BYTES:
+        raise CaseError(f"{r.filename}: the case file is larger than {MAX_CASE_BYTES} bytes (1 MiB)")
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(error, "problem", None) or "invalid YAML"
-        raise CaseError(f"{source.name}: not valid YAML{where}: {problem}") from None
-    except RecursionError:
-        raise CaseError(f"{source.name}: not valid YAML: nested too deeply") from None
+        encoded = text.encode("utf-8")
+    except UnicodeEncodeError as error:
+        line = text.count("\n", 0, error.start) + 1
+        raise CaseError(f"{r.filename}: line {line}: {text[error.start]!r} is a lone surrogate, "
+                        "not a character; expected Unicode text") from None
+    if len(encoded) > MAX_CASE_BYTES:
+        raise CaseError(f"{r.filename}: the case file is larger than {MAX_CASE_BYTES} bytes (1 MiB)")
+    data = _load_yaml(text, r.filename)
+    if data is None:
+        raise CaseError(f"{r.filename}: the case file is empty (or only comments); expected a mapping "
+                        "with geometry, material, boundary and obstacle")
     if not isinstance(data, dict):
         raise r.fail("", data, "expected a mapping with geometry, material, boundary and obstacle")
 
@@ -340,6 +497,8 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     title = top.get("title", source.stem)
     if not isinstance(title, str):
         raise r.fail("title", title, "expected a string")
+    if "title" in top and (len(title) > 200 or not title.isprintable()):
+        raise r.fail("title", title, "expected one line of at most 200 printable characters")
     if "description" in top and not isinstance(top["description"], str):
         raise r.fail("description", top["description"], "expected a string")
 
@@ -356,7 +515,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     return Case(
         source=source,
         text=text,
-        digest=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        digest=hashlib.sha256(encoded).hexdigest(),
         title=title,
         geometry=geometry,
         mesh=mesh,
@@ -368,6 +527,197 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
         output=output,
         exact=exact,
     )
+
+
+# --------------------------------------------------------------------------- YAML
+
+
+try:  # libyaml's parser: the events in C, about 20 times faster than PyYAML's own
+    from yaml._yaml import CParser as _Events
+except ImportError:  # pragma: no cover - PyYAML built without libyaml
+    from yaml.parser import Parser
+    from yaml.reader import Reader
+    from yaml.scanner import Scanner
+
+    class _Events(Reader, Scanner, Parser):  # type: ignore[no-redef]
+        def __init__(self, stream: str) -> None:
+            Reader.__init__(self, stream)
+            Scanner.__init__(self)
+            Parser.__init__(self)
+
+
+class _Limit(Exception):
+    """Raised from inside the composer: the message, with the file name still to prepend."""
+
+
+class _CaseLoader(yaml.composer.Composer, _Events, yaml.constructor.SafeConstructor, yaml.resolver.Resolver):
+    """PyYAML's safe loader, with composition counted and mappings checked for repeated keys.
+
+    Each node is composed with its expanded size (the values it stands for once every
+    alias in it is replaced by a copy) and height; an alias adds its target's size to the
+    running count at every use. The count is the size of the document as any consumer
+    walking it would see it, and composing stops as soon as it passes MAX_YAML_VALUES, or
+    the expanded nesting passes MAX_YAML_DEPTH. An alias to a node still being composed
+    (a recursive structure) is refused: its target has no size yet.
+    """
+
+    def __init__(self, text: str) -> None:
+        _Events.__init__(self, text)
+        yaml.composer.Composer.__init__(self)
+        yaml.constructor.SafeConstructor.__init__(self)
+        yaml.resolver.Resolver.__init__(self)
+        self._measure: dict[int, tuple[int, int]] = {}  # id(node) -> (expanded values, height)
+        self._values = 0
+        self._path: list[str] = []
+        self._mapping_paths: dict[int, str] = {}
+        self.keys_at: dict[tuple[int, int], str] = {}  # (line, column) where a node starts -> its key path
+
+    def _key(self) -> str:
+        return "".join(self._path).lstrip(".")
+
+    def _where(self) -> str:
+        return self._key() or "the document"
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        self._path.append(_path_step(parent, index))
+        try:
+            if self.check_event(yaml.AliasEvent):
+                return self._compose_alias(parent, index)
+            if len(self._path) > MAX_YAML_DEPTH:
+                raise _Limit(f"{self._where()}: nested more than {MAX_YAML_DEPTH} levels deep (line "
+                             f"{self.peek_event().start_mark.line + 1}); expected the case format's few levels")
+            self._values += 1
+            if self._values > MAX_YAML_VALUES:
+                raise _Limit(f"{self._where()}: the document holds more than {MAX_YAML_VALUES} values (line "
+                             f"{self.peek_event().start_mark.line + 1}); expected a case of at most that many")
+            start = self.peek_event().start_mark
+            self.keys_at.setdefault((start.line, start.column), self._key())
+            node = super().compose_node(parent, index)
+            if isinstance(node, yaml.ScalarNode):
+                self._measure[id(node)] = (1, 1)
+                try:
+                    node.value.encode("utf-8")
+                except UnicodeEncodeError:
+                    raise _Limit(f"{self._where()}: line {node.start_mark.line + 1}: a lone surrogate escape "
+                                 "is not a character; expected Unicode text") from None
+                return node
+            is_mapping = isinstance(node, yaml.MappingNode)
+            children = [c for pair in node.value for c in pair] if is_mapping else node.value
+            sizes = [self._measure[id(c)] for c in children]
+            self._measure[id(node)] = (1 + sum(n for n, _ in sizes), 1 + max((h for _, h in sizes), default=0))
+            return node
+        finally:
+            self._path.pop()
+
+    def compose_mapping_node(self, anchor: Any) -> Any:
+        path = self._key()
+        node = super().compose_mapping_node(anchor)
+        self._mapping_paths[id(node)] = path
+        return node
+
+    def _compose_alias(self, parent: Any, index: Any) -> Any:
+        event = self.peek_event()
+        target = self.anchors.get(event.anchor)
+        if target is not None and id(target) not in self._measure:
+            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: the "
+                         "alias refers to a node that contains it; expected a value that does not contain itself")
+        node = super().compose_node(parent, index)  # the target; refuses an undefined alias
+        size, height = self._measure[id(node)]
+        self._values += size
+        if self._values > MAX_YAML_VALUES:
+            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
+                         f"its aliases expanded the document holds more than {MAX_YAML_VALUES} values; expected at "
+                         "most that many (an alias counts as a copy at every use)")
+        if len(self._path) - 1 + height > MAX_YAML_DEPTH:
+            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
+                         f"its aliases expanded the document is nested more than {MAX_YAML_DEPTH} levels deep; "
+                         "expected the case format's few levels")
+        return node
+
+    def construct_yaml_int(self, node: Any) -> Any:
+        # int() of a long decimal text is quadratic (Python refuses past 4300 digits) and a
+        # sexagesimal one (1:2:3) is parsed digit group by digit group: no coordinate needs 100.
+        if len(str(node.value)) > 100:
+            where = self.keys_at.get((node.start_mark.line, node.start_mark.column)) or "the document"
+            raise _Limit(f"{where} = {_short(str(node.value), 40)}: line {node.start_mark.line + 1}: an integer of "
+                         f"{len(str(node.value))} characters; expected a number of at most 100")
+        return super().construct_yaml_int(node)
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, Any] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node)
+                except TypeError:
+                    continue  # unhashable: PyYAML refuses it below
+                if first is not key_node:
+                    where = _join(self._mapping_paths.get(id(node), ""), _short(str(key), 64))
+                    raise _Limit(f"{where}: the key appears twice in one mapping (lines {first.start_mark.line + 1} "
+                                 f"and {key_node.start_mark.line + 1}); expected each key once")
+        return super().construct_mapping(node, deep=deep)
+
+
+_CaseLoader.add_constructor("tag:yaml.org,2002:int", _CaseLoader.construct_yaml_int)
+
+
+def _path_step(parent: Any, index: Any) -> str:
+    """The key path step to a node composed under ``parent`` at ``index`` (PyYAML's resolver arguments)."""
+    if isinstance(parent, yaml.SequenceNode):
+        return f"[{index}]"
+    if isinstance(parent, yaml.MappingNode):
+        if index is None:
+            return ".<key>"
+        if isinstance(index, yaml.ScalarNode):
+            return "." + _short(str(index.value), 64)
+        return ".<key>"
+    return ""
+
+
+def _load_yaml(text: str, filename: str) -> Any:
+    """One YAML document of ``text`` as Python data, counted while composed (see :class:`_CaseLoader`)."""
+    loader = _CaseLoader(text)
+    try:
+        return loader.get_single_data()
+    except _Limit as limit:
+        raise CaseError(f"{filename}: {limit}") from None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        key = loader.keys_at.get((mark.line, mark.column)) if mark is not None else None
+        raise CaseError(f"{filename}: {key + ': ' if key else ''}{_yaml_problem(error, text)}") from None
+    except RecursionError:
+        raise CaseError(f"{filename}: not valid YAML: nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def _yaml_problem(error: yaml.YAMLError, text: str) -> str:
+    """A one-line reason for PyYAML's error, with the line and column where it has them."""
+    character = getattr(error, "character", None)  # a ReaderError: where in the text is not kept
+    if isinstance(character, int):
+        at = text.find(chr(character))
+        where = ""
+        if at >= 0:
+            line = text.count("\n", 0, at) + 1
+            where = f" at line {line}, column {at - (text.rfind(chr(10), 0, at) + 1) + 1}"
+        return (f"not valid YAML{where}: character U+{character:04X} is not allowed in YAML text "
+                "(control characters must be written as escapes in double quotes)")
+    mark = getattr(error, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    problem = getattr(error, "problem", None) or str(error).splitlines()[0] or "invalid YAML"
+    context = getattr(error, "context", None)
+    if context == "expected a single document in the stream":
+        return (f"holds more than one YAML document (another one starts{where}); "
+                "expected a single mapping")
+    if mark is not None:
+        lines = text.split("\n")
+        if mark.line < len(lines) and "\t" in lines[mark.line][: mark.column + 1]:
+            return f"not valid YAML{where}: {problem} (a tab: YAML indents with spaces only)"
+    reason = f"{context}: {problem}" if context and context not in problem else problem
+    return f"not valid YAML{where}: {reason}"
 
 
 # --------------------------------------------------------------------------- sections
@@ -398,7 +748,16 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
         hole_list = spec.get("holes", [])
         if not isinstance(hole_list, list):
             raise r.fail(f"{key}.holes", hole_list, "expected a list of holes")
+        total = len(outer.vertices)
         for i, hole in enumerate(hole_list):
+            if isinstance(hole, dict) and "circle" in hole:
+                total += 4
+            elif isinstance(hole, dict) and isinstance(hole.get("vertices"), list):
+                total += len(hole["vertices"])
+            if total > MAX_POLYGON_VERTICES:
+                raise r.fail(f"{key}.holes[{i}]", f"<{len(hole_list)} holes>",
+                             f"the polygon and its holes have more than {MAX_POLYGON_VERTICES} vertices (a circle "
+                             "counts 4); expected at most that many (use a gmsh mesh_file for more)")
             holes.append(_hole(r, hole, f"{key}.holes[{i}]", outer))
         names = [*outer.edge_names]
         for hole in holes:
@@ -409,14 +768,27 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
     path = Path(spec)
     if not path.is_absolute():
         path = source.parent / path
-    if not path.is_file():
-        raise r.fail(key, spec, f"no such file ({path})")
+    problem = path_problem(path)
+    if problem is not None:
+        raise r.fail(key, spec, f"the path {'' if path == Path(spec) else f'{_short(str(path))} '}{problem}")
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise r.fail(key, spec, f"no such file ({_short(str(path))})") from None
+    except (OSError, ValueError) as error:
+        raise r.fail(key, spec, f"cannot read {_short(str(path))} ({_reason(error)})") from None
+    if not stat.S_ISREG(mode):
+        kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
+        raise r.fail(key, spec, f"{_short(str(path))} is {kind}; expected a gmsh .msh file")
     return MeshFileGeometry(path), None
 
 
 def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
     if not isinstance(vertices, list) or len(vertices) < 2:
         raise r.fail(f"{key}.vertices", vertices, "expected a list of at least 2 points [x, y]")
+    if len(vertices) > MAX_POLYGON_VERTICES:
+        raise r.fail(f"{key}.vertices", f"<{len(vertices)} vertices>",
+                     f"expected at most {MAX_POLYGON_VERTICES} vertices (use a gmsh mesh_file for finer outlines)")
     points = np.array([r.point(v, f"{key}.vertices[{i}]") for i, v in enumerate(vertices)])
     if not isinstance(edges, list) or len(edges) != len(points):
         raise r.fail(
@@ -454,7 +826,10 @@ def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
         if problem is not None and not (has_arc and problem.startswith("zero area")):
             raise r.fail(f"{key}.vertices", points.tolist(), problem)
     _check_extent(r, f"{key}.vertices", points)
-    return Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
+    try:
+        return Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
+    except MeshError as error:
+        raise r.fail(f"{key}.vertices", points.tolist(), str(error)) from None
 
 
 def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
@@ -466,13 +841,28 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
         center = r.point(circle["center"], f"{key}.circle.center")
         radius = r.number(circle["radius"], f"{key}.circle.radius", low=0, low_open=True)
         name = r.name(data.get("name", "hole"), f"{key}.name")
-        loop = circle_loop(center, radius, name)
+        least = max(_extent(PolygonGeometry(outer, ())) / (2 * MAX_DIVISIONS), 1e-6 * math.hypot(*center),
+                    1 / SCALE_LIMIT)
+        if radius < least:
+            raise r.fail(f"{key}.circle.radius", radius,
+                         f"must be at least {least:.3g}: the body's extent / {2 * MAX_DIVISIONS}, and 1e-6 of the "
+                         "centre's distance from the origin (so that float64 and the mesh resolve the circle)")
+        try:
+            loop = circle_loop(center, radius, name)
+        except MeshError as error:
+            raise r.fail(f"{key}.circle", circle, str(error)) from None
     else:
         if "vertices" not in data or "edges" not in data:
             raise r.fail(key, data, "expected circle: {center, radius} or vertices and edges")
         if "name" in data:
             raise r.fail(f"{key}.name", data["name"], "a polygonal hole names each of its edges instead")
         loop = _loop(r, data["vertices"], data["edges"], key)
+        least = _extent(PolygonGeometry(outer, ())) / MAX_DIVISIONS
+        span = float(np.ptp(loop.vertices, axis=0).min())
+        if span < least:
+            raise r.fail(f"{key}.vertices", loop.vertices.tolist(),
+                         f"the hole is {span:.3g} across; expected at least the body's extent / {MAX_DIVISIONS} "
+                         f"= {least:.3g}, the finest mesh size")
     inside = _points_inside(outer.vertices, loop.vertices)
     if not inside.all():
         raise r.fail(key, loop.vertices[~inside][0].tolist(), "hole vertex outside the outer polygon")
@@ -733,11 +1123,17 @@ def _output(r: _Reader, data: Any, source: Path) -> OutputSettings:
     directory = data.get("directory", f"results/{source.stem}")
     if not isinstance(directory, str) or not directory.strip():
         raise r.fail("output.directory", directory, "expected a directory path")
-    files = data.get("files", list(DEFAULT_OUTPUT_FILES))
+    problem = path_problem(directory, name_reserve=OUTPUT_NAME_RESERVE, path_reserve=OUTPUT_PATH_RESERVE)
+    if problem is not None:
+        given = "" if "directory" in data else " (the default, from the case file's name)"
+        raise r.fail("output.directory", directory, f"the path{given} {problem}")
+    files = data.get("files", list(DEFAULT_FORMATS))
     if not isinstance(files, list) or not files:
-        raise r.fail("output.files", files, f"expected a non-empty list from {', '.join(OUTPUT_FILES)}")
-    chosen = tuple(r.choice(f, f"output.files[{i}]", OUTPUT_FILES) for i, f in enumerate(files))
-    return OutputSettings(directory=Path(directory), files=tuple(dict.fromkeys(chosen)))
+        raise r.fail("output.files", files, f"expected a non-empty list from {', '.join(FORMAT_NAMES)}")
+    chosen = tuple(dict.fromkeys(r.choice(f, f"output.files[{i}]", FORMAT_NAMES) for i, f in enumerate(files)))
+    for name, need in missing_needs(chosen):
+        raise r.fail("output.files", files, f"{name} is written beside {need} and reads it: list {need} too")
+    return OutputSettings(directory=Path(directory), files=chosen)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -748,8 +1144,19 @@ def _join(prefix: str, key: str) -> str:
 
 
 def _show(value: Any) -> str:
-    text = repr(value) if isinstance(value, str) else str(value)
+    try:
+        text = repr(value) if isinstance(value, str) else str(value)
+    except (ValueError, RecursionError):  # an integer past Python's 4300-digit str() limit
+        text = f"<{type(value).__name__} too large to print>"
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _short(text: str, limit: int = 120) -> str:
+    """``text`` cut in the middle to at most ``limit`` characters (a path keeps its end, the file name)."""
+    if len(text) <= limit:
+        return text
+    tail = (limit - 3) * 2 // 3
+    return text[: limit - 3 - tail] + "..." + text[-tail:]
 
 
 def _range_text(low: float | None, high: float | None, low_open: bool, high_open: bool) -> str:

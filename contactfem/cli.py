@@ -13,18 +13,36 @@ from pathlib import Path
 import click
 
 from contactfem import __version__
-from contactfem.errors import CaseError, ContactFemError, MeshError
+from contactfem.errors import (
+    CaseError,
+    ContactFemError,
+    ExistingResultError,
+    Interrupted,
+    MeshError,
+)
+from contactfem.io.registry import (
+    ADAPT_JSON,
+    COMPARE_JSON,
+    COMPARE_PNG,
+    CONVERGENCE_CSV,
+    CONVERGENCE_JSON,
+    CONVERGENCE_PNGS,
+    REPORT_JSON,
+    RESULT_FILES,
+    RESULT_MARKERS,
+    to_json,
+)
+from contactfem.linalg import BACKEND_CHOICES
+from contactfem.methods import METHOD_NAMES
 
 EXIT_FAILURE = 1
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports it
-#: The files of one solve; report.json or solution.h5 mark a directory as holding results.
-RESULT_FILES = ("solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "report.json",
-                "solution.xdmf", "solution-xdmf.h5", "deformed.png", "contact_profile.png")
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
 def _fail(error: ContactFemError) -> None:
-    code = EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError)) else EXIT_FAILURE
+    code = EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ExistingResultError)) else EXIT_FAILURE
     click.echo(f"error: {_printable(str(error))}", err=True)
     sys.exit(code)
 
@@ -36,18 +54,27 @@ def _printable(text: str) -> str:
 
 
 def _interruptible(command):
-    """Turn Ctrl-C (SIGINT) into one line on stderr and exit code 130, without a traceback;
-    keep numpy's RuntimeWarnings off stderr (errors stay one line).
+    """Turn Ctrl-C (SIGINT) and SIGTERM into one line on stderr and exit code 130 or 143,
+    and memory exhaustion into one line and exit 1, without a traceback; keep numpy's
+    RuntimeWarnings off stderr (errors stay one line).
 
-    Outputs are staged and moved into place together (see io.atomic.staged_directory), so
-    an interrupted run leaves the results of an earlier one as they were.
+    Outputs are staged and switched in by one decided step (see io.atomic.claimed_directory),
+    so an interrupted run leaves the results of an earlier one as they were.
     """
     import functools
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        import signal
         import warnings
 
+        def terminate(signum, frame):
+            raise Interrupted()
+
+        try:
+            previous = signal.signal(signal.SIGTERM, terminate)
+        except ValueError:  # not the main thread (an embedding application): leave SIGTERM alone
+            previous = None
         try:
             # Overflow and 0/0 in numpy are caught by the finiteness checks and refused
             # with one line naming the key; numpy's own warnings would only add noise.
@@ -55,40 +82,40 @@ def _interruptible(command):
                 warnings.simplefilter("ignore", RuntimeWarning)
                 return command(*args, **kwargs)
         except KeyboardInterrupt:
-            click.echo("error: interrupted (SIGINT); nothing was written, earlier results are unchanged", err=True)
+            click.echo("error: interrupted (SIGINT); no result was switched in, earlier results are unchanged",
+                       err=True)
             sys.exit(EXIT_INTERRUPTED)
+        except Interrupted:
+            click.echo("error: terminated (SIGTERM); no result was switched in, earlier results are unchanged",
+                       err=True)
+            sys.exit(EXIT_TERMINATED)
+        except MemoryError:
+            click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
+                       "a larger mesh.size or fewer refinements)", err=True)
+            sys.exit(EXIT_FAILURE)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
     return wrapper
 
 
-def _refuse_existing(directory: Path, markers: tuple[str, ...], overwrite: bool) -> None:
-    """Exit 2 if ``directory`` already holds contactfem results and --overwrite is absent."""
-    if overwrite:
-        return
-    found = [name for name in markers if (Path(directory) / name).exists()]
-    if found:
-        click.echo(f"error: {directory}: already holds contactfem results ({', '.join(found)}); "
-                   "pass --overwrite to replace them", err=True)
-        sys.exit(EXIT_BAD_INPUT)
-
-
-def _refuse_non_finite(outcome) -> None:
+def _refuse_non_finite(case, solution, report: dict) -> None:
     """A solve whose fields or report hold NaN/inf is a failure, never an output."""
     import numpy as np
 
     from contactfem.errors import SolverError
-    from contactfem.solve import to_json
 
-    solution, contact = outcome.solution, outcome.solution.contact
+    contact = solution.contact
     arrays = {"displacement": solution.displacement, "stress": solution.stress, "von_mises": solution.von_mises,
               "multiplier": contact.multiplier, "nodal_force": contact.nodal_force}
     bad = [name for name, values in arrays.items() if not np.isfinite(values).all()]
     try:
-        to_json(outcome.report)
+        to_json(report)
     except ValueError:
         bad.append("report")
     if bad:
-        raise SolverError(f"{outcome.case.source.name}: the solution is not finite ({', '.join(bad)}): the "
+        raise SolverError(f"{case.source.name}: the solution is not finite ({', '.join(bad)}): the "
                           "data's scales overflow float64; rescale the units of lengths, moduli and loads")
 
 
@@ -113,7 +140,30 @@ def _end_progress() -> None:
         reporter.close()
 
 
-case_argument = click.argument("case_file", metavar="CASE", type=click.Path(dir_okay=False, path_type=Path))
+class _CheckedPath(click.Path):
+    """A path checked as text first (no NUL, components and the whole within the file system's
+    limits, room kept for the staging names an output directory receives), so that the file
+    system is never asked about a path it would refuse with a traceback."""
+
+    def __init__(self, *, output: bool = False, **kwargs) -> None:
+        super().__init__(path_type=Path, **kwargs)
+        self.output = output
+
+    def convert(self, value, param, ctx):
+        from contactfem.case import (
+            OUTPUT_NAME_RESERVE,
+            OUTPUT_PATH_RESERVE,
+            path_problem,
+        )
+
+        reserves = {"name_reserve": OUTPUT_NAME_RESERVE, "path_reserve": OUTPUT_PATH_RESERVE} if self.output else {}
+        problem = path_problem(value, **reserves) if isinstance(value, (str, bytes, Path)) else None
+        if problem is not None:
+            self.fail(f"the path {problem}", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+case_argument = click.argument("case_file", metavar="CASE", type=_CheckedPath(dir_okay=False))
 refine_option = click.option("--refine", type=click.IntRange(0, 12), default=None,
                              help="Uniform refinements of the case's mesh (each halves h).")
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
@@ -122,7 +172,33 @@ overwrite_option = click.option("--overwrite", is_flag=True,
                                 help="Replace the results already in the output directory (refused otherwise).")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _OneLineErrors(click.Group):
+    """Usage errors (an unknown option, a bad value, a missing argument) as one ``error:`` line and
+    exit 2, like every other bad input; Ctrl-C outside a command's own handling as exit 130."""
+
+    def main(self, *args, **kwargs):
+        kwargs["standalone_mode"] = False
+        try:
+            return super().main(*args, **kwargs)
+        except click.UsageError as error:
+            if type(error).__name__ == "NoArgsIsHelpError":  # bare `contactfem`: the help is the answer
+                click.echo(error.ctx.get_help() if error.ctx else error.format_message())
+                sys.exit(0)
+            where = error.ctx.command_path if error.ctx else "contactfem"
+            click.echo(f"error: {where}: {_printable(error.format_message())} (see --help)", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        except click.ClickException as error:
+            click.echo(f"error: {_printable(error.format_message())}", err=True)
+            sys.exit(error.exit_code)
+        except (click.Abort, KeyboardInterrupt):
+            click.echo("error: interrupted (SIGINT); no result was switched in, earlier results are unchanged",
+                       err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        except click.exceptions.Exit as done:  # --help, --version
+            sys.exit(done.exit_code)
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="contactfem")
 def main() -> None:
     """Frictionless contact of a 2D elastic body on a rigid flat obstacle (P1 mixed methods).
@@ -141,12 +217,12 @@ def main() -> None:
 
 @main.command()
 @case_argument
-@click.option("--method", type=click.Choice(["positive", "standard"]), default=None,
+@click.option("--method", type=click.Choice(METHOD_NAMES), default=None,
               help="Contact method: positive = (4), standard = (5). Default: the case's.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Output directory. Default: the case's output.directory.")
 @refine_option
-@click.option("--backend", type=click.Choice(["auto", "cholmod", "pardiso", "superlu"]), default=None,
+@click.option("--backend", type=click.Choice(BACKEND_CHOICES), default=None,
               help="Sparse direct solver. Default: the case's (auto = fastest installed).")
 @quiet_option
 @json_option
@@ -166,32 +242,51 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
     """
     from contactfem.case import load_case
-    from contactfem.io.atomic import staged_directory
-    from contactfem.solve import solve_case, to_json, write_outputs
+    from contactfem.io.atomic import claimed_directory
+    from contactfem.report import build_report
+    from contactfem.solve import solve_case
 
     progress = _progress(quiet)
     try:
         case = load_case(case_file)
         if backend is not None:
             case = case.with_solver(backend=backend)
+        if make_plot and "h5" not in case.output.files:
+            raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
-        _refuse_existing(directory, ("report.json", "solution.h5"), overwrite)
-        outcome = solve_case(case, method=method, refine=refine, progress=progress)
-        _refuse_non_finite(outcome)
-        # All files of the run are written aside and land together (or not at all).
-        with staged_directory(directory, replaces=RESULT_FILES, last="report.json") as staging:
-            staged = write_outputs(outcome, staging, progress=progress)
-        written = [Path(directory) / path.name for path in staged]
-        if make_plot:
-            written += _plot_after_solve(directory, outcome, progress)
+        with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
+            result = solve_case(case, method=method, refine=refine, progress=progress)
+            with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+                report = _write_solution(staging, case, result, build_report(case, result), progress)
+                names = _files_of(case.output.files)
+                if make_plot:
+                    names += _pictures(staging, staging, progress)
+        written = [Path(directory) / name for name in names]
     except ContactFemError as error:
         _fail(error)
         return
     _end_progress()
     if as_json:
-        click.echo(to_json(outcome.report), nl=False)
+        click.echo(to_json(report), nl=False)
     elif not quiet:
-        click.echo(_summary(outcome.report, written))
+        click.echo(_summary(report, written))
+
+
+def _files_of(formats: tuple[str, ...]) -> list[str]:
+    from contactfem.io.registry import FORMATS
+
+    return [name for format in formats for name in FORMATS[format].files]
+
+
+def _write_solution(staging: Path, case, result, report: dict, progress) -> dict:
+    """Write one result's files (the case's formats) into a staging directory. Returns the
+    report as written (its timings include the writing)."""
+    from contactfem.io.registry import result_data, write_result
+
+    _refuse_non_finite(case, result.solution, report)
+    _, written_report = write_result(result_data(case, result, report), staging, case.output.files,
+                                     progress=progress)
+    return written_report
 
 
 @main.command()
@@ -251,7 +346,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
 
 @main.command()
 @case_argument
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Where compare.json and compare.png go. Default: <output.directory>-compare.")
 @refine_option
 @quiet_option
@@ -272,20 +367,19 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     """
     from contactfem.case import load_case
     from contactfem.io import atomic_write_text
-    from contactfem.io.atomic import staged_directory
+    from contactfem.io.atomic import claimed_directory
     from contactfem.plots import plot_contact_profiles
-    from contactfem.solve import to_json
     from contactfem.studies import compare_methods
 
     try:
         case = load_case(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-compare")
-        _refuse_existing(directory, ("compare.json",), overwrite)
-        figures, outcomes = compare_methods(case, refine=refine, progress=_progress(quiet))
-        with staged_directory(directory, last="compare.json") as staging:
-            atomic_write_text(staging / "compare.json", to_json(figures))
-            plot_contact_profiles(staging / "compare.png", outcomes)
-            _write_series(staging, "compare", [(name, o.solution) for name, o in outcomes.items()])
+        with claimed_directory(directory, markers=(COMPARE_JSON,), overwrite=overwrite) as claim:
+            figures, outcomes = compare_methods(case, refine=refine, progress=_progress(quiet))
+            with claim.stage(last=COMPARE_JSON) as staging:
+                atomic_write_text(staging / COMPARE_JSON, to_json(figures))
+                plot_contact_profiles(staging / COMPARE_PNG, outcomes, title=case.title)
+                _write_series(staging, "compare", [(name, o.solution) for name, o in outcomes.items()])
     except ContactFemError as error:
         _fail(error)
         return
@@ -299,10 +393,9 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     methods = figures["methods"]
     for label, key in (("Newton iterations", "iterations"), ("solve seconds", "solve_seconds"),
                        ("contact force", "contact_force")):
-        rows.append((label, *(f"{methods[m][key]:.6g}" for m in ("positive", "standard"))))
-    rows.append(("min multiplier", *(f"{methods[m]['sign_conditions']['min_multiplier']:.4g}"
-                                     for m in ("positive", "standard"))))
-    rows.append(("active nodes", *(str(methods[m]["contact_zone"]["active_nodes"]) for m in ("positive", "standard"))))
+        rows.append((label, *(f"{methods[m][key]:.6g}" for m in METHOD_NAMES)))
+    rows.append(("min multiplier", *(f"{methods[m]['sign_conditions']['min_multiplier']:.4g}" for m in METHOD_NAMES)))
+    rows.append(("active nodes", *(str(methods[m]["contact_zone"]["active_nodes"]) for m in METHOD_NAMES)))
     width = max(len(r[0]) for r in rows)
     click.echo(f"{case.title}: {figures['mesh']['unknowns']} unknowns, {figures['mesh']['contact_nodes']} contact nodes")
     for row in rows:
@@ -312,7 +405,7 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     click.echo(f"  negative θ nodes             {figures['negative_theta_nodes']} (min θ {figures['min_theta']:.4g})")
     click.echo(f"  total variation in lift-off  θ {figures['theta_total_variation_in_lift_off']:.4g}, "
                f"λ {figures['lambda_total_variation_in_lift_off']:.4g}")
-    click.echo(f"  wrote {directory / 'compare.json'}, {directory / 'compare.png'}, "
+    click.echo(f"  wrote {directory / COMPARE_JSON}, {directory / COMPARE_PNG}, "
                f"{directory / 'compare.pvd'} (ParaView: one time step per method)")
 
 
@@ -322,9 +415,9 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
               help="Number of nested meshes: the case's mesh refined 0 … levels−1 times.")
 @click.option("--extra", type=click.IntRange(1, 4), default=1, show_default=True,
               help="Refinements beyond the last level for the reference, when the case has no exact solution.")
-@click.option("--method", "methods", type=click.Choice(["positive", "standard"]), multiple=True,
+@click.option("--method", "methods", type=click.Choice(METHOD_NAMES), multiple=True,
               help="Method(s) to study; default both.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Where convergence.json/.csv and the PNGs go. Default: <output.directory>-convergence.")
 @quiet_option
 @json_option
@@ -344,26 +437,25 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
     """
     from contactfem.case import load_case
     from contactfem.io import atomic_write_text
-    from contactfem.io.atomic import staged_directory
+    from contactfem.io.atomic import claimed_directory
     from contactfem.plots import plot_convergence
-    from contactfem.solve import to_json
-    from contactfem.studies import METHOD_NAMES, convergence_study
+    from contactfem.studies import convergence_study
 
     try:
         case = load_case(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-convergence")
-        _refuse_existing(directory, ("convergence.json",), overwrite)
         kept: list = []  # (label, solution) of every level and method, for convergence-*.pvd
-        study = convergence_study(case, levels, extra=extra, methods=methods or METHOD_NAMES,
-                                  progress=_progress(quiet),
-                                  on_outcome=lambda level, name, o: kept.append((level, name, o.solution)))
-        with staged_directory(directory, last="convergence.json") as staging:
-            atomic_write_text(staging / "convergence.json", to_json(study))
-            atomic_write_text(staging / "convergence.csv", _csv(study["rows"]))
-            plot_convergence(staging, study)
-            for name in dict.fromkeys(name for _, name, _ in kept):
-                _write_series(staging, f"convergence-{name}",
-                              [(f"level{level}", s) for level, n, s in kept if n == name])
+        with claimed_directory(directory, markers=(CONVERGENCE_JSON,), overwrite=overwrite) as claim:
+            study = convergence_study(case, levels, extra=extra, methods=methods or METHOD_NAMES,
+                                      progress=_progress(quiet),
+                                      on_outcome=lambda level, name, o: kept.append((level, name, o.solution)))
+            with claim.stage(last=CONVERGENCE_JSON) as staging:
+                atomic_write_text(staging / CONVERGENCE_JSON, to_json(study))
+                atomic_write_text(staging / CONVERGENCE_CSV, _csv(study["rows"]))
+                plot_convergence(staging, study)
+                for name in dict.fromkeys(name for _, name, _ in kept):
+                    _write_series(staging, f"convergence-{name}",
+                                  [(f"level{level}", s) for level, n, s in kept if n == name])
     except ContactFemError as error:
         _fail(error)
         return
@@ -390,7 +482,7 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
                    f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells))
     click.echo("  (observed rates between consecutive levels in parentheses; the paper predicts "
                "h^(1/2+ν), ν ≤ 1/2, for the H1 and H-1/2 errors)")
-    click.echo(f"  wrote {directory}/convergence.json, convergence.csv, convergence_h.png, convergence_time.png, "
+    click.echo(f"  wrote {directory}/{CONVERGENCE_JSON}, {CONVERGENCE_CSV}, {', '.join(CONVERGENCE_PNGS)}, "
                f"convergence-<method>.pvd (ParaView: one time step per level)")
 
 
@@ -404,18 +496,20 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
               help="Stop after the step that passes this many seconds.")
 @click.option("--theta", type=click.FloatRange(0, 1, min_open=True), default=0.5, show_default=True,
               help="Dörfler bulk marking: refine a smallest set carrying θ of Σ η_T².")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Output directory. Default: <output.directory>-adapt.")
 @quiet_option
 @json_option
+@overwrite_option
+@_interruptible
 def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds: float, theta: float,
-          out_dir: Path | None, quiet: bool, as_json: bool) -> None:
+          out_dir: Path | None, quiet: bool, as_json: bool, overwrite: bool) -> None:
     """Adaptive refinement of CASE with method (4) and its residual error estimator.
 
     Solve, estimate (Hild–Nicaise residual estimator, see contactfem/estimator.py), mark
     (Dörfler, θ) and refine (newest-vertex bisection) until η ≤ --target or a budget is
-    reached. Writes the final solution like `solve` (report.json gains "estimator"),
-    estimator.vtu (cell data error_indicator = η_T) and adapt.json (per step: unknowns, η,
+    reached. Writes the final solution like `solve` (report.json gains "estimator",
+    solution.vtu the cell data error_indicator = η_T) and adapt.json (per step: unknowns, η,
     seconds, and the true errors when the case has an exact solution).
 
     \b
@@ -424,20 +518,23 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
       contactfem adapt cases/manufactured.yaml --target 2e-5 --theta 0.3
     """
     from contactfem.adaptive import adapt as adaptive_loop
-    from contactfem.adaptive import write_estimator_vtu
     from contactfem.case import load_case
     from contactfem.io import atomic_write_text
-    from contactfem.solve import to_json, write_outputs
+    from contactfem.io.atomic import claimed_directory
+    from contactfem.report import build_report
 
     progress = _progress(quiet)
     try:
         case = load_case(case_file)
-        run = adaptive_loop(case, theta=theta, target=target, max_unknowns=max_unknowns,
-                            max_seconds=max_seconds, progress=progress)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-adapt")
-        written = write_outputs(run.outcome, directory, progress=progress)
-        written.append(write_estimator_vtu(run.outcome.solution, directory / "estimator.vtu"))
-        written.append(atomic_write_text(directory / "adapt.json", to_json(run.history())))
+        with claimed_directory(directory, markers=(ADAPT_JSON, *RESULT_MARKERS), overwrite=overwrite) as claim:
+            run = adaptive_loop(case, theta=theta, target=target, max_unknowns=max_unknowns,
+                                max_seconds=max_seconds, progress=progress)
+            report = build_report(case, run.result, extras={"estimator": run.estimate.summary()})
+            with claim.stage(replaces=(*RESULT_FILES, ADAPT_JSON), last=ADAPT_JSON) as staging:
+                _write_solution(staging, case, run.result, report, progress)
+                atomic_write_text(staging / ADAPT_JSON, to_json(run.history()))
+        written = [directory / name for name in (*_files_of(case.output.files), ADAPT_JSON)]
     except ContactFemError as error:
         _fail(error)
         return
@@ -462,25 +559,22 @@ def _write_series(directory: Path, stem: str, entries: list) -> list[Path]:
     return write_series(directory, stem, entries)
 
 
-def _plot_after_solve(directory: Path, outcome, progress) -> list[Path]:
-    """solve --plot: the pictures of the directory just written (needs solution.h5)."""
-    from contactfem.errors import OutputError
+def _pictures(result_dir: Path, out_dir: Path, progress, **options) -> list[str]:
+    """The pictures of the result in ``result_dir`` (read from its solution.h5) into ``out_dir``."""
     from contactfem.render import make_pictures
 
-    if "h5" not in outcome.case.output.files:
-        raise OutputError("--plot reads solution.h5: keep h5 in the case's output.files")
     if progress is not None:
         progress("writing pictures")
-    return [Path(p) for p in make_pictures(directory)["files"]]
+    return [Path(p).name for p in make_pictures(result_dir, out_dir, **options)["files"]]
 
 
 @main.command()
-@click.argument("result_dir", metavar="RESULT_DIR", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("result_dir", metavar="RESULT_DIR", type=_CheckedPath(file_okay=False))
 @click.option("--size", default="1200x900", show_default=True, metavar="WxH",
               help="Size of each PNG in pixels.")
 @click.option("--scale", default="auto", show_default=True, metavar="auto|FACTOR",
               help="Displacement magnification; auto makes the largest displacement 10% of the body's size.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Where the PNGs go. Default: RESULT_DIR.")
 @quiet_option
 @click.option("--json", "as_json", is_flag=True, help="Print the written files and the factor as JSON.")
@@ -498,15 +592,22 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
       contactfem plot results/square
       contactfem plot results/square --size 1600x1000 --scale 20 --out figures
     """
-    from contactfem.render import make_pictures, parse_scale, parse_size
+    from contactfem.io.atomic import claimed_directory
+    from contactfem.io.registry import PICTURES
+    from contactfem.render import load_result, make_pictures, parse_scale, parse_size
 
     try:
         pixels = parse_size(size)
         factor = parse_scale(scale)
+        load_result(result_dir)  # a missing or unreadable result is refused before anything is touched
         progress = _progress(quiet)
-        if progress is not None:
-            progress("rendering pictures")
-        made = make_pictures(result_dir, out_dir, size=pixels, scale=factor)
+        directory = out_dir if out_dir is not None else result_dir
+        with claimed_directory(directory) as claim:
+            with claim.stage(replaces=PICTURES) as staging:
+                if progress is not None:
+                    progress("rendering pictures")
+                made = make_pictures(result_dir, staging, size=pixels, scale=factor)
+        made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
     except ContactFemError as error:
         _fail(error)
         return
@@ -520,7 +621,7 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
 
 @main.command()
 @click.argument("path", metavar="[PATH]", required=False, default="case.yaml",
-                type=click.Path(dir_okay=False, path_type=Path))
+                type=_CheckedPath(dir_okay=False))
 @quiet_option
 def init(path: Path, quiet: bool) -> None:
     """Write a commented starter case to PATH (default case.yaml); never overwrites.

@@ -22,3 +22,11 @@ class SolverError(ContactFemError):
 
 class OutputError(ContactFemError):
     """An output file cannot be written."""
+
+
+class ExistingResultError(OutputError):
+    """The output directory holds a finished result and replacing it was not asked for."""
+
+
+class Interrupted(BaseException):
+    """SIGTERM arrived: unwind like KeyboardInterrupt (cleanups run, nothing is switched in)."""

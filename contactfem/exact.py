@@ -34,6 +34,13 @@ from contactfem.expressions import Expression, ExpressionError, sympy_symbols, t
 
 __all__ = ["ExactSolution", "Program", "evaluate"]
 
+#: The most nodes the four entries of ∇u may hold together (sympy's expression trees,
+#: shared subtrees counted at each use). Deriving σ and f = −div σ costs about the square
+#: of the gradient's size: at this bound about two seconds, where the manufactured
+#: solutions of cases/ need under 200 and a balanced product of 60 factors (500
+#: characters of expression) would take a minute or more.
+MAX_GRADIENT_SIZE = 3000
+
 
 # --------------------------------------------------------------------------- the evaluator
 
@@ -85,6 +92,22 @@ _FUNCTIONS: dict[Any, Callable[..., Any]] = {
     sympy.StrictGreaterThan: np.greater, sympy.GreaterThan: np.greater_equal,
     sympy.Equality: np.equal, sympy.Unequality: np.not_equal,
 }
+
+
+def _tree_size(expressions: Any, limit: int) -> int:
+    """The number of nodes in the expression trees, counted up to just past ``limit``."""
+    count = 0
+    for expression in expressions:
+        for _ in sympy.preorder_traversal(expression):
+            count += 1
+            if count > limit:
+                return count
+    return count
+
+
+def _brief(value: Any, limit: int = 60) -> str:
+    text = str(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _as_sympy(value: Any) -> Any:
@@ -236,7 +259,9 @@ class ExactSolution:
     Raises
     ------
     ExpressionError
-        If a derived field cannot be evaluated numerically (see :class:`Program`).
+        If u holds a non-finite number (zoo, nan, ±oo), ∇u has more than
+        :data:`MAX_GRADIENT_SIZE` nodes, or a derived field cannot be evaluated
+        numerically (see :class:`Program`).
     """
 
     def __init__(self, ux: Any, uy: Any, lam: float, mu: float,
@@ -248,8 +273,16 @@ class ExactSolution:
         extra = (self.u[0].free_symbols | self.u[1].free_symbols) - {x, y}
         if extra:
             raise ExpressionError(f"the displacement uses symbols other than x, y: {sorted(map(str, extra))}")
+        for name, component in zip(("u_x", "u_y"), self.u):
+            if component.has(sympy.zoo, sympy.nan, sympy.oo, sympy.S.NegativeInfinity):
+                raise ExpressionError(f"{name} = {_brief(component)} is not finite (a division by zero or "
+                                      "log(0) among its numbers)")
         lam_s, mu_s = sympy.Float(self.lam), sympy.Float(self.mu)
         self.grad = sympy.Matrix(2, 2, lambda a, b: sympy.diff(self.u[a], (x, y)[b]))
+        if _tree_size(self.grad, MAX_GRADIENT_SIZE) > MAX_GRADIENT_SIZE:
+            raise ExpressionError(
+                f"the displacement's gradient has more than {MAX_GRADIENT_SIZE} terms, too many to derive the "
+                "stress and body force in reasonable time; expected a simpler manufactured solution")
         strain = (self.grad + self.grad.T) / 2
         self.stress_matrix = lam_s * strain.trace() * sympy.eye(2) + 2 * mu_s * strain
         self.force = tuple(
@@ -275,7 +308,12 @@ class ExactSolution:
                          obstacle_normal: Sequence[float] | None = None) -> "ExactSolution":
         """From two checked case-file expressions, converted by :func:`to_sympy`."""
         ux, uy = (to_sympy(e) for e in displacement)
-        return cls(ux, uy, lam, mu, obstacle_normal)
+        try:
+            return cls(ux, uy, lam, mu, obstacle_normal)
+        except (ArithmeticError, TypeError, ValueError, RecursionError) as error:
+            # sympy's own failures on odd input (exact arithmetic, undefined products)
+            reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+            raise ExpressionError(f"sympy cannot derive it ({type(error).__name__}: {_brief(reason)})") from None
 
     # All methods take x, y broadcasting against each other; the leading shape is theirs.
 

@@ -317,7 +317,10 @@ def to_sympy(expression: Expression) -> Any:
 
     tree = _parse(expression.text)
     _build(tree, set())  # the same whitelist as the numeric form, before any mapping
-    return _Sympy(sympy, *sympy_symbols()).value(tree)
+    try:
+        return _Sympy(sympy, *sympy_symbols()).value(tree)
+    except (ArithmeticError, RecursionError) as error:  # sympy's exact arithmetic on numbers
+        raise ExpressionError(f"{error or type(error).__name__} in {expression.text!r}") from None
 
 
 def _sympy_power(s: Any) -> Callable[[Any, Any], Any]:
@@ -337,6 +340,17 @@ def _sympy_power(s: Any) -> Callable[[Any, Any], Any]:
     return power
 
 
+def _sympy_modulo(s: Any) -> Callable[[Any, Any], Any]:
+    """sympy's Mod, refusing a divisor that is zero once sympy has simplified it (``x % (y-y)``)."""
+
+    def modulo(a: Any, b: Any) -> Any:
+        if getattr(b, "is_zero", False):
+            raise ExpressionError(f"modulo by zero ({a} % {b})")
+        return s.Mod(a, b)
+
+    return modulo
+
+
 class _Sympy:
     """Maps checked ast nodes to sympy objects (only the whitelisted node types)."""
 
@@ -346,7 +360,7 @@ class _Sympy:
         s = sympy
         self.binary = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
                        ast.Mult: lambda a, b: a * b, ast.Div: lambda a, b: a / b,
-                       ast.Pow: _sympy_power(s), ast.Mod: lambda a, b: s.Mod(a, b)}
+                       ast.Pow: _sympy_power(s), ast.Mod: _sympy_modulo(s)}
         self.compare = {ast.Lt: s.Lt, ast.LtE: s.Le, ast.Gt: s.Gt, ast.GtE: s.Ge, ast.Eq: s.Eq, ast.NotEq: s.Ne}
         self.functions: dict[str, Callable[..., Any]] = {
             "sin": s.sin, "cos": s.cos, "tan": s.tan, "arcsin": s.asin, "arccos": s.acos, "arctan": s.atan,

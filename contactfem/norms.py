@@ -26,7 +26,11 @@ from contactfem.assembly import (
 from contactfem.discretize import DiscreteProblem
 from contactfem.linalg import factorize
 from contactfem.mesh import prolongation
-from contactfem.quadrature import TRIANGLE_POINTS, TRIANGLE_WEIGHTS, gauss_on_unit_interval
+from contactfem.quadrature import (
+    TRIANGLE_POINTS,
+    TRIANGLE_WEIGHTS,
+    gauss_on_unit_interval,
+)
 from contactfem.result import Solution
 
 NORM_NAMES = (

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from contactfem.io.atomic import atomic_path
+from contactfem.io.registry import CONVERGENCE_PNGS
 from contactfem.norms import NORM_NAMES
 
 _LABELS = {
@@ -34,7 +35,7 @@ def _save(figure, path: Path) -> Path:
     return path
 
 
-def plot_contact_profiles(path: Path, outcomes: dict) -> Path:
+def plot_contact_profiles(path: Path, outcomes: dict, title: str = "") -> Path:
     """λh, θh and the gap g0 − u_n along ΓC, against the abscissa along the obstacle."""
     plt = _pyplot()
     positive = outcomes["positive"]
@@ -48,7 +49,7 @@ def plot_contact_profiles(path: Path, outcomes: dict) -> Path:
     top.axhline(0.0, color="k", lw=0.8)
     top.set_ylabel("contact pressure")
     top.legend()
-    top.set_title(positive.case.title)
+    top.set_title(title)
     gap = contact.gap - positive.solution.contact.normal_displacement
     bottom.plot(s, gap, "-", color="tab:green")
     bottom.axhline(0.0, color="k", lw=0.8)
@@ -66,8 +67,8 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
     plt = _pyplot()
     written = []
     methods = sorted({row["method"] for row in study["rows"]})
-    for x_key, name, x_label in (("h", "convergence_h.png", "h (largest triangle diameter)"),
-                                 ("total_seconds", "convergence_time.png", "seconds (mesh + assembly + solve)")):
+    for x_key, name, x_label in zip(("h", "total_seconds"), CONVERGENCE_PNGS,
+                                    ("h (largest triangle diameter)", "seconds (mesh + assembly + solve)")):
         figure, axes = plt.subplots(2, 3, figsize=(13, 7.5))
         for axis, norm in zip(axes.ravel(), NORM_NAMES):
             for method in methods:

@@ -1,4 +1,4 @@
-"""Quadrature rules shared by the error norms and the error estimator."""
+"""Quadrature rules shared by the loads, the error norms and the error estimator."""
 
 from __future__ import annotations
 
@@ -20,3 +20,10 @@ def gauss_on_unit_interval(n: int = 5) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Legendre points and weights on [0, 1], exact for degree 2n − 1."""
     nodes, weights = np.polynomial.legendre.leggauss(n)
     return 0.5 * (nodes + 1), 0.5 * weights
+
+
+#: The one rule for surface forces on boundary edges: Simpson's, on [0, 1] along the edge
+#: (points at the ends and the midpoint). It integrates g·φ exactly for quadratic g (the
+#: load vector) and ‖g − σν‖² exactly for linear g (the estimator's Neumann residual).
+EDGE_RULE_POINTS = np.array([0.0, 0.5, 1.0])
+EDGE_RULE_WEIGHTS = np.array([1 / 6, 4 / 6, 1 / 6])

@@ -1,8 +1,9 @@
 """Pictures of a result directory: the deformed body (pyvista, off-screen) and the ΓC profiles.
 
 Everything is read back from ``solution.h5`` (:func:`contactfem.io.read_hdf5`): the mesh,
-the fields, the contact arrays and the case text, whose ``obstacle`` and ``title`` are
-taken from its YAML. Nothing here prints; :func:`make_pictures` returns what it wrote.
+the fields, the contact arrays, the obstacle (``/contact`` attributes) and the title (a root
+attribute); the case file is not read again. Nothing here prints; :func:`make_pictures`
+returns what it wrote.
 
 VTK renders without an X server through its EGL window (``VTK_DEFAULT_OPENGL_WINDOW``
 is set before pyvista is imported, unless the caller chose another window already).
@@ -17,12 +18,11 @@ import numpy as np
 
 from contactfem.errors import CaseError, OutputError
 from contactfem.io.atomic import atomic_path, ensure_directory
+from contactfem.io.registry import DEFORMED_PNG, PROFILE_PNG, SOLUTION_H5
 
 __all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "load_result", "make_pictures", "parse_size",
            "render_deformed"]
 
-DEFORMED_PNG = "deformed.png"
-PROFILE_PNG = "contact_profile.png"
 #: The auto magnification makes the largest displacement this fraction of the body's size.
 AUTO_FRACTION = 0.10
 #: Above this many triangles the mesh edges would only grey the picture out.
@@ -58,35 +58,23 @@ def load_result(result_dir: Path | str) -> dict:
     """``read_hdf5(result_dir/solution.h5)``; a missing file is bad input (CaseError)."""
     from contactfem.io import read_hdf5
 
-    path = Path(result_dir) / "solution.h5"
+    path = Path(result_dir) / SOLUTION_H5
     if not path.is_file():
         raise CaseError(f"{result_dir}: no solution.h5 here; run `contactfem solve` first "
                         "(with h5 in output.files)")
     return read_hdf5(path)
 
 
-def _case_yaml(data: dict) -> dict:
-    import yaml
-
-    try:
-        parsed = yaml.safe_load(data.get("case") or "")
-    except yaml.YAMLError:
-        return {}
-    return parsed if isinstance(parsed, dict) else {}
-
-
-def _obstacle(case: dict) -> tuple[np.ndarray, np.ndarray] | None:
-    """(point, unit normal into the obstacle) from the case's ``obstacle`` block, or None."""
-    block = case.get("obstacle")
-    try:
-        if "points" in block:
-            a, b = (np.asarray(p, dtype=float) for p in block["points"])
-            t = (b - a) / np.linalg.norm(b - a)
-            return a, np.array([t[1], -t[0]])  # the obstacle lies to the right of a -> b
-        normal = np.asarray(block["normal"], dtype=float)
-        return np.asarray(block["point"], dtype=float), normal / np.linalg.norm(normal)
-    except (TypeError, ValueError, KeyError):
+def _obstacle(data: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """(point, unit normal into the obstacle) as stored with the contact fields, or None (older files)."""
+    attrs = data.get("contact", {}).get("attrs", {})
+    if "obstacle_point" not in attrs or "obstacle_normal" not in attrs:
         return None
+    return np.asarray(attrs["obstacle_point"], dtype=float), np.asarray(attrs["obstacle_normal"], dtype=float)
+
+
+def _title(data: dict) -> str:
+    return str(data["attrs"].get("title") or "contactfem result")
 
 
 def auto_scale(points: np.ndarray, displacement: np.ndarray, fraction: float = AUTO_FRACTION) -> float:
@@ -132,8 +120,7 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
                        faces=np.column_stack([np.full(len(triangles), 3), triangles]).ravel())
     body.cell_data["von Mises stress"] = np.asarray(fields["von_mises"], dtype=float)
 
-    case = _case_yaml(data)
-    title = str(case.get("title") or "contactfem result")
+    title = _title(data)
     method = data["attrs"].get("method", "?")
 
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
@@ -168,7 +155,7 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
             plotter.add_mesh(dots, color="#d62728", point_size=9, render_points_as_spheres=True)
             legend.append(["contact zone (active)", "#d62728"])
 
-        obstacle = _obstacle(case)
+        obstacle = _obstacle(data)
         caption = f"{title}\nmethod: {method}\ndisplacement magnified x {factor:.3g}"
         if obstacle is not None:
             point, normal = obstacle
@@ -218,7 +205,7 @@ def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
     data = load_result(result_dir)
     out = ensure_directory(Path(out_dir) if out_dir is not None else Path(result_dir))
     factor = render_deformed(data, out / DEFORMED_PNG, size=size, scale=scale)
-    title = str(_case_yaml(data).get("title") or "contactfem result")
+    title = _title(data)
     plot_result_profile(out / PROFILE_PNG, data, size=size, title=title)
     return {"files": [str(out / DEFORMED_PNG), str(out / PROFILE_PNG)], "scale": factor,
             "size": list(size)}

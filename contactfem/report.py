@@ -1,12 +1,26 @@
-"""Figures a user checks a solve by: sign conditions, contact zone, contact force, equilibrium."""
+"""The report of a solve, built from the case and the frozen result: the figures a user checks a
+solve by (sign conditions, contact zone, contact force, equilibrium), the exact errors when the
+case has an exact solution, and any extras (the estimator's figures). Nothing here solves or writes.
+"""
 
 from __future__ import annotations
+
+import platform
+import time
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from contactfem import __version__
+from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem
+from contactfem.methods import get_method
+from contactfem.result import Solution
+
+if TYPE_CHECKING:
+    from contactfem.solve import SolveResult
 
 SCHEMA_VERSION = 1
 
@@ -16,6 +30,86 @@ SCHEMA_VERSION = 1
 #: and benchmarks/extremes.py measures the normalised displacement falling off from this
 #: point on. Plane stress cannot lock (its effective λ is at most 2μ).
 LOCKING_WARNING_RATIO = 1e3
+
+
+def build_report(case: Case, result: "SolveResult", extras: Mapping | None = None) -> dict:
+    """The report.json content: deterministic but for the timings and the machine.
+
+    ``extras`` are further top-level entries (e.g. ``estimator``). The seconds spent here,
+    the exact error norms included, are the ``report`` timing.
+    """
+    clock = time.perf_counter()
+    problem, solution, kernel = result.problem, result.solution, result.kernel
+    mesh = problem.mesh
+    contact = solution.contact
+    method = get_method(solution.method)
+    diameters = mesh.triangle_diameters()
+    material = case.material
+    report = {
+        "schema_version": SCHEMA_VERSION,
+        "contactfem_version": __version__,
+        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "method": {"name": method.name, "equation": method.equation,
+                   "multiplier": method.multiplier_symbol, "summary": method.summary},
+        "material": {"E": material.young, "nu": material.poisson, "lambda": material.lame_lambda,
+                     "mu": material.lame_mu, "plane": material.plane},
+        "mesh": {
+            "nodes": mesh.n_points,
+            "triangles": mesh.n_triangles,
+            "h_min": float(diameters.min()),
+            "h_max": float(diameters.max()),
+            "contact_nodes": int(len(contact.nodes)),
+            "contact_edges": int(len(contact.edges)),
+        },
+        "unknowns": {"displacement": problem.n_unknowns, "multiplier": int(len(contact.nodes))},
+        "solver": {
+            "backend": result.backend,
+            "status": kernel.status.value,
+            "message": kernel.message,
+            "iterations": kernel.iterations,
+            "c": kernel.c,
+            "tolerance": case.solver.tolerance,
+            "cycle_detected_at": kernel.cycle_detected_at,
+            "factorizations": kernel.factorizations,
+            "column_solves": kernel.column_solves,
+            "sequencing": dict(result.sequencing),
+        },
+        "newton": [
+            {"iteration": i + 1, **{k: getattr(r, k) for k in
+                                    ("active", "added", "removed", "equilibrium_residual",
+                                     "complementarity_residual", "seconds")}}
+            for i, r in enumerate(kernel.history)
+        ],
+        "sign_conditions": sign_conditions(
+            solution.method, contact.gap, contact.normal_displacement, contact.multiplier, contact.nodal_force
+        ),
+        "contact_zone": contact_zone(problem, contact.active),
+        "contact_force": {
+            "normal": float(contact.nodal_force.sum()),
+            "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
+        },
+        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force),
+        "errors": exact_errors(problem, solution),
+        "warnings": material_warnings(case.material),
+        "machine": {"python": platform.python_version(), "platform": platform.platform()},
+        **(extras or {}),
+    }
+    report["timings"] = {**result.timings, "report": time.perf_counter() - clock}
+    return report
+
+
+def exact_errors(problem: DiscreteProblem, solution: Solution) -> dict | None:
+    """The six norms of exact − discrete when the problem has an exact solution (None otherwise).
+
+    The multiplier is compared with the exact pressure −σ_nn(u_exact) on ΓC. A norm
+    that is not finite (a singular exact field hit by a quadrature point) is null.
+    """
+    if problem.exact is None:
+        return None
+    from contactfem.norms import exact_errors as norms_of
+
+    errors = norms_of(solution, problem, problem.exact)
+    return {name: (float(value) if np.isfinite(value) else None) for name, value in errors.items()}
 
 
 def material_warnings(material) -> list[str]:

@@ -31,6 +31,10 @@ class ContactFields:
         Initial gap g0 along n between each contact node and the obstacle.
     active : (m,) bool
         Whether the node is in the final active set (in contact).
+    abscissa : (m,) float64
+        Position of each contact node along the obstacle (its coordinate along the tangent).
+    obstacle_point, obstacle_normal : (2,) float64
+        The flat obstacle: a point of its surface and its unit normal n.
     """
 
     nodes: np.ndarray
@@ -40,6 +44,9 @@ class ContactFields:
     normal_displacement: np.ndarray
     gap: np.ndarray
     active: np.ndarray
+    abscissa: np.ndarray
+    obstacle_point: np.ndarray
+    obstacle_normal: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,11 +1,12 @@
-"""Mesh sequencing: predict the active set of a large case from the same case on a coarser mesh.
+"""Mesh sequencing, as two pure steps: the same case on a coarser mesh, and the active set it predicts.
 
-The coarse solution (h four times larger), itself predicted from a coarser one while it is large, is read along
-ΓC as functions of the abscissa on the obstacle: its pressure λ and its normal
-displacement u_n. At each fine contact node the indicator of the active set iteration,
-λ ω + c (u_n − g), is evaluated with those interpolated values and the fine gap; the
-nodes where it is positive start active. Only nodes near the ends of the contact zone
-can be mispredicted, so the fine iteration starts a node or two from its answer.
+The coarse solution (h four times larger) is read along ΓC as functions of the abscissa
+on the obstacle: its pressure λ and its normal displacement u_n. At each fine contact
+node the indicator of the active set iteration, λ ω + c (u_n − g), is evaluated with those
+interpolated values and the fine gap; the nodes where it is positive start active. Only
+nodes near the ends of the contact zone can be mispredicted, so the fine iteration starts
+a node or two from its answer. The recursion (solve the coarse case, itself predicted from
+a coarser one) lives in :mod:`contactfem.solve`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from dataclasses import replace
 import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
-from contactfem.errors import SolverError
+from contactfem.discretize import ContactBoundary
+from contactfem.result import ContactFields
 
 # Below this many unknowns a cold start is cheaper than solving a coarser case first.
 SEQUENCING_THRESHOLD = 5_000
@@ -23,6 +25,11 @@ SEQUENCING_THRESHOLD = 5_000
 # against 1/4 for halving, and mispredicts only nodes next to the ends of the zone, which
 # the kernel's cached Schur columns absorb (measured on the square: 1024 from 256).
 COARSENING = 4
+
+
+def worth_sequencing(n_unknowns: int) -> bool:
+    """Whether a problem of this size is worth predicting from a coarser one."""
+    return n_unknowns >= SEQUENCING_THRESHOLD
 
 
 def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Case, int] | None:
@@ -45,39 +52,8 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
     return None
 
 
-def predict_active_set(case: Case, problem, c: float, progress=None) -> tuple[np.ndarray | None, dict]:
-    """Initial active set (m,) for ``problem`` from a coarser solve, and what it cost.
-
-    Returns (None, {}) when the problem is small or no coarser mesh can be made.
-    """
-    from contactfem.solve import prepare, solve_case  # the pipeline sits above this module
-
-    if problem.n_unknowns < SEQUENCING_THRESHOLD:
-        return None, {}
-    coarse = coarser(case, problem.refinements)
-    if coarse is None:
-        return None, {}
-    coarse_case, coarse_refine = coarse
-    coarse_problem = prepare(coarse_case, refine=coarse_refine)
-    if coarse_problem.n_unknowns >= problem.n_unknowns:
-        return None, {}
-    try:
-        outcome = solve_case(coarse_case, method="positive", problem=coarse_problem)
-    except SolverError:
-        # A prediction is only a starting point: without one the fine solve starts cold.
-        return None, {}
-    coarse_contact = outcome.problem.contact
-    s_coarse = coarse_contact.abscissa
-    fine = problem.contact
-    pressure = np.interp(fine.abscissa, s_coarse, outcome.solution.contact.multiplier)
-    normal = np.interp(fine.abscissa, s_coarse, outcome.solution.contact.normal_displacement)
-    indicator = pressure * fine.masses.lumped + c * (normal - fine.gap)
-    active = indicator > 0
-    if progress is not None:
-        progress(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
-    return active, {
-        "coarse_unknowns": coarse_problem.n_unknowns,
-        "coarse_iterations": outcome.kernel.iterations,
-        "predicted_active": int(active.sum()),
-        "levels": 1 + outcome.report["solver"].get("sequencing", {}).get("levels", 0),
-    }
+def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:
+    """Initial active set (m,) of the fine contact nodes from a coarse solution's contact fields."""
+    pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)
+    normal = np.interp(fine.abscissa, coarse.abscissa, coarse.normal_displacement)
+    return pressure * fine.masses.lumped + c * (normal - fine.gap) > 0

@@ -10,13 +10,20 @@ import time
 import numpy as np
 
 from contactfem.case import Case
-from contactfem.norms import NORM_NAMES, exact_errors, nested_errors, nodal_multiplier, observed_rates
-from contactfem.solve import Outcome, Progress, prepare, solve_case
+from contactfem.methods import METHOD_NAMES
+from contactfem.norms import (
+    NORM_NAMES,
+    exact_errors,
+    nested_errors,
+    nodal_multiplier,
+    observed_rates,
+)
+from contactfem.report import contact_zone, sign_conditions
+from contactfem.solve import Progress, SolveResult, prepare, solve_case
 
-METHOD_NAMES = ("positive", "standard")
 
-
-def compare_methods(case: Case, *, refine: int | None = None, progress: Progress | None = None) -> tuple[dict, dict[str, Outcome]]:
+def compare_methods(case: Case, *, refine: int | None = None,
+                    progress: Progress | None = None) -> tuple[dict, dict[str, SolveResult]]:
     """Solve ``case`` with both methods on one assembled system and measure how they differ.
 
     Returns the figures (JSON-ready) and the two outcomes.
@@ -50,18 +57,21 @@ def compare_methods(case: Case, *, refine: int | None = None, progress: Progress
         "lift_off_nodes": int(lift_off.sum()),
         "theta_total_variation_in_lift_off": _total_variation(theta, lift_off),
         "lambda_total_variation_in_lift_off": _total_variation(lam, lift_off),
-        "methods": {
-            name: {
-                "iterations": o.kernel.iterations,
-                "solve_seconds": o.timings["solve"],
-                "sign_conditions": o.report["sign_conditions"],
-                "contact_zone": o.report["contact_zone"],
-                "contact_force": o.report["contact_force"]["normal"],
-            }
-            for name, o in outcomes.items()
-        },
+        "methods": {name: _method_figures(o) for name, o in outcomes.items()},
     }
     return figures, outcomes
+
+
+def _method_figures(result: SolveResult) -> dict:
+    contact = result.solution.contact
+    return {
+        "iterations": result.kernel.iterations,
+        "solve_seconds": result.timings["solve"],
+        "sign_conditions": sign_conditions(result.method, contact.gap, contact.normal_displacement,
+                                           contact.multiplier, contact.nodal_force),
+        "contact_zone": contact_zone(result.problem, contact.active),
+        "contact_force": float(contact.nodal_force.sum()),
+    }
 
 
 def _total_variation(values: np.ndarray, mask: np.ndarray) -> float:
@@ -88,9 +98,8 @@ def convergence_study(
     """
     say = progress or (lambda message: None)
     base_refine = case.mesh.refine
-    exact = _exact_of(case)
     reference = None
-    if exact is None:
+    if case.exact is None:  # no exact solution: the reference is a finer nested solve
         finest = base_refine + levels - 1 + extra
         say(f"reference: {extra} refinement(s) beyond the last level")
         reference_problem = prepare(case, refine=finest)
@@ -110,8 +119,8 @@ def convergence_study(
             outcome = solve_case(case, method=name, problem=problem)
             if on_outcome is not None:  # on_outcome(level, method, outcome), e.g. to keep the fields
                 on_outcome(level, name, outcome)
-            if exact is not None:
-                errors = exact_errors(outcome.solution, problem, exact)
+            if problem.exact is not None:
+                errors = exact_errors(outcome.solution, problem, problem.exact)
             else:
                 errors = nested_errors(
                     outcome.solution, reference[name].solution, reference[name].problem,
@@ -142,14 +151,8 @@ def convergence_study(
         }
     return {
         "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
-        "reference": "exact" if exact is not None else f"nested, {extra} refinement(s) finer",
+        "reference": "exact" if case.exact is not None else f"nested, {extra} refinement(s) finer",
         "levels": levels,
         "rows": rows,
         "rates": rates,
     }
-
-
-def _exact_of(case: Case):
-    """The case's exact solution as the norms expect it, or None."""
-    builder = getattr(case, "exact_solution", None)
-    return builder() if callable(builder) else None

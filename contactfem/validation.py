@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from contactfem.solve import Outcome
+from contactfem.solve import SolveResult
 
 
-def hertz_comparison(outcome: Outcome, radius: float) -> dict:
+def hertz_comparison(outcome: SolveResult, radius: float) -> dict:
     """Relative errors of the contact half-width, peak pressure and pressure profile.
 
     Plane-strain Hertz for a cylinder of radius R on a rigid plane, with P the total
@@ -21,9 +21,10 @@ def hertz_comparison(outcome: Outcome, radius: float) -> dict:
     the last two active nodes to zero, and kept within the last edge of the zone. The
     profile error is the relative L² norm on ΓC of λh − p, λh the method's multiplier.
     """
-    case = outcome.case
-    material = case.material
-    modulus = material.young / (1 - material.poisson**2) if material.plane == "strain" else material.young
+    law = outcome.problem.law
+    # E* = E/(1 − ν²) in plane strain, E in plane stress: both are 4μ(λ+μ)/(λ+2μ) with the
+    # plane's own λ (plane stress's 2λμ/(λ+2μ)).
+    modulus = 4 * law.mu * (law.lam + law.mu) / (law.lam + 2 * law.mu)
     contact = outcome.solution.contact
     s = outcome.problem.contact.abscissa
     force = float(contact.nodal_force.sum())

@@ -3,27 +3,27 @@
 Opens each file with the reader ParaView uses for it (.vtu: XMLUnstructuredGridReader,
 .pvd: PVDReader, .xdmf: Xdmf3ReaderS and the XDMF 2 reader XDMFReader), and writes to
 OUT.json, per file and reader, the time steps and every leaf data set: its block name,
-point and cell counts, points, and each array's name, association, number of
-components, VTK type and values. Prints a short account on stdout.
+point and cell counts, points, and each array's name, association (point, cell or field
+data), number of components, VTK type and values. Prints a short account on stdout.
 """
 
 import json
 import sys
 
-from paraview import servermanager
-from paraview import simple
+from paraview import servermanager, simple
 
 
 def arrays(data, which):
     out = {}
-    field = data.GetPointData() if which == "point" else data.GetCellData()
+    field = {"point": data.GetPointData, "cell": data.GetCellData, "field": data.GetFieldData}[which]()
     for i in range(field.GetNumberOfArrays()):
-        array = field.GetArray(i)
+        array = field.GetAbstractArray(i)
         n, c = array.GetNumberOfTuples(), array.GetNumberOfComponents()
         out[array.GetName()] = {
             "components": c,
             "type": array.GetDataTypeAsString(),
-            "values": [array.GetComponent(t, k) for t in range(n) for k in range(c)],
+            "values": ([array.GetComponent(t, k) for t in range(n) for k in range(c)] if array.IsA("vtkDataArray")
+                       else [array.GetVariantValue(v).ToString() for v in range(n * c)]),
         }
     return out
 
@@ -57,6 +57,7 @@ def leaves(data, name=""):
         "coordinates": [data.GetPoint(i) for i in range(n)],
         "point_data": arrays(data, "point"),
         "cell_data": arrays(data, "cell"),
+        "field_data": arrays(data, "field"),
     }]
 
 
@@ -98,11 +99,11 @@ def main():
                 for block in blocks:
                     print(f"  t={step} block {block['name']!r}: {block['class']}, {block['points']} points, "
                           f"{block['cells']} cells, cell types {block['cell_types']}")
-                    for kind in ("point_data", "cell_data"):
+                    for kind in ("point_data", "cell_data", "field_data"):
                         for array, info in block[kind].items():
                             v = info["values"]
-                            print(f"    {kind[:-5]:5} {array:20} {info['components']} x {info['type']:14} "
-                                  f"range [{min(v):.6g}, {max(v):.6g}]")
+                            shown = f"range [{min(v):.6g}, {max(v):.6g}]" if v and not isinstance(v[0], str) else v
+                            print(f"    {kind[:-5]:5} {array:20} {info['components']} x {info['type']:14} {shown}")
 
 
 main()

@@ -11,16 +11,23 @@ import pytest
 import sympy
 import yaml
 from click.testing import CliRunner
-
 from conftest import case_from
+from test_expressions import VALID
+
 from contactfem.case import load_case
 from contactfem.cli import main
 from contactfem.errors import CaseError
 from contactfem.exact import ExactSolution, Program, evaluate
-from contactfem.expressions import Expression, ExpressionError, compile_expression, sympy_symbols, to_sympy
+from contactfem.expressions import (
+    Expression,
+    ExpressionError,
+    compile_expression,
+    sympy_symbols,
+    to_sympy,
+)
 from contactfem.norms import NORM_NAMES
+from contactfem.report import contact_zone, exact_errors
 from contactfem.solve import prepare, solve_case
-from test_expressions import VALID
 
 ROOT = Path(__file__).resolve().parents[1]
 MANUFACTURED = ROOT / "cases" / "manufactured.yaml"
@@ -296,7 +303,7 @@ def test_linear_exact_solution_is_reproduced(method):
     c = -1e-3
     case = case_from(exact_case(f"{c}*x", "0", top="displacement", left="traction", divisions=6))
     outcome = solve_case(case, method=method)
-    errors = outcome.report["errors"]
+    errors = exact_errors(outcome.problem, outcome.solution)
     assert set(errors) == set(NORM_NAMES)
     size = abs(c) / math.sqrt(3)  # ‖u‖_L2 = |c| / √3; |u|_H1 = |c|
     for name in ("displacement_l2", "displacement_h1_semi", "displacement_h1", "displacement_energy"):
@@ -311,11 +318,11 @@ def test_linear_exact_solution_is_reproduced(method):
 def test_manufactured_case_solves_with_finite_errors(method):
     case = load_case(MANUFACTURED)
     outcome = solve_case(case, method=method)
-    errors = outcome.report["errors"]
+    errors = exact_errors(outcome.problem, outcome.solution)
     assert list(errors) == list(NORM_NAMES)
     assert all(isinstance(v, float) and math.isfinite(v) and v > 0 for v in errors.values())
     # Contact on x < 0, separation on x > 0: the discrete zone is [−1, 0].
-    (interval,) = outcome.report["contact_zone"]["intervals"]
+    (interval,) = contact_zone(outcome.problem, outcome.solution.contact.active)["intervals"]
     assert interval["abscissa"] == [-1.0, 0.0]
 
 
@@ -354,7 +361,7 @@ def test_report_errors_null_without_exact_block():
     from conftest import square_case_dict
 
     outcome = solve_case(case_from(square_case_dict(4)))
-    assert outcome.report["errors"] is None
+    assert exact_errors(outcome.problem, outcome.solution) is None
 
 
 def test_cli_solve_manufactured_writes_errors(tmp_path):

@@ -66,11 +66,11 @@ def results(tmp_path_factory) -> Results:
     return Results(tmp_path_factory.mktemp("fuzz"))
 
 
-def check(results: Results, text: str, key: str | None, files: dict[str, bytes] | None = None) -> int:
-    """Run ``solve`` on the case ``text`` into the existing results with --overwrite."""
+def check(results: Results, text: str | bytes, key: str | None, files: dict[str, bytes] | None = None) -> int:
+    """Run ``solve`` on the case ``text`` (or raw bytes) into the existing results with --overwrite."""
     with tempfile.TemporaryDirectory(dir=results.root) as tmp:
         case = Path(tmp) / CASE_NAME
-        case.write_text(text, encoding="utf-8")
+        case.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8"))
         for name, data in (files or {}).items():
             (Path(tmp) / name).write_bytes(data)
         fresh = Path(tmp) / "fresh"
@@ -220,27 +220,39 @@ def test_rectangles_of_any_size(results, lower, upper, divisions):
     check(results, dump(data), None)
 
 
+def forbid(monkeypatch, name: str, replacement) -> None:
+    """Replace ``name`` in every discretisation module that looks it up (a module or a package)."""
+    import importlib
+    import pkgutil
+
+    package = importlib.import_module("contactfem.discretize")
+    modules = [package]
+    if hasattr(package, "__path__"):
+        modules += [importlib.import_module(f"{package.__name__}.{info.name}")
+                    for info in pkgutil.iter_modules(package.__path__)]
+    patched = [m for m in modules if hasattr(m, name)]
+    assert patched, f"no discretisation module uses {name}"
+    for module in patched:
+        monkeypatch.setattr(module, name, replacement)
+
+
 @pytest.mark.parametrize("mesh", [{"divisions": 100_000}, {"divisions": [100_000, 3_000]}, {"divisions": 64, "refine": 12},
                                   {"size": 1e-5}, {"divisions": 2000, "refine": 4}])
 def test_oversized_meshes_are_refused_before_meshing(results, monkeypatch, mesh):
-    import contactfem.discretize
-
     def no_meshing(*args, **kwargs):
         raise AssertionError("meshing started")
 
-    monkeypatch.setattr(contactfem.discretize, "_mesh_geometry", no_meshing)
+    forbid(monkeypatch, "_mesh_geometry", no_meshing)
     data = copy.deepcopy(BASE)
     data["mesh"] = mesh
     assert check(results, dump(data), "mesh") == 2
 
 
 def test_an_oversized_refinement_of_a_mesh_file_is_refused_before_refining(results, monkeypatch):
-    import contactfem.discretize
-
     def no_refinement(*args, **kwargs):
         raise AssertionError("refinement started")
 
-    monkeypatch.setattr(contactfem.discretize, "refine_uniform", no_refinement)
+    forbid(monkeypatch, "refine_uniform", no_refinement)
     data = copy.deepcopy(BASE)
     data["geometry"] = {"mesh_file": "square.msh"}
     data["mesh"] = {"refine": 12}
@@ -304,3 +316,141 @@ def test_control_characters_in_keys_stay_on_one_line(tmp_path):
     assert result.exit_code == 2
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and "\\x1e" in lines[0] and "boundary.bottom" in lines[0]
+
+
+# --------------------------------------------------------------------------- the reader's bounds
+
+
+def _anchored(width: int, depth: int, leaf: str) -> list[str]:
+    """Lines of a chain of anchors, each a list of ``width`` aliases of the one before."""
+    lines = [f"a0: &a0 [{', '.join([leaf] * width)}]"]
+    lines += [f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * width)}]" for k in range(1, depth)]
+    return lines
+
+
+@FUZZ
+@given(width=st.integers(min_value=1, max_value=12), depth=st.integers(min_value=1, max_value=12),
+       leaf=st.sampled_from(["lol", "0", "1.0e4", "x", "{a: 1}", "[1, 2]"]),
+       use=st.sampled_from(["title", "material: {E", "boundary: {top: {traction", "body_force", "geometry"]))
+def test_alias_chains_of_any_size(results, width, depth, leaf, use):
+    """Aliases expanding to anything from one value to 12**12: refused in one line, fast."""
+    import time
+
+    chain = _anchored(width, depth, leaf)
+    last = f"*a{depth - 1}"
+    closing = "}" * use.count("{")
+    text = dump(BASE).replace("title: fuzz\n", "") + "\n".join(chain) + f"\n{use}: {last}{closing}\n"
+    started = time.perf_counter()
+    check(results, text, None)
+    assert time.perf_counter() - started < 10
+
+
+KEY_LINE = __import__("re").compile(r"^\s*[A-Za-z_][A-Za-z_]*:( |$)")
+
+
+@FUZZ
+@given(line=st.integers(min_value=0, max_value=200), extra=st.sampled_from(["", " 1", " x", " [1, 2]"]))
+def test_a_repeated_key_anywhere(results, line, extra):
+    """Any key line of the case written twice: refused, naming the key and both lines."""
+    lines = dump(BASE).splitlines()
+    candidates = [i for i, text in enumerate(lines) if KEY_LINE.match(text)]
+    i = candidates[line % len(candidates)]
+    key = lines[i].split(":")[0].strip()
+    copy_line = lines[i] if lines[i].rstrip().endswith(":") or not extra else lines[i].split(":")[0] + ":" + extra
+    text = "\n".join(lines[: i + 1] + [copy_line] + lines[i + 1:]) + "\n"
+    assert check(results, text, key) == 2
+
+
+@FUZZ
+@given(position=st.integers(min_value=0, max_value=10_000), data=st.binary(min_size=1, max_size=4),
+       prefix=st.sampled_from([b"", b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff", b"\x00\x00\xfe\xff", b"---\n"]))
+def test_bytes_spliced_into_the_file(results, position, data, prefix):
+    """Arbitrary bytes (invalid UTF-8, NULs, control characters, BOMs) at any place."""
+    raw = dump(BASE).encode("utf-8")
+    position %= len(raw) + 1
+    check(results, prefix + raw[:position] + data + raw[position:], None)
+
+
+@FUZZ
+@given(value=st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=20),
+       where=st.sampled_from(["title", "names", "output", "mesh_file", "part"]))
+def test_any_unicode_in_names_and_paths(results, value, where):
+    """Control characters, separators, BOMs, direction marks in the strings that end up in files."""
+    data = copy.deepcopy(BASE)
+    if where == "title":
+        data["title"] = value
+    elif where == "names":
+        data["geometry"]["rectangle"]["names"] = {"top": value}
+    elif where == "output":
+        data["output"]["directory"] = value
+    elif where == "mesh_file":
+        data["geometry"] = {"mesh_file": value}
+        data.pop("mesh")
+    else:
+        data["boundary"][value] = "free"
+    check(results, dump(data), None)
+
+
+path_parts = st.sampled_from(["a", "a" * 255, "a" * 256, "b" * 40, ".", "..", "", "\x00", " ", "~", "\\", "é"])
+
+
+@FUZZ
+@given(parts=st.lists(path_parts, min_size=1, max_size=40), repeat=st.integers(min_value=1, max_value=40),
+       key=st.sampled_from(["output.directory", "geometry.mesh_file"]))
+def test_paths_of_any_length(results, parts, repeat, key):
+    """Paths up to ~400 000 characters, overlong components, NULs: one line, no traceback."""
+    path = "/".join(parts * repeat)
+    data = copy.deepcopy(BASE)
+    if key == "output.directory":
+        data["output"]["directory"] = path
+    else:
+        data["geometry"] = {"mesh_file": path}
+        data.pop("mesh")
+    check(results, dump(data), None)
+
+
+raw_numbers = st.sampled_from([".inf", "-.inf", ".nan", ".NaN", "1e400", "1.0e400", "-1.0e400", "1.0e-400", "0x10",
+                               "0o17", "017", "0b101", "1_2", "+.5", "1:30", "190:20:30", "yes", "no", "on", "~",
+                               "null", "2001-12-14", "!!binary aGVsbG8=", "!!float 1", "!!int 3", "!!str 1",
+                               "0x" + "f" * 200, "9" * 400, "1" + "0" * 99, "[]", "{}", "'1e6'", '"\\x00"',
+                               "&a 1", "!!set {a}", "!!omap [a: 1]", "- 1"])
+
+
+@FUZZ
+@given(value=raw_numbers, target=st.sampled_from(["E: 1000000.0", "nu: 0.3", "divisions: 4", "tolerance: 1.0e-10",
+                                                    "max_iterations: 50", "c: auto"]))
+def test_raw_yaml_scalars_where_numbers_belong(results, value, target):
+    """YAML 1.1's spellings of numbers, booleans, dates and tags, written as they are (not quoted)."""
+    text = dump(BASE)
+    name = target.split(":")[0]
+    check(results, text.replace(target, f"{name}: {value}"), None)
+
+
+exact_tokens = st.sampled_from(["x", "y", "0", "1", "2", "-1", "1e308", "1e-308", "pi", "(", ")", "+", "-", "*", "/",
+                                "**", "%", "sin", "exp", "log", "sqrt", "abs", "where", "atan2", "floor", ",", "<",
+                                "0.5", "9**9**9", " "])
+
+
+@FUZZ
+@given(ux=st.lists(exact_tokens, min_size=1, max_size=16), uy=st.lists(exact_tokens, min_size=1, max_size=6))
+def test_expressions_in_the_exact_block(results, ux, uy):
+    """Modulo by zero, 0/0, 0**-1, huge powers: refused by name or evaluated, never a traceback."""
+    data = copy.deepcopy(BASE)
+    data["exact"] = {"displacement": ["".join(ux), "".join(uy)]}
+    data["boundary"]["top"] = {"traction": "exact"}
+    check(results, dump(data), None)
+
+
+@FUZZ
+@given(radius=st.floats(min_value=1e-320, max_value=0.6), cx=st.floats(min_value=-1, max_value=2),
+       scale=st.sampled_from([1.0, 1e-6, 1e6, 1e40]))
+def test_circular_holes_of_any_size(results, radius, cx, scale):
+    """From subnormal to larger than the body: refused naming the hole's key, or solved."""
+    data = copy.deepcopy(BASE)
+    corners = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    data["geometry"] = {"polygon": {
+        "vertices": [[scale * a, scale * b] for a, b in corners], "edges": ["bottom", "right", "top", "left"],
+        "holes": [{"circle": {"center": [scale * cx, scale * 0.5], "radius": scale * radius}}]}}
+    data["mesh"] = {"size": 0.25 * scale}
+    data["boundary"]["top"] = "free"
+    check(results, dump(data), None)

@@ -10,8 +10,8 @@ refined. The test asks for 2% on both meshes and for every error to shrink.
 from __future__ import annotations
 
 import pytest
-
 from conftest import shipped_case
+
 from contactfem.solve import prepare, solve_case
 from contactfem.validation import hertz_comparison
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import case_from
+
 from contactfem.norms import NORM_NAMES, exact_errors, nested_errors, observed_rates
 from contactfem.result import ContactFields, Solution
 from contactfem.solve import prepare, solve_case
@@ -87,7 +87,8 @@ def interpolated_solution(problem, displacement, pressure) -> Solution:
         stress=np.zeros((mesh.n_triangles, 4)), von_mises=np.zeros(mesh.n_triangles),
         contact=ContactFields(nodes=contact.nodes, edges=contact.edges, multiplier=pressure(px, py),
                               nodal_force=zeros, normal_displacement=zeros, gap=zeros,
-                              active=np.ones(len(contact.nodes), bool)),
+                              active=np.ones(len(contact.nodes), bool), abscissa=contact.abscissa,
+                              obstacle_point=contact.obstacle.point, obstacle_normal=contact.obstacle.normal),
         newton={},
     )
 

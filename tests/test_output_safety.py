@@ -21,6 +21,7 @@ from click.testing import CliRunner
 
 from contactfem.cli import main
 from contactfem.errors import OutputError
+from contactfem.io.atomic import LOCK_FILE
 
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE = ROOT / "cases" / "square.yaml"
@@ -38,7 +39,8 @@ def run(*args):
 
 
 def snapshot(directory: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file()}
+    """The directory's files, but for the lock every writing command keeps there."""
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.is_file() and p.name != LOCK_FILE}
 
 
 def leftovers(parent: Path) -> list[str]:
@@ -97,14 +99,14 @@ def test_a_directory_without_results_needs_no_flag(tmp_path):
 
 def test_a_failure_while_writing_leaves_the_old_result_complete(solved, monkeypatch):
     """The HDF5 writer fails after the VTU files were written: nothing of the new run lands."""
-    import contactfem.io
+    import contactfem.io.registry
 
     before = snapshot(solved)
 
     def broken(*args, **kwargs):
         raise OutputError("cannot write solution.h5: disk full (simulated)")
 
-    monkeypatch.setattr(contactfem.io, "write_hdf5", broken)
+    monkeypatch.setattr(contactfem.io.registry, "write_hdf5", broken)
     result = run("solve", SQUARE, "--out", solved, "--overwrite", "--method", "standard")
     assert result.exit_code == 1
     assert len(result.stderr.splitlines()) == 1 and "disk full" in result.stderr
@@ -146,3 +148,182 @@ def test_sigint_during_the_solve_exits_130_and_keeps_earlier_results(solved, tmp
     assert len(lines) == 1 and lines[0].startswith("error: interrupted"), stderr
     assert snapshot(solved) == before
     assert leftovers(solved.parent) == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize(("signal_number", "code", "word"), [(signal.SIGTERM, 143, "terminated"),
+                                                             (signal.SIGINT, 130, "interrupted")])
+def test_a_signal_during_the_solve_of_every_writing_command_keeps_earlier_results(
+        tmp_path, signal_number, code, word):
+    """compare and adapt as well as solve: one line, 130 or 143, the old files intact."""
+    for command in (["compare", "--refine", "3"], ["adapt", "--max-unknowns", "400000"]):
+        out = tmp_path / command[0]
+        out.mkdir()
+        (out / "report.json").write_text("{}", encoding="utf-8")
+        (out / "compare.json").write_text("{}", encoding="utf-8")
+        (out / "adapt.json").write_text("{}", encoding="utf-8")
+        before = snapshot(out)
+        process = subprocess.Popen(
+            [sys.executable, "-c", "from contactfem.cli import main; main()", command[0], str(SQUARE),
+             *command[1:], "--out", str(out), "--overwrite", "--quiet"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        )
+        time.sleep(1.5)
+        if process.poll() is not None:
+            pytest.skip(f"{command[0]} finished before the signal could be sent")
+        process.send_signal(signal_number)
+        stdout, stderr = process.communicate(timeout=60)
+        assert process.returncode == code, stderr
+        lines = stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {word}"), stderr
+        assert snapshot(out) == before
+        assert [p.name for p in out.iterdir() if p.name.startswith(".tmp-")] == []
+
+
+def test_a_second_run_into_a_directory_being_written_is_refused_at_once(tmp_path):
+    """The lock is held from before the work starts: the second run fails in one line, writes nothing."""
+    from contactfem.io.atomic import claimed_directory
+
+    out = tmp_path / "results"
+    with claimed_directory(out):
+        result = run("solve", SQUARE, "--out", out, "--quiet")
+    assert result.exit_code == 1
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and "another contactfem run is writing into it" in lines[0]
+    assert snapshot(out) == {}
+
+
+def test_concurrent_solves_into_one_directory_never_mix(tmp_path):
+    """Two processes racing for one directory: one writes, the other is refused; the files
+    that land are all from one run (same method in report.json and solution.h5)."""
+    from contactfem.io import read_hdf5
+
+    out = tmp_path / "results"
+    processes = [subprocess.Popen(
+        [sys.executable, "-c", "from contactfem.cli import main; main()", "solve", str(SQUARE), "--refine", "1",
+         "--method", method, "--out", str(out), "--overwrite", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path) for method in ("positive", "standard")]
+    codes = [p.wait(timeout=120) for p in processes]
+    assert sorted(codes) in ([0, 0], [0, 1]), codes
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert read_hdf5(out / "solution.h5")["attrs"]["method"] == report["method"]["name"]
+
+
+def test_a_switch_over_cut_short_is_completed_by_the_next_command(solved, tmp_path):
+    """A run killed after its files were decided but before all were moved: the next command
+    that claims the directory finishes the move, so the directory holds one run, never a mix."""
+    import shutil
+
+    from contactfem.io.atomic import SWITCH_FILE, TEMP_PREFIX
+
+    newer = tmp_path / "newer"
+    assert run("solve", SQUARE, "--out", newer, "--method", "standard", "--quiet").exit_code == 0
+    staging = solved / f"{TEMP_PREFIX}999999-deadbeef.staging"
+    staging.mkdir()
+    names = sorted(p.name for p in newer.iterdir() if p.is_file() and p.name != LOCK_FILE)
+    for name in names:
+        shutil.copy(newer / name, staging / name)
+    (staging / SWITCH_FILE).write_text(json.dumps({"files": names, "replaces": []}), encoding="utf-8")
+    # The killed run had moved the first two files already.
+    for name in names[:2]:
+        os.replace(staging / name, solved / name)
+    result = run("plot", solved, "--quiet")
+    assert result.exit_code == 0, result.stderr
+    assert not staging.exists()
+    for name in names:
+        assert (solved / name).read_bytes() == (newer / name).read_bytes(), name
+
+
+def test_an_undecided_staging_area_of_a_killed_run_is_removed(solved):
+    """SIGKILL before the decision leaves a staging area without a switch file: it is discarded."""
+    from contactfem.io.atomic import TEMP_PREFIX
+
+    before = snapshot(solved)
+    staging = solved / f"{TEMP_PREFIX}999999-cafebabe.staging"
+    staging.mkdir()
+    (staging / "report.json").write_text("{}", encoding="utf-8")
+    (solved / f"{TEMP_PREFIX}999999-0badf00d.solution.h5").write_bytes(b"partial")
+    result = run("solve", SQUARE, "--out", solved, "--quiet", "--overwrite")
+    assert result.exit_code == 0, result.stderr
+    assert not staging.exists() and leftovers(solved) == []
+    assert set(snapshot(solved)) == set(before)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
+def test_a_writable_directory_inside_a_read_only_parent_is_written(tmp_path):
+    """Staging happens inside the output directory, so its parent need not be writable."""
+    parent = tmp_path / "locked"
+    out = parent / "results"
+    out.mkdir(parents=True)
+    parent.chmod(0o555)
+    try:
+        result = run("solve", SQUARE, "--out", out, "--quiet")
+    finally:
+        parent.chmod(0o755)
+    assert result.exit_code == 0, result.stderr
+    assert "report.json" in snapshot(out)
+
+
+def test_an_output_path_that_is_a_file_is_refused_before_solving(tmp_path, monkeypatch):
+    import contactfem.solve
+
+    target = tmp_path / "results"
+    target.write_text("not a directory", encoding="utf-8")
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("the solve started")
+
+    monkeypatch.setattr(contactfem.solve, "solve_case", no_solve)
+    result = run("solve", SQUARE, "--out", target, "--quiet")
+    assert result.exit_code == 2
+    assert len(result.stderr.splitlines()) == 1 and "--out" in result.stderr and str(target) in result.stderr
+    assert target.read_text(encoding="utf-8") == "not a directory"
+
+
+def test_plot_without_h5_is_refused_before_anything_is_touched(solved, tmp_path):
+    import yaml
+
+    before = snapshot(solved)
+    data = yaml.safe_load(SQUARE.read_text(encoding="utf-8"))
+    data["output"] = {"files": ["vtu", "json"]}
+    case = tmp_path / "no_h5.yaml"
+    case.write_text(yaml.safe_dump(data), encoding="utf-8")
+    result = run("solve", case, "--out", solved, "--overwrite", "--plot", "--quiet")
+    assert result.exit_code == 2
+    assert len(result.stderr.splitlines()) == 1 and "h5" in result.stderr
+    assert snapshot(solved) == before
+
+
+def test_xdmf_without_its_archive_is_refused_by_the_case_reader(tmp_path):
+    import yaml
+
+    data = yaml.safe_load(SQUARE.read_text(encoding="utf-8"))
+    data["output"] = {"files": ["xdmf"]}
+    case = tmp_path / "xdmf_only.yaml"
+    case.write_text(yaml.safe_dump(data), encoding="utf-8")
+    out = tmp_path / "out"
+    result = run("solve", case, "--out", out, "--quiet")
+    assert result.exit_code == 2
+    line = result.stderr.strip()
+    assert "xdmf_only.yaml" in line and "output.files" in line and "h5" in line
+    assert not out.exists()
+
+
+def test_adapt_refuses_existing_results_and_a_failure_leaves_them_whole(tmp_path, monkeypatch):
+    import contactfem.io.registry
+
+    out = tmp_path / "adapt"
+    first = run("adapt", SQUARE, "--max-unknowns", "600", "--out", out, "--quiet")
+    assert first.exit_code == 0, first.stderr
+    before = snapshot(out)
+    again = run("adapt", SQUARE, "--max-unknowns", "600", "--out", out, "--quiet")
+    assert again.exit_code == 2 and "--overwrite" in again.stderr
+    assert snapshot(out) == before
+
+    def broken(*args, **kwargs):
+        raise OutputError("cannot write solution.h5: disk full (simulated)")
+
+    monkeypatch.setattr(contactfem.io.registry, "write_hdf5", broken)
+    failed = run("adapt", SQUARE, "--max-unknowns", "900", "--out", out, "--quiet", "--overwrite")
+    assert failed.exit_code == 1 and "disk full" in failed.stderr
+    assert snapshot(out) == before

@@ -12,14 +12,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from contactfem.io import read_hdf5
-
 from test_cli import invoke
+from test_writers import METADATA, _solution
+
+from contactfem.io import read_hdf5, write_vtu
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = Path(__file__).with_name("pvpython_probe.py")
 PVPYTHON = shutil.which("pvpython")
+
+CELL_FIELDS = {"error_indicator": np.linspace(0.0, 1.0, 8), "level": np.arange(8, dtype=np.int32),
+               "marked": np.array([1, 0, 0, 1, 0, 1, 1, 0], dtype=np.uint8)}
 
 pytestmark = pytest.mark.skipif(PVPYTHON is None, reason="pvpython not installed (apt-get install python3-paraview)")
 
@@ -39,6 +42,8 @@ def probed(tmp_path_factory):
     assert invoke("compare", case, "--out", tmp / "compare", "--quiet").exit_code == 0
     files = [tmp / "solve" / n for n in ("solution.vtu", "contact.vtu", "solution.pvd", "solution.xdmf")]
     files.append(tmp / "compare" / "compare.pvd")
+    write_vtu(_solution(cell_fields=CELL_FIELDS), tmp / "direct", metadata=METADATA)
+    files.append(tmp / "direct" / "solution.vtu")
     out = tmp / "probe.json"
     run = subprocess.run([PVPYTHON, str(PROBE), str(out), *map(str, files)], capture_output=True, text=True,
                          timeout=300, cwd=tmp)
@@ -76,6 +81,17 @@ def _check_body(block, data, stress_layout):
         assert np.allclose(_values(block["cell_data"][name])[:, 0], column, rtol=1e-12, atol=0)
 
 
+def _metadata(block) -> dict[str, str]:
+    """The field data of a body block as text: each array holds the UTF-8 bytes of one entry."""
+    found = {}
+    for name, info in block["field_data"].items():
+        if name == "Name" and info["type"] == "char":
+            continue  # the PVD reader's own: the data set's name
+        assert info["type"] == "unsigned char" and info["components"] == 1, name
+        found[name] = bytes(int(v) for v in info["values"]).decode("utf-8")
+    return found
+
+
 def _check_contact(block, data):
     contact = data["contact"]
     assert block["cell_types"] == [3]  # VTK_LINE
@@ -100,6 +116,7 @@ def test_vtu_files_as_paraview_reads_them(probed):
     data = read_hdf5(tmp / "solve" / "solution.h5")
     (body,) = report["solve/solution.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
     _check_body(body, data, "vtk6")
+    _metadata(body)
     (contact,) = report["solve/contact.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
     _check_contact(contact, data)
 
@@ -111,6 +128,7 @@ def test_pvd_groups_body_and_contact(probed):
     assert found["times"] == [0.0]
     body, contact = found["steps"]["0.0"]
     _check_body(body, data, "vtk6")
+    _metadata(body)
     _check_contact(contact, data)
 
 
@@ -134,3 +152,16 @@ def test_compare_series_has_one_time_step_per_method(probed):
         pressures[method] = _values(contact["point_data"]["contact_pressure"])[:, 0]
     assert pressures["positive"].min() >= 0
     assert np.isclose(pressures["standard"].min(), min(figures["min_theta"], 0.0), rtol=1e-12)
+
+
+def test_cell_fields_and_metadata_as_paraview_reads_them(probed):
+    report, _ = probed
+    (body,) = report["direct/solution.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
+    cells = body["cell_data"]
+    for name, values, vtk_type in (("error_indicator", CELL_FIELDS["error_indicator"], "double"),
+                                   ("level", CELL_FIELDS["level"], "int"),
+                                   ("marked", CELL_FIELDS["marked"], "unsigned char")):
+        assert cells[name]["type"] == vtk_type and cells[name]["components"] == 1, name
+        assert np.array_equal(_values(cells[name])[:, 0], values), name
+    assert cells["stress"]["components"] == 6
+    assert _metadata(body) == METADATA

@@ -12,7 +12,6 @@ import meshio
 import numpy as np
 import pytest
 from PIL import Image
-
 from test_cli import invoke
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,7 +94,6 @@ def test_init_writes_a_case_that_checks_and_never_overwrites(tmp_path):
 
 def test_compare_and_converge_write_series_pvd(tmp_path):
     import yaml
-
     from conftest import square_case_dict
 
     small = tmp_path / "small.yaml"

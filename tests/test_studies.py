@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 from click.testing import CliRunner
-
 from conftest import CASES, case_from, square_case_dict
+
 from contactfem.cli import main
 from contactfem.studies import compare_methods, convergence_study
 

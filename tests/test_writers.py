@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import textwrap
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -12,8 +15,16 @@ import numpy as np
 import pytest
 
 from contactfem.errors import OutputError
-from contactfem.io import atomic_path, atomic_write_text, read_hdf5, write_hdf5, write_vtu
+from contactfem.io import (
+    atomic_path,
+    atomic_write_text,
+    read_hdf5,
+    write_hdf5,
+    write_vtu,
+)
 from contactfem.io.atomic import TEMP_PREFIX, atomic_write_bytes
+from contactfem.io.series import write_series
+from contactfem.io.vtu import VTK_LINE, VTK_TRIANGLE, Grid, write_grid
 from contactfem.mesh.core import Circle, Mesh
 from contactfem.result import ContactFields, Solution
 
@@ -50,7 +61,8 @@ def _grid_mesh() -> Mesh:
     )
 
 
-def _solution(newton: dict[str, np.ndarray] | None = None) -> Solution:
+def _solution(newton: dict[str, np.ndarray] | None = None,
+              cell_fields: dict[str, np.ndarray] | None = None) -> Solution:
     mesh = _grid_mesh()
     rng = np.random.default_rng(7)
     n, n_tri = mesh.n_points, mesh.n_triangles
@@ -63,6 +75,9 @@ def _solution(newton: dict[str, np.ndarray] | None = None) -> Solution:
         normal_displacement=np.array([0.1, 0.05]),
         gap=np.array([0.1, 0.2]),
         active=np.array([True, False]),
+        abscissa=np.array([0.5, 1.0]),
+        obstacle_point=np.array([0.0, -0.1]),
+        obstacle_normal=np.array([0.0, -1.0]),
     )
     if newton is None:
         newton = {
@@ -80,6 +95,7 @@ def _solution(newton: dict[str, np.ndarray] | None = None) -> Solution:
         von_mises=np.abs(rng.normal(size=n_tri)),
         contact=contact,
         newton=newton,
+        cell_fields=cell_fields or {},
     )
 
 
@@ -202,6 +218,9 @@ def test_contact_vtu_without_edges_is_an_output_error(tmp_path: Path) -> None:
         normal_displacement=np.zeros(0),
         gap=np.zeros(0),
         active=np.zeros(0, dtype=bool),
+        abscissa=np.zeros(0),
+        obstacle_point=np.zeros(2),
+        obstacle_normal=np.array([0.0, -1.0]),
     )
     broken = Solution(
         solution.method, solution.mesh, solution.displacement, solution.stress,
@@ -254,13 +273,13 @@ def test_failed_vtu_write_keeps_the_old_file(tmp_path: Path, monkeypatch) -> Non
 
     old = b"old solution, must survive\n"
     (tmp_path / "solution.vtu").write_bytes(old)
-    real_stream = vtu._stream
+    real_write = vtu._vtk_write
 
-    def write_then_fail(path, header, arrays):
-        real_stream(path, header, arrays)  # a complete temporary file...
+    def write_then_fail(grid, path):
+        real_write(grid, path)  # a complete temporary file...
         raise RuntimeError("disk on fire")  # ...then a failure before the rename
 
-    monkeypatch.setattr(vtu, "_stream", write_then_fail)
+    monkeypatch.setattr(vtu, "_vtk_write", write_then_fail)
     with pytest.raises(RuntimeError, match="disk on fire"):
         write_vtu(_solution(), tmp_path)
     assert (tmp_path / "solution.vtu").read_bytes() == old
@@ -274,15 +293,278 @@ def test_oserror_during_vtu_write_becomes_output_error(tmp_path: Path, monkeypat
     old = b"old"
     (tmp_path / "solution.vtu").write_bytes(old)
 
-    def half_write(path, header, arrays):
+    def half_write(grid, path):
         Path(path).write_bytes(b"<VTKFile trunc")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(vtu, "_stream", half_write)
+    monkeypatch.setattr(vtu, "_vtk_write", half_write)
     with pytest.raises(OutputError, match=r"cannot write .*solution\.vtu: No space left"):
         write_vtu(_solution(), tmp_path)
     assert (tmp_path / "solution.vtu").read_bytes() == old
     assert _temporaries(tmp_path) == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="file size limits are POSIX")
+def test_vtk_writer_failure_is_an_output_error(tmp_path: Path) -> None:
+    """A real failure inside VTK's writer (the file size limit is hit mid-write) is reported
+    as an OutputError, silently: VTK prints nothing, and the old file and no temporary stay."""
+    (tmp_path / "grid.vtu").write_bytes(b"old")
+    script = textwrap.dedent(f"""
+        import resource, signal
+        import numpy as np
+        from contactfem.errors import OutputError
+        from contactfem.io.vtu import VTK_TRIANGLE, Grid, write_grid
+
+        grid = Grid(np.random.default_rng(0).random((30000, 2)),
+                    np.arange(60000).reshape(-1, 3) % 30000, VTK_TRIANGLE,
+                    cell_data={{"eta": np.ones(20000)}})
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a failing write() instead of a kill
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, resource.RLIM_INFINITY))
+        try:
+            write_grid({str(tmp_path / "grid.vtu")!r}, grid)
+        except OutputError as exc:
+            print(exc)
+        """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert "cannot write" in run.stdout and "grid.vtu: File too large" in run.stdout
+    assert "ERROR" not in run.stderr and "vtkXML" not in run.stderr  # VTK printed nothing
+    assert (tmp_path / "grid.vtu").read_bytes() == b"old"
+    assert _temporaries(tmp_path) == []
+
+
+def _vtk_read(path: Path) -> dict:
+    """The file as VTK's own XML reader (the one ParaView uses) gives it back."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+
+    reader = vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    assert reader.GetErrorCode() == 0
+    grid = reader.GetOutput()
+
+    def arrays(data) -> dict:
+        found = {}
+        for i in range(data.GetNumberOfArrays()):
+            array = data.GetAbstractArray(i)
+            found[array.GetName()] = vtk_to_numpy(array)
+        return found
+
+    cells = grid.GetCells()
+    return {
+        "points": vtk_to_numpy(grid.GetPoints().GetData()),
+        "cells": vtk_to_numpy(cells.GetConnectivityArray()).reshape(grid.GetNumberOfCells(), -1),
+        "types": {grid.GetCellType(i) for i in range(grid.GetNumberOfCells())},
+        "point_data": arrays(grid.GetPointData()),
+        "cell_data": arrays(grid.GetCellData()),
+        "field_data": arrays(grid.GetFieldData()),
+    }
+
+
+def _assert_same(found: np.ndarray, expected: np.ndarray, name: str) -> None:
+    assert found.dtype == expected.dtype, name
+    assert found.shape == expected.shape, name
+    np.testing.assert_array_equal(found, expected, err_msg=name)
+
+
+_DATA_TYPES = {
+    "solution.vtu": {
+        "Points": ("Float64", "3"), "connectivity": ("Int64", None), "offsets": ("Int64", None),
+        "types": ("UInt8", None), "displacement": ("Float64", "3"), "stress": ("Float64", "6"),
+        "stress_xx": ("Float64", None), "stress_yy": ("Float64", None), "stress_xy": ("Float64", None),
+        "stress_zz": ("Float64", None), "von_mises": ("Float64", None),
+    },
+    "contact.vtu": {
+        "Points": ("Float64", "3"), "connectivity": ("Int64", None), "offsets": ("Int64", None),
+        "types": ("UInt8", None), "mesh_node": ("Int64", None), "contact_pressure": ("Float64", None),
+        "nodal_force": ("Float64", None), "normal_displacement": ("Float64", None), "gap": ("Float64", None),
+        "active": ("UInt8", None), "contact_node": ("UInt8", None), "displacement": ("Float64", "3"),
+    },
+}
+
+
+def test_vtu_arrays_have_their_types_and_components(tmp_path: Path) -> None:
+    """Every array's VTK type and component count, as written in the file: scalars carry
+    no NumberOfComponents (VTK's default 1), so that readers see them 1-D."""
+    write_vtu(_solution(), tmp_path)
+    for name, expected in _DATA_TYPES.items():
+        root = _vtu_header(tmp_path / name)
+        found = {a.get("Name"): (a.get("type"), a.get("NumberOfComponents")) for a in root.iter("DataArray")}
+        assert found == expected, name
+        assert root.find("UnstructuredGrid/FieldData") is None, name  # no metadata given
+
+
+def test_cell_fields_round_trip(tmp_path: Path) -> None:
+    """Solution.cell_fields become cell data of solution.vtu, values and dtypes exact, as
+    meshio and as VTK's reader read them."""
+    rng = np.random.default_rng(3)
+    fields = {
+        "error_indicator": rng.random(8),
+        "level": rng.integers(0, 5, size=8).astype(np.int32),
+        "marked": (rng.random(8) > 0.5).astype(np.uint8),
+    }
+    solution = _solution(cell_fields=fields)
+    write_vtu(solution, tmp_path)
+    by_meshio = meshio.read(tmp_path / "solution.vtu").cell_data
+    by_vtk = _vtk_read(tmp_path / "solution.vtu")["cell_data"]
+    for name, values in fields.items():
+        _assert_same(by_meshio[name][0], values, name)
+        _assert_same(by_vtk[name], values, name)
+    _assert_same(by_vtk["von_mises"], solution.von_mises, "von_mises")
+    assert set(by_vtk) == set(_DATA_TYPES["solution.vtu"]) - {"Points", "connectivity", "offsets", "types",
+                                                             "displacement"} | set(fields)
+    assert "error_indicator" not in meshio.read(tmp_path / "contact.vtu").cell_data
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"error_indicator": np.ones(7)}, r"'error_indicator' has shape \(7,\), expected \(8,\)"),
+    ({"error_indicator": np.ones((8, 2))}, r"expected \(8,\)"),
+    ({"von_mises": np.ones(8)}, "would replace"),
+])
+def test_bad_cell_fields_write_nothing(tmp_path: Path, fields, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        write_vtu(_solution(cell_fields=fields), tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+METADATA = {
+    "method": "positive",
+    "case_title": "Hertz contact – ünïcode ✓",
+    "case_sha256": "9f" * 32,
+    "units": "SI: lengths in m, stresses in Pa",
+    "version": "0.1.0",
+    "empty": "",
+}
+
+
+def _text(values: np.ndarray) -> str:
+    assert values.dtype == np.uint8 and values.ndim == 1
+    return values.tobytes().decode("utf-8")
+
+
+def test_metadata_round_trips_as_field_data(tmp_path: Path) -> None:
+    """Each metadata entry is a field data array of solution.vtu holding the value's UTF-8
+    bytes; VTK's reader and meshio give back exactly the strings."""
+    write_vtu(_solution(), tmp_path, metadata=METADATA)
+    by_vtk = _vtk_read(tmp_path / "solution.vtu")["field_data"]
+    assert {name: _text(values) for name, values in by_vtk.items()} == METADATA
+    by_meshio = meshio.read(tmp_path / "solution.vtu").field_data
+    assert {name: _text(values) for name, values in by_meshio.items()} == METADATA
+    root = _vtu_header(tmp_path / "solution.vtu")
+    assert [(a.get("Name"), a.get("type")) for a in root.iterfind("UnstructuredGrid/FieldData/DataArray")] == [
+        (name, "UInt8") for name in METADATA]
+    assert _vtk_read(tmp_path / "contact.vtu")["field_data"] == {}
+    # The rest of the file is unchanged by the metadata.
+    _assert_same(meshio.read(tmp_path / "solution.vtu").cell_data["von_mises"][0], _solution().von_mises,
+                 "von_mises")
+
+
+def test_metadata_must_be_strings(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="metadata 'refine' is int, not str"):
+        write_vtu(_solution(), tmp_path / "out", metadata={"refine": 2})
+    assert not (tmp_path / "out").exists()
+
+
+def test_write_grid_keeps_every_name_dtype_and_component_count(tmp_path: Path) -> None:
+    rng = np.random.default_rng(5)
+    points = rng.random((6, 2))
+    cells = np.array([[0, 1, 2], [2, 3, 4], [3, 4, 5]], dtype=np.int32)
+    point_data = {
+        "f32": rng.random(6).astype(np.float32),
+        "i8": rng.integers(-100, 100, size=6).astype(np.int8),
+        "u16_pairs": rng.integers(0, 60000, size=(6, 2)).astype(np.uint16),
+        "i64_vectors": rng.integers(-(2**40), 2**40, size=(6, 3)),
+    }
+    cell_data = {"f64_tensor": rng.normal(size=(3, 6)), "u64": np.array([0, 2**63, 2**64 - 1], dtype=np.uint64),
+                 "flag": np.array([True, False, True])}
+    field_data = {"levels": np.array([0.5, 0.25]), "pairs": np.arange(4, dtype=np.int32).reshape(2, 2),
+                  "note": "plane strain"}
+    path = write_grid(tmp_path / "g.vtu", Grid(points, cells, VTK_TRIANGLE, point_data=point_data,
+                                                cell_data=cell_data, field_data=field_data))
+    assert path == tmp_path / "g.vtu" and _temporaries(tmp_path) == []
+    expected_cells = {**cell_data, "flag": np.array([1, 0, 1], dtype=np.uint8)}
+    expected_fields = {**field_data, "note": np.frombuffer(b"plane strain", dtype=np.uint8)}
+    xyz = np.column_stack([points, np.zeros(6)])
+
+    vtk = _vtk_read(path)
+    _assert_same(vtk["points"], xyz, "points")
+    _assert_same(vtk["cells"], cells.astype(np.int64), "cells")
+    assert vtk["types"] == {VTK_TRIANGLE}
+    for found, expected in ((vtk["point_data"], point_data), (vtk["cell_data"], expected_cells),
+                            (vtk["field_data"], expected_fields)):
+        assert list(found) == list(expected)
+        for name, values in expected.items():
+            _assert_same(found[name], values, name)
+
+    mesh = meshio.read(path)
+    _assert_same(mesh.points, xyz, "points")
+    _assert_same(mesh.cells[0].data, cells.astype(np.int64), "cells")
+    for name, values in point_data.items():
+        _assert_same(mesh.point_data[name], values, name)
+    for name, values in expected_cells.items():
+        _assert_same(mesh.cell_data[name][0], values, name)
+    for name, values in expected_fields.items():
+        _assert_same(mesh.field_data[name], values, name)
+
+
+def test_write_grid_of_lines_with_3d_points(tmp_path: Path) -> None:
+    points = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 2.0], [2.0, 1.0, 3.0]])
+    write_grid(tmp_path / "l.vtu", Grid(points, np.array([[0, 1], [1, 2]]), VTK_LINE))
+    mesh = meshio.read(tmp_path / "l.vtu")
+    assert [block.type for block in mesh.cells] == ["line"]
+    _assert_same(mesh.points, points, "points")
+    _assert_same(mesh.cells[0].data, np.array([[0, 1], [1, 2]]), "cells")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"cells": np.array([[0, 1, 3]])}, r"cells refer to points outside 0\.\.2"),
+    ({"cells": np.array([[0, 1, -1]])}, r"cells refer to points outside 0\.\.2"),
+    ({"cells": np.array([[0.0, 1.0, 2.0]])}, "integer"),
+    ({"points": np.zeros((3, 4))}, r"expected \(n, 2\) or \(n, 3\)"),
+    ({"point_data": {"u": np.zeros(4)}}, r"point data 'u' has shape \(4,\), expected 3 rows"),
+    ({"cell_data": {"s": np.zeros((1, 2, 2))}}, "cell data 's' has shape"),
+    ({"cell_data": {"s": np.zeros((1, 0))}}, "cell data 's' has shape"),
+    ({"cell_data": {"z": np.zeros(1, dtype=complex)}}, "cannot be stored"),
+    ({"field_data": {"when": np.array(["today"])}}, "cannot be stored"),
+])
+def test_write_grid_rejects_arrays_that_do_not_fit(tmp_path: Path, change, message) -> None:
+    base = {"points": np.zeros((3, 2)), "cells": np.array([[0, 1, 2]]), "cell_type": VTK_TRIANGLE}
+    (tmp_path / "g.vtu").write_bytes(b"old")
+    with pytest.raises(ValueError, match=message):
+        write_grid(tmp_path / "g.vtu", Grid(**{**base, **change}))
+    assert (tmp_path / "g.vtu").read_bytes() == b"old"
+    assert _temporaries(tmp_path) == []
+
+
+def test_write_series_writes_every_entry_then_the_collection(tmp_path: Path) -> None:
+    first, second = _solution(), _solution(cell_fields={"error_indicator": np.arange(8.0)})
+    written = write_series(tmp_path, "cmp", [("positive", first), ("standard", second)])
+    names = ["cmp-positive.vtu", "cmp-positive-contact.vtu", "cmp-standard.vtu", "cmp-standard-contact.vtu",
+             "cmp.pvd"]
+    assert written == [tmp_path / name for name in names]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)  # no temporaries, no scratch directory
+    _assert_same(meshio.read(tmp_path / "cmp-positive.vtu").cell_data["von_mises"][0], first.von_mises,
+                 "von_mises")
+    _assert_same(_vtk_read(tmp_path / "cmp-standard.vtu")["cell_data"]["error_indicator"], np.arange(8.0),
+                 "error_indicator")
+    assert meshio.read(tmp_path / "cmp-standard-contact.vtu").cells[0].type == "line"
+    # The series files are the very files write_vtu writes.
+    write_vtu(second, tmp_path / "solve")
+    assert (tmp_path / "solve" / "solution.vtu").read_bytes() == (tmp_path / "cmp-standard.vtu").read_bytes()
+    assert (tmp_path / "solve" / "contact.vtu").read_bytes() == (tmp_path / "cmp-standard-contact.vtu").read_bytes()
+    files = [d.get("file") for d in ET.parse(tmp_path / "cmp.pvd").getroot().iterfind("./Collection/DataSet")]
+    assert files == names[:4]
+    with pytest.raises(ValueError, match="not a plain name"):
+        write_series(tmp_path, "cmp", [("../up", first)])
+
+
+def test_vtu_modules_import_vtk_only_when_writing() -> None:
+    script = ("import sys, contactfem.io.vtu, contactfem.io.series; "
+              "print(sorted(m for m in sys.modules if m.startswith(('vtk', 'vtkmodules'))))")
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[]"
 
 
 # --------------------------------------------------------------------- HDF5

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import secrets
 import shutil
@@ -11,15 +12,17 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from contactfem.errors import OutputError
+from contactfem.errors import ExistingResultError, OutputError
 
 __all__ = [
+    "LOCK_FILE",
     "TEMP_PREFIX",
+    "ClaimedDirectory",
+    "claimed_directory",
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_text",
     "ensure_directory",
-    "staged_directory",
 ]
 
 #: Every temporary file starts with this, so leftovers of a killed process are easy to spot.
@@ -209,73 +212,200 @@ def atomic_write_text(final: Path | str, text: str, encoding: str = "utf-8") -> 
     return atomic_write_bytes(final, text.encode(encoding))
 
 
+#: The signals held back while a staged result is switched in.
+_DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
 @contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold back SIGINT for the duration of the block, then deliver it (main thread only)."""
+def _signals_deferred() -> Iterator[None]:
+    """Hold back SIGINT and SIGTERM for the block, then deliver them (main thread only)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     received: list[int] = []
+    previous = {}
     try:
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+        for number in _DEFERRED_SIGNALS:
+            previous[number] = signal.signal(number, lambda signum, frame: received.append(signum))
     except (ValueError, OSError):  # no signal support here: nothing to defer
+        for number, handler in previous.items():
+            signal.signal(number, handler)
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if received:
-        raise KeyboardInterrupt
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    for number in received:
+        signal.raise_signal(number)
+
+
+#: The lock every writing command holds on its output directory from before its work
+#: starts until its files are in place.
+LOCK_FILE = ".contactfem.lock"
+#: Written into a staging directory once all its files are complete: from then on the
+#: switch-over is decided, and a run killed during it is completed by the next command
+#: that claims the directory.
+SWITCH_FILE = ".switch.json"
+
+
+class ClaimedDirectory:
+    """An output directory held by this process (see :func:`claimed_directory`)."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+
+    @contextmanager
+    def stage(self, replaces: tuple[str, ...] = (), last: str | None = None) -> Iterator[Path]:
+        """Yield a fresh staging directory inside the output directory; on success its files
+        replace the directory's in one decided step.
+
+        The block writes plain files into the staging directory. When it completes, a
+        switch file listing them is written and synced: that single atomic rename decides
+        the switch-over. The files are then moved into place with :func:`os.replace`
+        (``last`` moved last), the files named in ``replaces`` that this run did not write
+        are deleted, and the staging directory is removed, with SIGINT and SIGTERM held back.
+        If the block raises, the staging directory is removed and nothing in the output
+        directory changes. If the process dies after the decision, the next claim completes
+        the switch-over; if before, it removes the staging directory.
+        """
+        staging = _fresh_name(self.directory, "staging")
+        try:
+            staging.mkdir()
+        except OSError as exc:
+            raise _wrap(staging, exc) from exc
+        decided = False
+        try:
+            yield staging
+            names = sorted(p.name for p in staging.iterdir() if not p.name.startswith(TEMP_PREFIX))
+            if any((staging / name).is_dir() for name in names):
+                raise OutputError(f"cannot write {self.directory}: a writer left a directory in the staging area")
+            if last in names:
+                names.remove(last)
+                names.append(last)
+            plan = {"files": names, "replaces": [name for name in replaces if name not in names]}
+            with _signals_deferred():
+                atomic_write_text(staging / SWITCH_FILE, json.dumps(plan))
+                _fsync_directory(staging)
+                decided = True
+                _switch(staging, self.directory)
+        finally:
+            if not decided:
+                shutil.rmtree(staging, ignore_errors=True)
+
+
+def _fresh_name(directory: Path, label: str) -> Path:
+    return directory / f"{TEMP_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.{label}"
+
+
+def _switch(staging: Path, directory: Path) -> None:
+    """Carry out a decided switch-over (idempotent: a file already moved is skipped)."""
+    plan = json.loads((staging / SWITCH_FILE).read_text(encoding="utf-8"))
+    try:
+        for name in plan["files"]:
+            if (staging / name).exists():
+                os.replace(staging / name, directory / name)
+        for name in plan["replaces"]:
+            _remove_quietly(directory / name)
+    except OSError as exc:
+        raise _wrap(directory, exc) from exc
+    _fsync_directory(directory)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def _recover(directory: Path) -> None:
+    """Finish or discard what killed runs left in ``directory`` (its lock is held, so every
+    staging area and temporary file here belongs to a run that is gone)."""
+    for leftover in directory.glob(f"{TEMP_PREFIX}*"):
+        if leftover.is_dir() and (leftover / SWITCH_FILE).is_file():
+            try:
+                json.loads((leftover / SWITCH_FILE).read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                shutil.rmtree(leftover, ignore_errors=True)  # the decision itself was never written whole
+                continue
+            _switch(leftover, directory)
+        elif leftover.is_dir():
+            shutil.rmtree(leftover, ignore_errors=True)
+        else:
+            _remove_quietly(leftover)
 
 
 @contextmanager
-def staged_directory(directory: Path | str, replaces: tuple[str, ...] = (), last: str | None = None) -> Iterator[Path]:
-    """Yield a fresh staging directory whose files land together in ``directory`` on success.
+def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
+                      overwrite: bool = True) -> Iterator[ClaimedDirectory]:
+    """Create ``directory`` if needed, check that it is writable, and hold its lock for the block.
 
-    The staging directory is a hidden sibling of ``directory`` (same file system), named
-    ``.tmp-<pid>-<random>.<name>``. When the block completes, each of its files is moved
-    onto ``directory`` with :func:`os.replace` (``last`` moved last, e.g. the report that
-    marks a complete result), with SIGINT held back until the moves are done; then the
-    files named in ``replaces`` that the run did not write are deleted, so that no stale
-    file of an earlier run stays next to the new ones. If the block raises (an error,
-    KeyboardInterrupt), nothing in ``directory`` changes. The staging directory is always
-    removed.
+    Taken before any work starts, so that a run that could not write its results fails at
+    once: a directory that cannot be created or written, a directory another contactfem
+    run is writing into, or one that holds a finished result (any of ``markers``) when
+    ``overwrite`` is false. Leftovers of killed runs are completed or removed first.
 
     Raises
     ------
+    ExistingResultError
+        ``markers`` are present and ``overwrite`` is false.
     OutputError
-        If a directory cannot be created or a file cannot be moved.
+        The directory cannot be created or written, or another run holds it.
     """
+    import fcntl
+
+    directory = Path(directory)
+    created = _missing_ancestors(directory)
     directory = ensure_directory(directory)
-    staging = None
-    for _ in range(100):
-        candidate = directory.parent / f"{TEMP_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.{directory.name}"
-        try:
-            candidate.mkdir()
-        except FileExistsError:
-            continue
-        except OSError as exc:
-            raise _wrap(candidate, exc) from exc
-        staging = candidate
-        break
-    if staging is None:
-        raise OutputError(f"cannot write {directory}: no free temporary name next to it")
+    if not directory.is_dir():
+        raise OutputError(f"cannot write {directory}: not a directory")
+    lock = directory / LOCK_FILE
     try:
-        yield staging
-        names = sorted(p.name for p in staging.iterdir())
-        if last in names:
-            names.remove(last)
-            names.append(last)
-        with _sigint_deferred():
-            try:
-                for name in names:
-                    os.replace(staging / name, directory / name)
-                for name in replaces:
-                    if name not in names:
-                        _remove_quietly(directory / name)
-            except OSError as exc:
-                raise _wrap(directory, exc) from exc
-            _fsync_directory(directory)
+        fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o666)
+    except OSError as exc:
+        _remove_created(created)
+        raise _wrap(directory, exc) from exc
+    switched = False
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputError(f"cannot write {directory}: another contactfem run is writing into it; "
+                              "wait for it to finish or choose another output directory") from None
+        except OSError as exc:
+            raise _wrap(directory, exc) from exc
+        probe = _fresh_name(directory, "probe")
+        try:
+            probe.touch(exist_ok=False)
+            probe.unlink()
+        except OSError as exc:
+            raise _wrap(directory, exc) from exc
+        _recover(directory)
+        if not overwrite:
+            found = [name for name in markers if (directory / name).exists()]
+            if found:
+                raise ExistingResultError(f"{directory}: already holds contactfem results ({', '.join(found)}); "
+                                          "pass --overwrite to replace them")
+        claim = ClaimedDirectory(directory)
+        yield claim
+        switched = True
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        if not switched and created and not any(p.name != LOCK_FILE for p in directory.iterdir()):
+            # A run refused or failed before writing anything leaves no directory behind.
+            _remove_quietly(lock)
+            _remove_created(created)
+        os.close(fd)  # closing the descriptor releases the lock
+
+
+def _missing_ancestors(directory: Path) -> list[Path]:
+    """``directory`` and its ancestors that do not exist yet, deepest first."""
+    missing = []
+    for path in (directory, *directory.parents):
+        if path.exists() or path.is_symlink():
+            break
+        missing.append(path)
+    return missing
+
+
+def _remove_created(created: list[Path]) -> None:
+    for path in created:  # deepest first; stops at the first that is not empty
+        try:
+            path.rmdir()
+        except OSError:
+            return

@@ -1,6 +1,6 @@
 """The HDF5 archive of a solved case; the docstring of this module is the reference layout.
 
-Layout, schema version 1::
+Layout, schema version 2 (version 1 lacked ``/contact/abscissa`` and the obstacle)::
 
     /                      attrs: format = "contactfem-solution", schema_version = 1 (int),
                                   method ("positive" | "standard"), case_hash,
@@ -24,6 +24,9 @@ Layout, schema version 1::
     /contact/normal_displacement (m,) float64
     /contact/gap           (m,) float64
     /contact/active        (m,) uint8, 0/1
+    /contact/abscissa      (m,) float64, position of each node along the obstacle
+    /contact               attrs: obstacle_point (2,), obstacle_normal (2,) float64: the
+                                  flat obstacle {p : (p − point)·normal ≥ 0}
     /newton/<key>          (n_iterations,) one dataset per key of Solution.newton
 
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
@@ -43,10 +46,12 @@ from contactfem.errors import OutputError
 from contactfem.io.atomic import atomic_path, ensure_directory
 from contactfem.result import Solution
 
-__all__ = ["write_hdf5", "read_hdf5", "FORMAT", "SCHEMA_VERSION"]
+__all__ = ["write_hdf5", "read_hdf5", "FORMAT", "SCHEMA_VERSION", "SOLUTION_H5"]
 
+#: The archive's file name in a result directory.
+SOLUTION_H5 = "solution.h5"
 FORMAT = "contactfem-solution"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 _RESERVED_ATTRS = ("format", "schema_version", "method", "case_hash")
 _ATTR_TYPES = (str, int, float, np.integer, np.floating, np.bool_)
 
@@ -161,6 +166,9 @@ def write_hdf5(
             _dataset(g, "normal_displacement", contact.normal_displacement, np.float64)
             _dataset(g, "gap", contact.gap, np.float64)
             _dataset(g, "active", np.asarray(contact.active, dtype=bool), np.uint8)
+            _dataset(g, "abscissa", contact.abscissa, np.float64)
+            g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
+            g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
 
             g = f.create_group("newton")
             for key, values in solution.newton.items():

@@ -1,7 +1,8 @@
 """A series of solutions (the methods of ``compare``, the levels of ``converge``) as one PVD.
 
-Each entry is written by :func:`contactfem.io.vtu.write_vtu` (same arrays as a solve's
-``solution.vtu`` and ``contact.vtu``) and stored flat as ``<stem>-<label>.vtu`` and
+Each entry is written by :func:`contactfem.io.vtu.write_grid` with the grids of
+:func:`contactfem.io.vtu.solution_grids` (same arrays as a solve's ``solution.vtu`` and
+``contact.vtu``) and stored flat as ``<stem>-<label>.vtu`` and
 ``<stem>-<label>-contact.vtu``; ``<stem>.pvd`` lists them as the time steps 0, 1, 2 … of
 one collection (part 0 the body, part 1 ΓC), so that ParaView's time control steps
 through the methods or the levels. The ``name`` attribute of each data set carries the
@@ -10,15 +11,12 @@ label. Files only, no subdirectories: a staged output directory moves files into
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
 
 from contactfem.io.atomic import atomic_write_text, ensure_directory
-from contactfem.io.vtu import CONTACT_VTU, SOLUTION_VTU, write_vtu
+from contactfem.io.vtu import solution_grids, write_grid
 from contactfem.result import Solution
 
 __all__ = ["write_series", "series_xml"]
@@ -43,8 +41,8 @@ def series_xml(stem: str, labels: Sequence[str]) -> str:
 def write_series(directory: Path | str, stem: str, entries: Sequence[tuple[str, Solution]]) -> list[Path]:
     """Write each ``(label, solution)`` as ``stem-label.vtu``, ``stem-label-contact.vtu``, then ``stem.pvd``.
 
-    Labels must be plain names (no path separators). Returns the written files, the
-    collection last.
+    Labels must be plain names (no path separators). Each file is written atomically.
+    Returns the written files, the collection last.
     """
     directory = ensure_directory(directory)
     labels = [label for label, _ in entries]
@@ -52,14 +50,8 @@ def write_series(directory: Path | str, stem: str, entries: Sequence[tuple[str, 
         if not label or "/" in label or "\\" in label or label in (".", ".."):
             raise ValueError(f"series label {label!r} is not a plain name")
     written = []
-    scratch = Path(tempfile.mkdtemp(prefix=".tmp-series-", dir=directory))
-    try:
-        for label, solution in entries:
-            write_vtu(solution, scratch)
-            for source, target in zip((SOLUTION_VTU, CONTACT_VTU), _files(stem, label)):
-                os.replace(scratch / source, directory / target)
-                written.append(directory / target)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+    for label, solution in entries:
+        for grid, file in zip(solution_grids(solution), _files(stem, label)):
+            written.append(write_grid(directory / file, grid))
     written.append(atomic_write_text(directory / f"{stem}.pvd", series_xml(stem, labels)))
     return written

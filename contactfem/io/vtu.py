@@ -1,9 +1,19 @@
-"""ParaView output: body and contact boundary as VTU files, tied together by a PVD collection."""
+"""ParaView output: body and contact boundary as VTU files, tied together by a PVD collection.
+
+Every VTU file of the package goes through :func:`write_grid`, which hands the arrays to
+VTK's own ``vtkXMLUnstructuredGridWriter``: raw appended binary data, no compression,
+UInt64 byte counts, little endian, 64-bit ids. That is what ParaView reads fastest, it
+has no 4 GB limit, and meshio reads it back. VTK is imported only when a file is written.
+"""
 
 from __future__ import annotations
 
+import errno
+import os
+import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -12,57 +22,102 @@ from contactfem.errors import OutputError
 from contactfem.io.atomic import atomic_path, atomic_write_text, ensure_directory
 from contactfem.result import Solution
 
-__all__ = ["write_vtu", "SOLUTION_VTU", "CONTACT_VTU", "COLLECTION_PVD"]
+__all__ = [
+    "COLLECTION_PVD",
+    "CONTACT_VTU",
+    "SOLUTION_VTU",
+    "VTK_LINE",
+    "VTK_TRIANGLE",
+    "Grid",
+    "solution_grids",
+    "write_grid",
+    "write_vtu",
+]
 
 SOLUTION_VTU = "solution.vtu"
 CONTACT_VTU = "contact.vtu"
 COLLECTION_PVD = "solution.pvd"
 
+#: VTK cell types of the grids written here.
+VTK_TRIANGLE, VTK_LINE = 5, 3
+
+
+@dataclass(frozen=True, eq=False)
+class Grid:
+    """An unstructured grid of one cell type, as :func:`write_grid` writes it.
+
+    Attributes
+    ----------
+    points : (n, 2) or (n, 3) float
+        Coordinates; 2D points get z = 0 (VTK points are 3D).
+    cells : (m, k) int
+        Point indices of each cell, ``k`` the point count of ``cell_type``.
+    cell_type : int
+        VTK cell type, e.g. :data:`VTK_TRIANGLE` or :data:`VTK_LINE`.
+    point_data, cell_data : dict of str to ndarray
+        ``(n,)``/``(m,)`` scalars or ``(n, c)``/``(m, c)`` arrays of ``c`` components.
+        Stored with their own dtype (float32/64, signed or unsigned integers of 8 to
+        64 bits; bool becomes uint8).
+    field_data : dict of str to str or ndarray
+        Arrays of any length that belong to the whole grid. A ``str`` is stored as its
+        UTF-8 bytes (a UInt8 array): meshio's VTU reader rejects VTK string arrays and
+        would then not read the file at all.
+    """
+
+    points: np.ndarray
+    cells: np.ndarray
+    cell_type: int
+    point_data: Mapping[str, np.ndarray] = field(default_factory=dict)
+    cell_data: Mapping[str, np.ndarray] = field(default_factory=dict)
+    field_data: Mapping[str, str | np.ndarray] = field(default_factory=dict)
+
 
 def _with_zero_z(xy: np.ndarray) -> np.ndarray:
     """(n, 2) -> (n, 3) with a zero third column: VTK points and vectors are 3D."""
     xy = np.asarray(xy, dtype=np.float64)
-    return np.column_stack([xy, np.zeros(len(xy))])
+    out = np.zeros((len(xy), 3))
+    out[:, :2] = xy
+    return out
 
 
-@dataclass(frozen=True, eq=False)
-class _Grid:
-    """An unstructured grid of one cell type, as VTK stores it."""
-
-    points: np.ndarray  # (n, 3)
-    cells: np.ndarray  # (m, k) node indices
-    cell_type: int  # VTK cell type: 5 triangle, 3 line
-    point_data: dict[str, np.ndarray]
-    cell_data: dict[str, np.ndarray]
-
-
-def _body_mesh(solution: Solution) -> _Grid:
-    """The triangulation with displacement and stresses."""
+def _body_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
+    """The triangulation with displacement, stresses and ``solution.cell_fields``."""
     mesh = solution.mesh
     stress = np.asarray(solution.stress, dtype=np.float64)
-    xx, yy, xy, zz = stress.T  # Solution's column order
-    zero = np.zeros(len(stress))
+    n_triangles = len(stress)
     # VTK's symmetric tensor order is XX, YY, ZZ, XY, YZ, XZ; ParaView shows a
     # 6-component array as a symmetric tensor (eigenvalues, Tensor Glyph...).
-    tensor = np.column_stack([xx, yy, zz, xy, zero, zero])
+    tensor = np.zeros((n_triangles, 6))
+    tensor[:, [0, 1, 3, 2]] = stress  # Solution's columns are xx, yy, xy, zz
     cell_data = {
         "stress": tensor,
-        "stress_xx": xx,
-        "stress_yy": yy,
-        "stress_xy": xy,
-        "stress_zz": zz,
+        "stress_xx": stress[:, 0],
+        "stress_yy": stress[:, 1],
+        "stress_xy": stress[:, 2],
+        "stress_zz": stress[:, 3],
         "von_mises": np.asarray(solution.von_mises, dtype=np.float64),
     }
-    return _Grid(
-        points=_with_zero_z(mesh.points),
-        cells=np.asarray(mesh.triangles, dtype=np.int64),
+    for name, values in solution.cell_fields.items():
+        if name in cell_data:
+            raise ValueError(f"cell field {name!r} would replace the {SOLUTION_VTU} array of that name")
+        values = np.asarray(values)
+        if values.shape != (n_triangles,):
+            raise ValueError(f"cell field {name!r} has shape {values.shape}, expected ({n_triangles},)")
+        cell_data[name] = values
+    for name, value in metadata.items():
+        if not isinstance(value, str):
+            raise ValueError(f"metadata {name!r} is {type(value).__name__}, not str")
+    return Grid(
+        points=mesh.points,
+        cells=mesh.triangles,
         cell_type=VTK_TRIANGLE,
         point_data={"displacement": _with_zero_z(solution.displacement)},
         cell_data=cell_data,
+        field_data=dict(metadata),
     )
 
 
-def _contact_mesh(solution: Solution) -> _Grid:
+def _contact_grid(solution: Solution) -> Grid:
     """ΓC as line cells over its own, renumbered nodes, with the contact fields."""
     contact = solution.contact
     edges = np.asarray(contact.edges, dtype=np.int64).reshape(-1, 2)
@@ -94,13 +149,28 @@ def _contact_mesh(solution: Solution) -> _Grid:
         "contact_node": on_boundary(np.ones(len(nodes), dtype=np.uint8), np.uint8),
         "displacement": _with_zero_z(np.asarray(solution.displacement)[mesh_node]),
     }
-    return _Grid(
-        points=_with_zero_z(np.asarray(solution.mesh.points)[mesh_node]),
+    return Grid(
+        points=np.asarray(solution.mesh.points)[mesh_node],
         cells=local_edges,
         cell_type=VTK_LINE,
         point_data=point_data,
-        cell_data={},
     )
+
+
+def solution_grids(solution: Solution, metadata: Mapping[str, str] | None = None) -> tuple[Grid, Grid]:
+    """The body and the contact boundary of ``solution``, as :func:`write_vtu` writes them.
+
+    ``metadata`` becomes the field data of the body grid.
+
+    Raises
+    ------
+    OutputError
+        If the solution has no contact edges.
+    ValueError
+        If a cell field has the wrong length or the name of a built-in array, or a
+        metadata value is not a string.
+    """
+    return _body_grid(solution, metadata or {}), _contact_grid(solution)
 
 
 def _collection_xml(parts: list[tuple[str, str]]) -> str:
@@ -123,77 +193,190 @@ def _collection_xml(parts: list[tuple[str, str]]) -> str:
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-VTK_TRIANGLE, VTK_LINE = 5, 3
-_VTK_TYPES = {"f8": "Float64", "f4": "Float32", "i8": "Int64", "i4": "Int32", "u1": "UInt8"}
+# ----------------------------------------------------------------- the one VTU writer
+
+# Kind and item size of the dtypes VTK stores as they are (Float32/64, (U)Int8..64).
+_STORABLE = {("f", 4), ("f", 8)} | {(kind, size) for kind in "iu" for size in (1, 2, 4, 8)}
 
 
-def _write_grid(grid: _Grid, path: Path) -> None:
-    """Write ``grid`` as VTK XML with raw appended binary data, atomically.
+def _array(name: str, values: np.ndarray, rows: int | None, where: str) -> np.ndarray:
+    """``values`` as a C-contiguous native-endian 1-D or 2-D array VTK can wrap without a copy."""
+    values = np.asarray(values)
+    if values.dtype == np.bool_:
+        values = values.view(np.uint8)
+    if (values.dtype.kind, values.dtype.itemsize) not in _STORABLE:
+        raise ValueError(f"{where} {name!r}: dtype {values.dtype} cannot be stored in a VTU file")
+    if values.ndim not in (1, 2) or 0 in values.shape[1:] or (rows is not None and len(values) != rows):
+        expected = "any number of" if rows is None else str(rows)
+        raise ValueError(f"{where} {name!r} has shape {values.shape}, expected {expected} rows of 1 or more components")
+    return np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("="))
 
-    Raw appended data behind UInt64 byte counts is what ParaView reads fastest and has no
-    size limit; it also skips the base64 encoding that made meshio's writer cost 2–4 s
-    on 2 M triangles (now about a tenth of that).
-    """
-    arrays: list[np.ndarray] = []
-    offset = 0
 
-    def entry(name: str, array: np.ndarray) -> str:
-        nonlocal offset
-        array = np.ascontiguousarray(array)
-        array = array.astype(array.dtype.newbyteorder("<"), copy=False)
-        # Scalars leave NumberOfComponents at VTK's default 1, so readers see them 1-D.
-        components = "" if array.ndim == 1 else f' NumberOfComponents="{array.shape[1]}"'
-        kind = _VTK_TYPES[f"{array.dtype.kind}{array.dtype.itemsize}"]
-        text = f'<DataArray type="{kind}" Name="{name}"{components} format="appended" offset="{offset}"/>'
-        arrays.append(array)
-        offset += 8 + array.nbytes
-        return text
+def _checked(grid: Grid) -> dict:
+    """Every array of ``grid`` in the form VTK wraps, after checking that they fit together."""
+    points = np.asarray(grid.points)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise ValueError(f"points have shape {points.shape}, expected (n, 2) or (n, 3)")
+    points = _with_zero_z(points) if points.shape[1] == 2 else np.ascontiguousarray(points, dtype=np.float64)
+    cells = np.asarray(grid.cells)
+    if cells.ndim != 2 or cells.dtype.kind not in "iu":
+        raise ValueError(f"cells must be an (m, k) integer array, not {cells.dtype} of shape {cells.shape}")
+    connectivity = np.ascontiguousarray(cells, dtype=np.int64).ravel()
+    # An index outside the points would crash ParaView rather than be reported. Seen as
+    # unsigned, a negative index is huge, so one pass checks both ends.
+    if connectivity.size and connectivity.view(np.uint64).max() >= len(points):
+        raise ValueError(f"cells refer to points outside 0..{len(points) - 1}")
+    n_points, n_cells = len(points), len(cells)
 
-    n_cells, per_cell = grid.cells.shape
-    lines = [
-        '<?xml version="1.0"?>',
-        '<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64">',
-        "<UnstructuredGrid>",
-        f'<Piece NumberOfPoints="{len(grid.points)}" NumberOfCells="{n_cells}">',
-        "<Points>", entry("Points", np.asarray(grid.points, dtype=np.float64)), "</Points>",
-        "<Cells>",
-        entry("connectivity", np.asarray(grid.cells, dtype=np.int64).ravel()),
-        entry("offsets", per_cell * np.arange(1, n_cells + 1, dtype=np.int64)),
-        entry("types", np.full(n_cells, grid.cell_type, dtype=np.uint8)),
-        "</Cells>",
-        "<PointData>", *(entry(name, values) for name, values in grid.point_data.items()), "</PointData>",
-        "<CellData>", *(entry(name, values) for name, values in grid.cell_data.items()), "</CellData>",
-        "</Piece>",
-        "</UnstructuredGrid>",
-        '<AppendedData encoding="raw">',
-    ]
+    def field(values: str | np.ndarray, name: str) -> np.ndarray:
+        if isinstance(values, str):
+            return np.frombuffer(values.encode("utf-8"), dtype=np.uint8)
+        return _array(name, values, None, "field data")
+
+    return {
+        "points": points,
+        "connectivity": connectivity,
+        "cell_size": cells.shape[1],
+        "cell_type": int(grid.cell_type),
+        "point_data": {n: _array(n, v, n_points, "point data") for n, v in grid.point_data.items()},
+        "cell_data": {n: _array(n, v, n_cells, "cell data") for n, v in grid.cell_data.items()},
+        "field_data": {n: field(v, n) for n, v in grid.field_data.items()},
+    }
+
+
+def _vtk_grid(arrays: dict):
+    """A vtkUnstructuredGrid over the numpy arrays themselves (no copies)."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkUnstructuredGrid
+
+    def wrap(name: str, values: np.ndarray):
+        array = numpy_to_vtk(values, deep=False)
+        array.SetName(name)
+        return array
+
+    grid = vtkUnstructuredGrid()
+    points = vtkPoints()
+    points.SetData(wrap("Points", arrays["points"]))
+    grid.SetPoints(points)
+    cells = vtkCellArray()
+    # Cells of one size: VTK keeps the offsets implicit and the cell types as one constant.
+    if not cells.SetData(arrays["cell_size"], numpy_to_vtkIdTypeArray(arrays["connectivity"], deep=False)):
+        raise ValueError("VTK rejected the cells")
+    grid.SetCells(arrays["cell_type"], cells)
+    for where, data in (("point_data", grid.GetPointData()), ("cell_data", grid.GetCellData()),
+                        ("field_data", grid.GetFieldData())):
+        for name, values in arrays[where].items():
+            data.AddArray(wrap(name, values))
+    return grid
+
+
+def _vtk_write(grid, path: Path) -> None:
+    """Write the vtkUnstructuredGrid ``grid`` to ``path``; VTK's failures become :class:`OSError`."""
+    from vtkmodules.util.misc import calldata_type
+    from vtkmodules.util.vtkConstants import VTK_STRING
+    from vtkmodules.vtkCommonCore import vtkCommand
+    from vtkmodules.vtkCommonMisc import vtkErrorCode
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+    writer = vtkXMLUnstructuredGridWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(grid)
+    writer.SetDataModeToAppended()
+    writer.EncodeAppendedDataOff()
+    writer.SetCompressorTypeToNone()
+    writer.SetHeaderTypeToUInt64()
+    writer.SetIdTypeToInt64()
+    writer.SetByteOrderToLittleEndian()
+    # Uncompressed data is copied to the file in blocks of this size: fewer, larger writes.
+    writer.SetBlockSize(1 << 20)
+    errors: list[str] = []
+
+    @calldata_type(VTK_STRING)
+    def keep(caller, event, message):
+        errors.append(str(message))
+
+    # With an observer VTK hands its errors here instead of printing them on stderr.
+    writer.AddObserver(vtkCommand.ErrorEvent, keep)
+    writer.GetExecutive().AddObserver(vtkCommand.ErrorEvent, keep)
+    written = writer.Write()
+    code = writer.GetErrorCode()
+    if written and code == vtkErrorCode.NoError and not errors:
+        return
+    # VTK keeps the errno of a failed system call as its error code.
+    if 0 < code < vtkErrorCode.FirstVTKErrorCode:
+        raise OSError(code, os.strerror(code))
+    if code == vtkErrorCode.OutOfDiskSpaceError:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    raise OSError(f"VTK's writer failed: {_vtk_reason(errors) or vtkErrorCode.GetStringFromErrorCode(code)}")
+
+
+def _vtk_reason(errors: list[str]) -> str:
+    """The writer's own error messages, without VTK's source location and object address."""
+    reasons = []
+    for error in errors:
+        lines = error.strip().splitlines()
+        text = re.sub(r"^\w+ \(0x[0-9a-fA-F]+\): ", "", lines[1] if len(lines) > 1 else lines[0] if lines else "")
+        if text and not text.startswith("Algorithm "):  # the pipeline's "returned failure" repeats it
+            reasons.append(text)
+    return "; ".join(reasons)
+
+
+def _write(path: Path, vtk_grid) -> Path:
     with atomic_path(path) as temp:
-        _stream(temp, "\n".join(lines) + "\n_", arrays)
+        _vtk_write(vtk_grid, temp)
+    return path
 
 
-def _stream(path: Path, header: str, arrays: list[np.ndarray]) -> None:
-    """The file itself: XML header, then each array behind its UInt64 byte count."""
-    with open(path, "wb") as stream:
-        stream.write(header.encode("ascii"))
-        for array in arrays:
-            stream.write(np.uint64(array.nbytes).tobytes())
-            stream.write(array.data)
-        stream.write(b"\n</AppendedData>\n</VTKFile>\n")
+def write_grid(path: Path | str, grid: Grid) -> Path:
+    """Write ``grid`` to ``path`` as a VTU file, atomically.
+
+    The package's one VTU writer: VTK's ``vtkXMLUnstructuredGridWriter`` with raw
+    appended binary data, no compression, UInt64 byte counts (no size limit), Int64
+    cell connectivity and offsets, little endian. Points are Float64; each data array
+    keeps its name, dtype and component count. VTK writes into a temporary file next
+    to ``path``, which then replaces ``path`` (see
+    :func:`contactfem.io.atomic.atomic_path`); the numpy arrays are handed to VTK
+    without copies where their dtype and layout allow.
+
+    Parameters
+    ----------
+    path : Path or str
+        The file to create or replace; its directory must exist.
+    grid : Grid
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If the arrays do not fit together (row counts, cell indices) or have a dtype
+        a VTU file cannot hold; nothing is written then.
+    OutputError
+        If the file cannot be written.
+    """
+    return _write(Path(path), _vtk_grid(_checked(grid)))
 
 
-def write_vtu(solution: Solution, directory: Path | str) -> list[Path]:
+def write_vtu(solution: Solution, directory: Path | str, metadata: dict[str, str] | None = None) -> list[Path]:
     """Write the solution for ParaView: ``solution.vtu``, ``contact.vtu``, ``solution.pvd``.
 
     Each file is written atomically (see :func:`contactfem.io.atomic.atomic_path`); all
     arrays are built before the first file is touched, so an error in the data leaves
-    the directory as it was. ``directory`` is created if missing.
+    the directory as it was. ``directory`` is created if missing. Both VTU files are
+    written by :func:`write_grid`.
 
     ``solution.vtu`` (VTK XML, raw appended binary data, UInt64 byte counts)
         Triangle cells; points with z = 0. Point data ``displacement`` (n, 3) with
         z = 0, so that Warp By Vector works. Cell data ``stress`` (n_tri, 6), a
         symmetric tensor in VTK's order xx, yy, zz, xy, yz, xz (yz = xz = 0), and the
         scalars ``stress_xx``, ``stress_yy``, ``stress_xy``, ``stress_zz``,
-        ``von_mises``.
+        ``von_mises``, then every entry of ``solution.cell_fields`` (e.g.
+        ``error_indicator``) with its own dtype. Field data: one array per
+        ``metadata`` entry, its value's UTF-8 bytes as UInt8.
     ``contact.vtu``
         The contact boundary ΓC as line cells over the nodes of its edges only,
         renumbered. Point data ``mesh_node`` (int64, index in the full mesh),
@@ -211,6 +394,9 @@ def write_vtu(solution: Solution, directory: Path | str) -> list[Path]:
     solution : Solution
     directory : Path or str
         Where to write the three files.
+    metadata : dict of str to str, optional
+        Written as field data of ``solution.vtu``, e.g. method, case title, case
+        hash, units, package version.
 
     Returns
     -------
@@ -222,15 +408,17 @@ def write_vtu(solution: Solution, directory: Path | str) -> list[Path]:
     OutputError
         If the directory cannot be created or a file cannot be written, or if the
         solution has no contact edges (a VTU needs at least one cell).
+    ValueError
+        If a cell field has the wrong length or a built-in array's name, or a metadata
+        value is not a string.
     """
     directory = Path(directory)
-    body = _body_mesh(solution)
-    boundary = _contact_mesh(solution)
+    grids = [_vtk_grid(_checked(grid)) for grid in solution_grids(solution, metadata)]
     ensure_directory(directory)
 
     paths = [directory / SOLUTION_VTU, directory / CONTACT_VTU, directory / COLLECTION_PVD]
-    _write_grid(body, paths[0])
-    _write_grid(boundary, paths[1])
+    for path, vtk_grid in zip(paths, grids):
+        _write(path, vtk_grid)
     atomic_write_text(
         paths[2], _collection_xml([("body", SOLUTION_VTU), ("contact", CONTACT_VTU)])
     )

@@ -42,13 +42,14 @@ import numpy as np
 
 from contactfem.errors import OutputError
 from contactfem.io.atomic import atomic_path, atomic_write_text, ensure_directory
+from contactfem.io.hdf5 import SOLUTION_H5
 from contactfem.result import Solution
 
 __all__ = ["write_xdmf", "XDMF_FILE", "COMPANION_H5"]
 
 XDMF_FILE = "solution.xdmf"
 COMPANION_H5 = "solution-xdmf.h5"
-ARCHIVE_H5 = "solution.h5"
+ARCHIVE_H5 = SOLUTION_H5
 
 
 def _tensor(stress: np.ndarray) -> np.ndarray:

@@ -1,25 +1,32 @@
-"""Mesh construction: structured rectangles, Triangle meshes of curved polygons, Gmsh files, refinement."""
+"""Mesh construction: structured rectangles, Triangle meshes of curved polygons, Gmsh files, refinement.
 
-from contactfem.mesh.core import Circle, Mesh
-from contactfem.mesh.gmsh_io import read_gmsh, write_gmsh
-from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems, triangulate_domain
-from contactfem.mesh.quality import check_mesh
-from contactfem.mesh.refine import boundary_edges, prolongation, refine_uniform
-from contactfem.mesh.structured import structured_rectangle
+The names are imported on first use, so that ``contactfem.mesh.core`` and
+``contactfem.mesh.topology`` (what the numerical core needs) load without the meshing
+libraries (Triangle, meshio).
+"""
 
-__all__ = [
-    "Arc",
-    "Circle",
-    "Loop",
-    "Mesh",
-    "boundary_edges",
-    "check_mesh",
-    "circle_loop",
-    "polygon_problems",
-    "prolongation",
-    "read_gmsh",
-    "refine_uniform",
-    "structured_rectangle",
-    "triangulate_domain",
-    "write_gmsh",
-]
+from importlib import import_module
+
+_WHERE = {
+    "Circle": "core", "Mesh": "core",
+    "read_gmsh": "gmsh_io", "write_gmsh": "gmsh_io",
+    "Arc": "polygon", "Loop": "polygon", "circle_loop": "polygon", "polygon_problems": "polygon",
+    "triangulate_domain": "polygon",
+    "check_mesh": "quality",
+    "boundary_edges": "refine", "prolongation": "refine", "refine_uniform": "refine",
+    "structured_rectangle": "structured",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

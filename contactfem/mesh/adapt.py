@@ -29,10 +29,6 @@ from contactfem.mesh.quality import check_mesh
 __all__ = ["bisect", "bisect_uniform", "dorfler_mark", "label_longest_edge", "min_angle"]
 
 
-def _keys(a: np.ndarray, b: np.ndarray, n_points: int) -> np.ndarray:
-    return np.minimum(a, b).astype(np.int64) * np.int64(n_points) + np.maximum(a, b)
-
-
 def label_longest_edge(mesh: Mesh) -> Mesh:
     """The same mesh with each triangle rotated so that its longest edge is (v0, v1)."""
     tri = mesh.triangles
@@ -82,12 +78,10 @@ def bisect(mesh: Mesh, marked: np.ndarray, *, check: bool = True) -> Mesh:
         marked = np.flatnonzero(marked)
     if marked.size == 0:
         return mesh
-    starts = tri.T.reshape(-1)
-    ends = tri[:, [1, 2, 0]].T.reshape(-1)
-    unique_keys, inverse = np.unique(_keys(starts, ends, n_points), return_inverse=True)
-    edge_of = inverse.reshape(3, n_tri).T  # (t, k): edge k = (v_k, v_{k+1})
+    topology = mesh.topology
+    edge_of = topology.half_edge_edge.reshape(n_tri, 3)  # (t, k): edge k = (v_k, v_{k+1})
     refinement = edge_of[:, 0]
-    split = np.zeros(len(unique_keys), dtype=bool)
+    split = np.zeros(topology.n_edges, dtype=bool)
     split[refinement[marked]] = True
     while True:
         needs = split[edge_of].any(axis=1) & ~split[refinement]
@@ -95,17 +89,18 @@ def bisect(mesh: Mesh, marked: np.ndarray, *, check: bool = True) -> Mesh:
             break
         split[refinement[needs]] = True
 
-    split_keys = unique_keys[split]
-    lo, hi = split_keys // n_points, split_keys % n_points
-    points = np.concatenate([mesh.points, 0.5 * (mesh.points[lo] + mesh.points[hi])])
+    # The midpoint of the split edge e is node n_points + midpoint[e], in edge order.
+    midpoint = np.cumsum(split) - 1
+    split_edges = topology.edges[split]
+    points = np.concatenate(
+        [mesh.points, 0.5 * (mesh.points[split_edges[:, 0]] + mesh.points[split_edges[:, 1]])]
+    )
 
     # Boundary edges: split ones become (a, m), (m, b) keeping part and curve.
     bedges = mesh.boundary_edges.astype(np.int64)
-    bkeys = _keys(bedges[:, 0], bedges[:, 1], n_points)
-    slot = np.searchsorted(split_keys, bkeys)
-    slot_ok = np.minimum(slot, max(len(split_keys) - 1, 0))
-    cut = (slot < len(split_keys)) & (split_keys[slot_ok] == bkeys)
-    mid = n_points + slot_ok[cut]
+    bedge = topology.edge_index(bedges[:, 0], bedges[:, 1])
+    cut = (bedge >= 0) & split[bedge]
+    mid = n_points + midpoint[bedge[cut]]
     halves = np.stack([np.stack([bedges[cut, 0], mid], axis=1), np.stack([mid, bedges[cut, 1]], axis=1)],
                       axis=1).reshape(-1, 2)
     new_bedges = np.concatenate([bedges[~cut], halves])
@@ -116,20 +111,16 @@ def bisect(mesh: Mesh, marked: np.ndarray, *, check: bool = True) -> Mesh:
         if nodes.size:
             points[nodes] = circle.project(points[nodes])
 
-    # Sweeps of bisection: a triangle whose refinement edge is split is halved. Children
-    # have new nodes, so keys are now taken modulo the new number of points (the split
-    # keys keep their order: lo and hi are old nodes).
-    n_all = len(points)
-    wanted = lo * np.int64(n_all) + hi
+    # Sweeps of bisection: a triangle whose refinement edge is split is halved. The
+    # refinement edge of a child is an edge of its parent, or has a new node and is then
+    # no edge of the old topology (edge_index gives -1).
     for _ in range(64):
-        key = _keys(tri[:, 0], tri[:, 1], n_all)
-        slot = np.searchsorted(wanted, key)
-        slot_ok = np.minimum(slot, len(wanted) - 1)
-        hit = (slot < len(wanted)) & (wanted[slot_ok] == key)
+        edge = topology.edge_index(tri[:, 0], tri[:, 1])
+        hit = (edge >= 0) & split[edge]
         if not hit.any():
             break
         parent = tri[hit]
-        m = n_points + slot_ok[hit]
+        m = n_points + midpoint[edge[hit]]
         v0, v1, v2 = parent[:, 0], parent[:, 1], parent[:, 2]
         children = np.concatenate([np.stack([v2, v0, m], axis=1), np.stack([v1, v2, m], axis=1)])
         tri = np.concatenate([tri[~hit], children])

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
+
+from contactfem.errors import MeshError
+from contactfem.mesh.topology import Topology
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,50 @@ class Mesh:
     @property
     def n_triangles(self) -> int:
         return len(self.triangles)
+
+    @cached_property
+    def topology(self) -> Topology:
+        """The edges of the triangulation and their triangles, built on first access.
+
+        Cached on the mesh (a Mesh is never modified), so every stage shares one.
+
+        Raises
+        ------
+        MeshError
+            If a triangle repeats a node or has a node out of range.
+        """
+        try:
+            return Topology.from_triangles(self.triangles, self.n_points)
+        except ValueError as exc:
+            raise MeshError(f"mesh has no edge structure: {exc}") from None
+
+    @cached_property
+    def boundary_edge_triangles(self) -> np.ndarray:
+        """(n_boundary_edges,) int64: the triangle that each row of ``boundary_edges`` belongs to.
+
+        Raises
+        ------
+        MeshError
+            If a boundary edge is not an edge of the triangulation, or no triangle runs
+            it in its direction (with the body on its left).
+        """
+        edges = self.boundary_edges
+        topology = self.topology
+        edge = topology.edge_index(edges[:, 0], edges[:, 1])
+        try:
+            sides = topology.edge_triangles
+        except ValueError as exc:
+            raise MeshError(f"mesh is not conforming: {exc}") from None
+        # An edge running lo -> hi is column 0 of edge_triangles, hi -> lo column 1.
+        triangle = sides[np.maximum(edge, 0), (edges[:, 0] > edges[:, 1]).astype(np.intp)]
+        bad = np.flatnonzero((edge < 0) | (triangle < 0))
+        if bad.size:
+            k = int(bad[0])
+            raise MeshError(
+                f"boundary_edges[{k}] = {edges[k].tolist()} is not an edge of a triangle with the body on its left"
+            )
+        triangle.flags.writeable = False
+        return triangle
 
     def part_index(self, name: str) -> int:
         """Index of part ``name`` in ``part_names``; ValueError if the mesh has no such part."""

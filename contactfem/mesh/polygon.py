@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
 from fractions import Fraction
+from typing import Callable
 
 import numpy as np
 import triangle
@@ -18,6 +18,8 @@ __all__ = ["Arc", "Loop", "circle_loop", "polygon_problems", "triangulate_domain
 
 #: Relative tolerance on the radius of an arc's end vertex.
 RADIUS_TOLERANCE = 1e-9
+#: Edge pairs tested at once by :func:`polygon_problems` (about 100 MB of temporaries).
+_PAIRS_PER_BLOCK = 250_000
 #: Largest minimum angle for which Triangle's refinement is known to terminate.
 MAX_MIN_ANGLE = 34.0
 #: Largest angle one chord of an arc may span, whatever max_edge is, so that coarse
@@ -277,13 +279,19 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
         j = (i + 1) % k
         return f"edges {min(i, j)} and {max(i, j)} intersect"
 
-    i, j = np.triu_indices(k, 2)
-    keep = ~((i == 0) & (j == k - 1))  # edges 0 and k-1 are adjacent too
-    i, j = i[keep], j[keep]
-    if i.size:
-        hit = np.flatnonzero(_segments_intersect(v[i], nxt[i], v[j], nxt[j]))
-        if hit.size:
-            return f"edges {i[hit[0]]} and {j[hit[0]]} intersect"
+    # Every pair of non-adjacent edges, a block of first edges at a time: the pairs of one
+    # block stay near _PAIRS_PER_BLOCK, so memory does not grow with k².
+    block = max(1, _PAIRS_PER_BLOCK // k)
+    for first in range(0, k, block):
+        rows = np.arange(first, min(first + block, k))
+        i = np.repeat(rows, k)
+        j = np.tile(np.arange(k), len(rows))
+        keep = (j >= i + 2) & ~((i == 0) & (j == k - 1))  # edges 0 and k-1 are adjacent too
+        i, j = i[keep], j[keep]
+        if i.size:
+            hit = np.flatnonzero(_segments_intersect(v[i], nxt[i], v[j], nxt[j]))
+            if hit.size:
+                return f"edges {i[hit[0]]} and {j[hit[0]]} intersect"
 
     area2 = float(np.sum(v[:, 0] * nxt[:, 1] - v[:, 1] * nxt[:, 0]))
     if area2 == 0.0:

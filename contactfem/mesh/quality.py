@@ -6,7 +6,12 @@ import numpy as np
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
-from contactfem.mesh.refine import _decode, _single_codes, _sorted_edge_codes, _undirected_keys
+from contactfem.mesh.refine import (
+    _decode,
+    _single_codes,
+    _sorted_edge_codes,
+    _undirected_keys,
+)
 
 __all__ = ["check_mesh", "DEGENERATE_RATIO"]
 

@@ -7,6 +7,7 @@ import scipy.sparse as sp
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
+from contactfem.mesh.topology import Topology
 
 __all__ = ["boundary_edges", "prolongation", "refine_uniform"]
 
@@ -112,7 +113,15 @@ def boundary_edges(triangles: np.ndarray) -> np.ndarray:
     if tri.size == 0:
         return np.empty((0, 2), dtype=np.int64)
     n = int(tri.max()) + 1
-    return _decode(_single_codes(_sorted_edge_codes(tri, n)), n)
+    if np.any((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2]) | (tri[:, 2] == tri[:, 0])):
+        # No topology for such triangles, but files are read with this before
+        # check_mesh, which then names the degenerate triangle.
+        return _decode(_single_codes(_sorted_edge_codes(tri, n)), n)
+    topology = Topology.from_triangles(tri, n)
+    edges = topology.edges[topology.boundary].astype(np.int64)
+    flipped = topology.half_edge_flipped[topology.boundary_half_edges]
+    edges[flipped] = edges[flipped][:, ::-1]
+    return edges
 
 
 def _refine_once(mesh: Mesh) -> Mesh:
@@ -122,18 +131,14 @@ def _refine_once(mesh: Mesh) -> Mesh:
     if n_tri == 0:
         raise MeshError("cannot refine a mesh without triangles")
     tri = mesh.triangles
-    half = _half_edges(tri)
-    keys = _undirected_keys(half, n_points)
-    unique_keys, inverse = np.unique(keys, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    topology = mesh.topology
 
-    # New midpoint nodes are numbered after the old ones so the coarse mesh's nodes
-    # keep their indices and the meshes are nested.
-    lo = unique_keys // n_points
-    hi = unique_keys % n_points
-    midpoints = 0.5 * (mesh.points[lo] + mesh.points[hi])
-    mid_of_half = (n_points + inverse).reshape(3, n_tri)
-    m01, m12, m20 = mid_of_half
+    # New midpoint nodes are numbered after the old ones, in edge order, so the coarse
+    # mesh's nodes keep their indices and the meshes are nested.
+    edges = topology.edges
+    midpoints = 0.5 * (mesh.points[edges[:, 0]] + mesh.points[edges[:, 1]])
+    mid_of_half = n_points + topology.half_edge_edge.astype(np.int64).reshape(n_tri, 3)
+    m01, m12, m20 = mid_of_half[:, 0], mid_of_half[:, 1], mid_of_half[:, 2]
     v0, v1, v2 = tri[:, 0], tri[:, 1], tri[:, 2]
     # Children of triangle t are rows 4t..4t+3: the three corner triangles and the
     # middle one, all counter-clockwise like their parent.
@@ -148,13 +153,12 @@ def _refine_once(mesh: Mesh) -> Mesh:
     ).reshape(-1, 3)
 
     # Each boundary edge (a, b) becomes (a, m), (m, b) at rows 2k, 2k+1, keeping
-    # its part and curve; its midpoint is found among the unique edges by key.
+    # its part and curve.
     bedges = mesh.boundary_edges
-    bkeys = _undirected_keys(bedges, n_points)
-    slot = np.minimum(np.searchsorted(unique_keys, bkeys), len(unique_keys) - 1)
-    if np.any(unique_keys[slot] != bkeys):
+    bedge = topology.edge_index(bedges[:, 0], bedges[:, 1])
+    if np.any(bedge < 0):
         raise MeshError("cannot refine: a boundary edge is not an edge of any triangle")
-    bmid = n_points + slot
+    bmid = n_points + bedge
     new_bedges = np.stack(
         [np.stack([bedges[:, 0], bmid], axis=1), np.stack([bmid, bedges[:, 1]], axis=1)], axis=1
     ).reshape(-1, 2)
@@ -225,13 +229,13 @@ def prolongation(mesh: Mesh, times: int = 1) -> sp.csr_matrix:
     operator = sp.identity(mesh.n_points, format="csr")
     for _ in range(int(times)):
         n_points = mesh.n_points
-        keys = np.unique(_undirected_keys(_half_edges(mesh.triangles), n_points))
-        lo, hi = keys // n_points, keys % n_points
-        new = n_points + np.arange(len(keys))
+        edges = mesh.topology.edges.astype(np.int64)
+        n_edges = len(edges)
+        new = n_points + np.arange(n_edges)
         rows = np.concatenate([np.arange(n_points), new, new])
-        cols = np.concatenate([np.arange(n_points), lo, hi])
-        vals = np.concatenate([np.ones(n_points), np.full(2 * len(keys), 0.5)])
-        step = sp.csr_matrix((vals, (rows, cols)), shape=(n_points + len(keys), n_points))
+        cols = np.concatenate([np.arange(n_points), edges[:, 0], edges[:, 1]])
+        vals = np.concatenate([np.ones(n_points), np.full(2 * n_edges, 0.5)])
+        step = sp.csr_matrix((vals, (rows, cols)), shape=(n_points + n_edges, n_points))
         operator = step @ operator
         mesh = _refine_once(mesh)
     return operator.tocsr()

@@ -1,0 +1,140 @@
+"""The loads of a case, compiled once: the body force as one vector field, the surface forces on the
+natural boundary evaluated at the points of the one boundary rule, and what the supports leave free.
+
+Assembly (the load vector), the residual estimator (‖g − σν‖ on the natural boundary) and
+the reports all read this object; none of them goes back to the case.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from contactfem.assembly import body_force_vector, edge_geometry, edge_load_vector
+from contactfem.case import Case
+from contactfem.discretize.exact_checks import refuse_non_finite_exact
+from contactfem.discretize.finite import check_finite
+from contactfem.mesh import Mesh
+from contactfem.quadrature import EDGE_RULE_POINTS
+
+#: f(x, y) -> (k, 2): a vector field evaluated at k points.
+VectorField = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class NaturalBoundary:
+    """Boundary edges on which the traction is (at least in one direction) prescribed.
+
+    Attributes
+    ----------
+    edges : (k, 2) int64
+        Mesh node indices, body on the left.
+    length : (k,) float64
+    normal : (k, 2) float64
+        Outward unit normals.
+    traction : (q, k, 2) float64
+        The prescribed surface force g at the q points of :data:`EDGE_RULE_POINTS` on
+        each edge (zero on traction-free parts).
+    free : (k, 2, 2) float64
+        Projector onto the directions the supports leave free, in which σν = g must hold:
+        the identity on free, traction and pressure parts; the free axis of a roller; the
+        line's tangent t tᵀ on a symmetry line, whose normal reaction is not a residual.
+    """
+
+    edges: np.ndarray
+    length: np.ndarray
+    normal: np.ndarray
+    traction: np.ndarray
+    free: np.ndarray
+
+    def load_vector(self, n_points: int) -> np.ndarray:
+        """∫ g·v over the natural boundary (2 n_points,)."""
+        return edge_load_vector(self.edges, self.length, self.traction, n_points)
+
+
+@dataclass(frozen=True, eq=False)
+class Loads:
+    """The body force (None without one) and the natural boundary with its surface forces."""
+
+    body_force: VectorField | None
+    natural: NaturalBoundary
+
+    def load_vector(self, mesh: Mesh) -> np.ndarray:
+        """F (2 n_points,): ∫ f·v + ∫ g·v."""
+        load = np.zeros(2 * mesh.n_points)
+        if self.body_force is not None:
+            force = self.body_force
+            load += body_force_vector(mesh.points, mesh.triangles,
+                                      (lambda x, y: force(x, y)[..., 0], lambda x, y: force(x, y)[..., 1]))
+        return load + self.natural.load_vector(mesh.n_points)
+
+
+def compile_loads(case: Case, mesh: Mesh) -> Loads:
+    """The case's loads on ``mesh``, checked finite where they are integrated."""
+    return Loads(body_force=_body_force(case, mesh), natural=_natural_boundary(case, mesh))
+
+
+def _body_force(case: Case, mesh: Mesh) -> VectorField | None:
+    points, triangles = mesh.points, mesh.triangles
+    # The load integrates f at the edge midpoints: that is where it must be finite.
+    midpoints = (0.5 * (points[triangles] + np.roll(points[triangles], -1, axis=1))).reshape(-1, 2)
+    if case.exact is not None:
+        exact = case.exact.solution
+        refuse_non_finite_exact(case, "body_force = 'exact' (-div sigma)", exact.body_force(*midpoints.T), midpoints)
+        return exact.body_force
+    if case.body_force is None:
+        return None
+    check_finite(case, "body_force", case.body_force, midpoints)
+    fx, fy = case.body_force
+    return lambda x, y: np.stack([np.broadcast_to(fx(x, y), np.shape(x)), np.broadcast_to(fy(x, y), np.shape(x))],
+                                 axis=-1)
+
+
+def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:
+    """Every boundary edge whose traction is prescribed in some direction, part by part."""
+    parts = {p.name: p for p in case.parts}
+    exact = case.exact.solution if case.exact is not None else None
+    pieces = []
+    for index, name in enumerate(mesh.part_names):
+        edges = mesh.boundary_edges[mesh.edge_parts == index]
+        part = parts.get(name)
+        kind = part.kind if part is not None else "free"  # a part the case does not list is free
+        if len(edges) == 0 or kind in ("clamped", "contact"):
+            continue
+        length, normal = edge_geometry(mesh.points, edges)
+        where = [(1 - s) * mesh.points[edges[:, 0]] + s * mesh.points[edges[:, 1]] for s in EDGE_RULE_POINTS]
+        traction = np.zeros((len(EDGE_RULE_POINTS), len(edges), 2))
+        free = np.broadcast_to(np.eye(2), (len(edges), 2, 2)).copy()
+        if kind == "traction" and part.exact:
+            for q, points in enumerate(where):
+                traction[q] = exact.traction(points[:, 0], points[:, 1], normal)
+            samples = np.concatenate(where)
+            refuse_non_finite_exact(case, f"boundary.{name}.traction = 'exact' (sigma n)",
+                                    traction.reshape(-1, 2), samples)
+        elif kind == "traction":
+            check_finite(case, f"boundary.{name}.traction", part.values, np.concatenate(where))
+            for q, points in enumerate(where):
+                for component, field in enumerate(part.values):
+                    traction[q, :, component] = field(points[:, 0], points[:, 1])
+        elif kind == "pressure":
+            check_finite(case, f"boundary.{name}.pressure", part.values, np.concatenate(where))
+            for q, points in enumerate(where):
+                traction[q] = -normal * np.broadcast_to(part.values[0](points[:, 0], points[:, 1]), length.shape)[:, None]
+        elif kind == "displacement":
+            held = np.array([value is not None for value in part.values])
+            if held.all():
+                continue
+            free = np.broadcast_to(np.diag((~held).astype(float)), (len(edges), 2, 2)).copy()
+        elif kind == "symmetry":
+            tangent = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
+            free = np.einsum("ka,kb->kab", tangent, tangent)
+        pieces.append((edges, length, normal, traction, free))
+    if not pieces:
+        return NaturalBoundary(edges=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0), normal=np.zeros((0, 2)),
+                               traction=np.zeros((len(EDGE_RULE_POINTS), 0, 2)), free=np.zeros((0, 2, 2)))
+    edges, length, normal, traction, free = zip(*pieces)
+    return NaturalBoundary(edges=np.concatenate(edges), length=np.concatenate(length),
+                           normal=np.concatenate(normal), traction=np.concatenate(traction, axis=1),
+                           free=np.concatenate(free))

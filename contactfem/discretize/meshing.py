@@ -1,0 +1,156 @@
+"""From the case's geometry to a checked mesh, with the size guard that runs before meshing."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.errors import CaseError, MeshError
+from contactfem.mesh import (
+    Mesh,
+    check_mesh,
+    read_gmsh,
+    refine_uniform,
+    structured_rectangle,
+    triangulate_domain,
+)
+
+
+def build_mesh(case: Case, refine: int | None = None) -> Mesh:
+    """Mesh the case's geometry, refine it ``refine`` times (default: the case's), and check it."""
+    _refuse_oversized(case, refine)
+    try:
+        mesh = _mesh_geometry(case)
+    except MeshError as error:
+        key = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
+        raise MeshError(f"{case.source.name}: geometry.{key[type(case.geometry)]}: {error}") from None
+    missing = [p.name for p in case.parts if p.name not in mesh.part_names]
+    if missing:
+        raise CaseError(
+            f"{case.source.name}: boundary.{missing[0]}: {_mesh_origin(case)} has no boundary part "
+            f"named {missing[0]!r}; it has {', '.join(mesh.part_names)}"
+        )
+    times = case.mesh.refine if refine is None else refine
+    if isinstance(case.geometry, MeshFileGeometry):
+        # Only now is the mesh file's size known: refuse its refinements before they allocate.
+        _refuse_oversized(case, refine, base=mesh.n_triangles)
+    if times:
+        mesh = refine_uniform(mesh, times)
+    try:
+        check_mesh(mesh)
+    except MeshError as error:  # e.g. slivers of a rectangle of aspect 1e9: name the key
+        kind = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
+        raise MeshError(f"{case.source.name}: geometry.{kind[type(case.geometry)]}: {error}") from None
+    return mesh
+
+
+# Peak memory of a solve per triangle, measured on the square case at 2.1M triangles
+# (assembly, CHOLMOD factor, outputs), about 2 kB, with a margin.
+BYTES_PER_TRIANGLE = 2500
+
+
+def estimate_triangles(case: Case, refine: int | None = None) -> int:
+    """Triangles the case will be meshed into, estimated before meshing (0 for mesh files)."""
+    geometry, settings = case.geometry, case.mesh
+    times = settings.refine if refine is None else refine
+    if isinstance(geometry, RectangleGeometry):
+        nx, ny = settings.divisions
+        base = (4 if settings.diagonal == "crossed" else 2) * nx * ny
+    elif isinstance(geometry, PolygonGeometry):
+        v = geometry.outer.vertices
+        span = np.ptp(v, axis=0)
+        # Bounding box over the area of an equilateral triangle of side h, a safe upper bound.
+        extent = max(span.max(), 1e-300)
+        base = int(1.2 * extent * extent / (np.sqrt(3) / 4 * settings.size**2)) + 1
+        if settings.contact_size is not None:
+            # The graded band: ∫ L dd / area(h(d)) with h = hc + g d is L / (√3/4 · g · hc),
+            # with L bounded by π times the extent.
+            band = np.pi * extent / (np.sqrt(3) / 4 * settings.grading * settings.contact_size)
+            base += int(band)
+    else:
+        return 0
+    return int(base * 4**times)
+
+
+def _contact_grading(case: Case):
+    """The size field h(x) = min(size, contact_size + grading · distance(x, ΓC)).
+
+    The distance is to points sampled on the contact edges of the geometry at a quarter
+    of contact_size, so it is exact to that spacing.
+    """
+    from scipy.spatial import cKDTree
+
+    settings = case.mesh
+    samples = []
+    for loop in (case.geometry.outer, *case.geometry.holes):
+        k = len(loop.vertices)
+        for i, (name, arc) in enumerate(zip(loop.edge_names, loop.edge_arcs)):
+            if name not in case.contact_parts:
+                continue
+            start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
+            if arc is None:
+                length = np.linalg.norm(end - start)
+                t = np.linspace(0.0, 1.0, max(2, int(4 * length / settings.contact_size) + 2))
+                samples.append(start + t[:, None] * (end - start))
+            else:
+                center = np.asarray(arc.center)
+                radius = np.linalg.norm(start - center)
+                a0 = np.arctan2(*(start - center)[::-1])
+                a1 = np.arctan2(*(end - center)[::-1])
+                sweep = (a1 - a0) % (2 * np.pi) if arc.ccw else -((a0 - a1) % (2 * np.pi))
+                n = max(2, int(4 * radius * abs(sweep) / settings.contact_size) + 2)
+                angle = a0 + sweep * np.linspace(0.0, 1.0, n)
+                samples.append(center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
+    tree = cKDTree(np.concatenate(samples))
+
+    def size(points: np.ndarray) -> np.ndarray:
+        distance, _ = tree.query(points)
+        return np.minimum(settings.size, settings.contact_size + settings.grading * distance)
+
+    return size
+
+
+def _mesh_origin(case: Case) -> str:
+    if isinstance(case.geometry, MeshFileGeometry):
+        return f"the mesh file {case.geometry.path.name}"
+    return "the mesh"
+
+
+def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
+    """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before refining."""
+    import os
+
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        memory = 16 * 2**30
+    if base is None:
+        triangles = estimate_triangles(case, refine)
+    else:
+        triangles = base * 4 ** (case.mesh.refine if refine is None else refine)
+    limit = memory // BYTES_PER_TRIANGLE
+    if triangles > limit:
+        raise CaseError(
+            f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
+            f"more than the {limit:.3g} this machine's {memory / 2**30:.0f} GiB can solve; "
+            "use fewer divisions, a larger mesh.size or fewer refinements"
+        )
+
+
+def _mesh_geometry(case: Case) -> Mesh:
+    geometry = case.geometry
+    settings = case.mesh
+    if isinstance(geometry, RectangleGeometry):
+        mesh = structured_rectangle(
+            geometry.lower, geometry.upper, *settings.divisions,
+            diagonal=settings.diagonal, side_names=geometry.side_names,
+        )
+    elif isinstance(geometry, PolygonGeometry):
+        mesh = triangulate_domain(
+            geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
+            size=_contact_grading(case) if settings.contact_size is not None else None,
+        )
+    else:
+        assert isinstance(geometry, MeshFileGeometry)
+        mesh = read_gmsh(geometry.path)
+    return mesh

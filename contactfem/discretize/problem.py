@@ -1,0 +1,74 @@
+"""The discrete problem: the assembled linear elastic system with its loads, supports and contact boundary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+
+from contactfem.assembly import Elasticity, stiffness_matrix
+from contactfem.case import Case
+from contactfem.discretize.contact import ContactBoundary, contact_boundary
+from contactfem.discretize.exact_checks import check_exact_contact
+from contactfem.discretize.frames import ReducedSystem
+from contactfem.discretize.loads import Loads, compile_loads
+from contactfem.discretize.supports import supports
+from contactfem.mesh import Mesh
+from contactfem.methods import ContactMethod
+
+if TYPE_CHECKING:
+    from contactfem.exact import ExactSolution
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteProblem:
+    """The assembled linear elastic system with its supports and contact boundary.
+
+    ``stiffness`` (2n, 2n) and ``load`` (2n,) carry no boundary condition;
+    ``dirichlet_dofs`` (k,) sorted, with ``dirichlet_values`` (k,). ``loads`` is what
+    ``load`` was assembled from; ``exact`` the manufactured solution the loads derive
+    from, when the case has one. Everything after this stage reads the problem, never the case.
+    """
+
+    mesh: Mesh
+    law: Elasticity
+    stiffness: sp.csr_matrix
+    load: np.ndarray
+    dirichlet_dofs: np.ndarray
+    dirichlet_values: np.ndarray
+    contact: ContactBoundary
+    loads: Loads
+    exact: "ExactSolution | None" = None
+    refinements: int = 0  # uniform refinements of the case's own mesh (for mesh sequencing)
+    # Nodes held on a symmetry line (u · n_s = 0) and the line's unit normal at each.
+    symmetry_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    symmetry_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @property
+    def n_unknowns(self) -> int:
+        """Displacement unknowns once the supports are eliminated."""
+        return 2 * self.mesh.n_points - len(self.dirichlet_dofs)
+
+    def contact_system(self, method: ContactMethod) -> ReducedSystem:
+        """The kernel's view: supports eliminated, contact nodes in (normal, tangent) unknowns."""
+        return ReducedSystem.build(self, method)
+
+
+def build_problem(case: Case, mesh: Mesh, refinements: int = 0) -> DiscreteProblem:
+    """Assemble stiffness and loads, impose the supports and find the contact nodes."""
+    material = case.material
+    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
+    stiffness = stiffness_matrix(mesh.points, mesh.triangles, law)
+    loads = compile_loads(case, mesh)
+    dirichlet_dofs, dirichlet_values, symmetry_nodes, symmetry_normals = supports(case, mesh)
+    contact = contact_boundary(case, mesh, dirichlet_dofs, symmetry_nodes, symmetry_normals)
+    exact = case.exact.solution if case.exact is not None else None
+    if exact is not None:
+        check_exact_contact(case, mesh, contact.edges)
+    return DiscreteProblem(
+        mesh=mesh, law=law, stiffness=stiffness, load=loads.load_vector(mesh),
+        dirichlet_dofs=dirichlet_dofs, dirichlet_values=dirichlet_values, contact=contact, loads=loads,
+        exact=exact, refinements=refinements, symmetry_nodes=symmetry_nodes, symmetry_normals=symmetry_normals,
+    )

@@ -1,0 +1,484 @@
+"""Hostile input through the command line: whatever the case file (or the path to it)
+holds, ``contactfem solve`` refuses it with exit code 2 and exactly one line on stderr,
+``error: <file>: <key> ...``, naming the file, without a traceback and without creating
+the output directory, and it does so quickly and without reading more than it must.
+
+Each case here was found by a hostile-input round (alias bombs, endless files, repeated
+keys, overlong paths, expression corner cases, tiny holes) or written as a variant of
+one (encodings, YAML oddities, number forms). A few inputs are valid and must solve.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from contactfem.case import (
+    MAX_CASE_BYTES,
+    MAX_POLYGON_VERTICES,
+    MAX_YAML_DEPTH,
+    MAX_YAML_VALUES,
+    NAME_MAX,
+    PATH_MAX,
+    load_case,
+    parse_case,
+    path_problem,
+)
+from contactfem.cli import main
+from contactfem.errors import CaseError
+
+ROOT = Path(__file__).resolve().parents[1]
+SQUARE_TEXT = (ROOT / "cases" / "square.yaml").read_text(encoding="utf-8").replace("divisions: 32", "divisions: 4")
+CASE_NAME = "hostile.yaml"
+
+
+def runner() -> CliRunner:
+    try:
+        return CliRunner(mix_stderr=False)
+    except TypeError:
+        return CliRunner()
+
+
+def invoke(*args: object):
+    return runner().invoke(main, [str(a) for a in args])
+
+
+def assert_one_line(result, *fragments: str, code: int = 2) -> str:
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    assert result.exit_code == code, (result.exit_code, result.stderr, result.stdout)
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error: "), lines[0]
+    for fragment in fragments:
+        assert fragment in lines[0], f"{fragment!r} not in {lines[0]!r}"
+    assert len(lines[0]) < 1000, len(lines[0])
+    return lines[0]
+
+
+def refuse_file(case: Path, *fragments: str, out: Path | None = None) -> str:
+    """Solve ``case`` into a fresh --out directory: one line naming the file, nothing written."""
+    out = out if out is not None else case.parent / "out"
+    line = assert_one_line(invoke("solve", case, "--out", out, "--quiet"), *fragments)
+    assert not out.exists(), f"{out} was created"
+    return line
+
+
+def write(tmp_path: Path, content: str | bytes, name: str = CASE_NAME) -> Path:
+    path = tmp_path / name
+    path.write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
+    return path
+
+
+def refuse_text(tmp_path: Path, content: str | bytes, *fragments: str) -> str:
+    return refuse_file(write(tmp_path, content), CASE_NAME, *fragments)
+
+
+def solves(tmp_path: Path, content: str | bytes) -> None:
+    out = tmp_path / "out"
+    result = invoke("solve", write(tmp_path, content), "--out", out, "--quiet")
+    assert result.exit_code == 0, result.stderr
+    assert (out / "report.json").exists()
+
+
+def square(**changes: object) -> str:
+    """The square case (4 divisions) with top-level sections replaced, as YAML text."""
+    data = yaml.safe_load(SQUARE_TEXT)
+    data.update(changes)
+    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+
+
+def substitute(old: str, new: str) -> str:
+    assert old in SQUARE_TEXT, old
+    return SQUARE_TEXT.replace(old, new, 1)
+
+
+# --------------------------------------------------------------------------- the file itself
+
+
+def test_dev_zero_is_refused_without_reading_it():
+    if not os.path.exists("/dev/zero"):
+        pytest.skip("no /dev/zero")
+    started = time.perf_counter()
+    assert_one_line(invoke("check", "/dev/zero"), "/dev/zero", "character device", "not a regular file")
+    assert time.perf_counter() - started < 5
+
+
+def test_a_fifo_is_refused_without_blocking(tmp_path):
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("no FIFOs here")
+    fifo = tmp_path / "case.fifo"
+    os.mkfifo(fifo)
+    refuse_file(fifo, "case.fifo", "FIFO", "not a regular file")
+
+
+def test_a_huge_sparse_file_is_refused_from_its_size(tmp_path):
+    case = tmp_path / CASE_NAME
+    with open(case, "wb") as handle:
+        handle.truncate(10 << 30)  # 10 GiB of holes: nothing is stored, nothing may be read
+    refuse_file(case, CASE_NAME, "larger than", "1 MiB")
+
+
+def test_one_byte_over_the_limit_is_refused_and_the_limit_itself_is_read(tmp_path):
+    padding = MAX_CASE_BYTES - len(SQUARE_TEXT.encode("utf-8")) - 2
+    at_limit = SQUARE_TEXT + "#" + "x" * padding + "\n"
+    assert len(at_limit.encode("utf-8")) == MAX_CASE_BYTES
+    assert load_case(write(tmp_path, at_limit)).title.startswith("square")
+    refuse_text(tmp_path, at_limit + "\n", "larger than")
+
+
+def test_a_directory_is_refused_in_one_line_by_the_reader(tmp_path):
+    with pytest.raises(CaseError, match="is a directory") as caught:
+        load_case(tmp_path)
+    assert "\n" not in str(caught.value)
+
+
+def test_a_directory_is_refused_through_the_cli(tmp_path):
+    # click's Path(dir_okay=False) or the reader: either says so in one line
+    assert_one_line(invoke("solve", tmp_path, "--out", tmp_path / "out"), str(tmp_path), "is a directory")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("length", [300, 5_000])
+def test_overlong_case_file_paths(tmp_path, length):
+    name = "a" * (length - len(".yaml")) + ".yaml" if length <= 2 * NAME_MAX else "a/" * (length // 2) + CASE_NAME
+    line = assert_one_line(invoke("solve", tmp_path / name, "--out", tmp_path / "out"),
+                           "component" if length <= 2 * NAME_MAX else "bytes long")
+    assert "..." in line  # the path is shortened in the message
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_nul_in_the_case_path_is_refused_by_the_reader(tmp_path):
+    with pytest.raises(CaseError, match="NUL"):
+        load_case(str(tmp_path / "a\x00b.yaml"))
+
+
+def test_path_problem_checks_text_only():
+    assert path_problem("results/square") is None
+    assert "NUL" in path_problem("a\x00b")
+    assert "component" in path_problem("x" * (NAME_MAX + 1))
+    assert "bytes long" in path_problem("a/" * PATH_MAX)
+    assert "kept for" in path_problem("x" * NAME_MAX, name_reserve=32)
+    assert "surrogate" in path_problem("\ud800")
+
+
+# --------------------------------------------------------------------------- YAML structure
+
+BOMB = "".join(
+    f"{name}: &{name} [{', '.join([f'*{prev}'] * 9 if prev else ['lol'] * 9)}]\n"
+    for prev, name in zip([None, *"abcdefgh"], "abcdefghi")
+)
+
+
+def test_billion_laughs_is_refused_quickly(tmp_path):
+    assert len(BOMB) < 1000  # 9**9 = 387 million strings once expanded
+    started = time.perf_counter()
+    refuse_text(tmp_path, BOMB, "aliases expanded", str(MAX_YAML_VALUES))
+    refuse_text(tmp_path, square(title="x") + BOMB.replace("i: &i", "title: &i"), "aliases expanded")
+    assert time.perf_counter() - started < 5
+
+
+def test_billion_laughs_through_parse_case():
+    with pytest.raises(CaseError, match=r"f\[0\] = \*e"):
+        parse_case(BOMB, source="bomb.yaml")
+
+
+@pytest.mark.parametrize(("text", "fragments"), [
+    ("title: &a [1, *a]\n", ("title[1] = *a", "contains it")),
+    ("title: &a {x: *a}\n", ("title.x = *a", "contains it")),
+    ("title: " + "[" * 100 + "]" * 100 + "\n", (f"nested more than {MAX_YAML_DEPTH}",)),
+    ("a: &a " + "[" * 20 + "1" + "]" * 20 + "\ntitle: " + "[" * 20 + "*a" + "]" * 20 + "\n",
+     ("= *a", f"nested more than {MAX_YAML_DEPTH}")),
+    ("title: [" + "0, " * (MAX_YAML_VALUES + 10) + "0]\n", ("title[", f"more than {MAX_YAML_VALUES} values")),
+    ("title: *nothing\n", ("undefined alias",)),
+], ids=["recursive-list", "recursive-map", "deep", "deep-by-alias", "too-many-values", "undefined-alias"])
+def test_yaml_structure_is_bounded(tmp_path, text, fragments):
+    started = time.perf_counter()
+    refuse_text(tmp_path, text, *fragments)
+    assert time.perf_counter() - started < 5
+
+
+@pytest.mark.parametrize(("old", "new", "fragments"), [
+    ("title: square", "title: a\ntitle: square", ("title:", "appears twice", "lines 9 and 10")),
+    ("  nu: 0.3\n", "  nu: 0.3\n  nu: 0.2\n", ("material.nu", "appears twice")),
+    ("  left: clamped\n", "  left: clamped\n  left: free\n", ("boundary.left", "appears twice")),
+    ("  E: 1.0e6\n", "  E: 1.0e6\n  0x10: 1\n  16: 2\n", ("material.16", "appears twice")),
+], ids=["top", "material", "boundary-part", "same-number-two-spellings"])
+def test_repeated_keys_are_refused(tmp_path, old, new, fragments):
+    refuse_text(tmp_path, substitute(old, new), *fragments)
+
+
+def test_merge_keys_and_anchors_stay_allowed(tmp_path):
+    text = substitute("  E: 1.0e6\n  nu: 0.3\n", "  <<: {E: 1.0e6, nu: 0.2}\n  nu: 0.3\n")
+    text = text.replace('  top: {traction: [1.0e4, "-1e4*(1-1.5*x)"]}',
+                        '  top: &load {traction: [1.0e4, "-1e4*(1-1.5*x)"]}').replace("  right: free", "  right: *load")
+    case = parse_case(text, source="anchors.yaml")
+    assert case.material.poisson == 0.3
+    assert case.part("right").kind == "traction"
+    solves(tmp_path, text)
+
+
+@pytest.mark.parametrize(("content", "fragments"), [
+    (SQUARE_TEXT + "---\ntitle: second\n", ("more than one YAML document", "line 31")),
+    (substitute("  E: 1.0e6", "\tE: 1.0e6"), ("line 16", "a tab")),
+    (("\ufeff" + SQUARE_TEXT).encode("utf-16-le"), ("UTF-16",)),
+    (("\ufeff" + SQUARE_TEXT).encode("utf-32"), ("UTF-32",)),
+    (SQUARE_TEXT.encode().replace(b"square on", b"squ\xe4re on"), ("byte 0xe4", "line 9", "not UTF-8")),
+    (SQUARE_TEXT.encode() + b"\xff\xfe", ("byte 0xff", "not UTF-8")),
+    (substitute("title: square", "title: \x00square"), ("U+0000", "line 9")),
+    (substitute("title: square", "title: \x1b[31msquare"), ("U+001B", "line 9")),
+    ("", ("empty",)),
+    ("# nothing but a comment\n\n", ("empty",)),
+    ("---\n...\n", ("empty",)),
+    ("- geometry\n- material\n", ("expected a mapping",)),
+    ("just a sentence\n", ("'just a sentence'", "expected a mapping")),
+    ("title: [1, 2\n", ("not valid YAML", "line 2")),
+    (SQUARE_TEXT + "? [1, 2]\n: x\n", ("unhashable key",)),
+    (SQUARE_TEXT + "k" * 5000 + ": 1\n", ("not valid YAML",)),
+    (substitute("title: square", 'title: "\\ud800square"'), ("invalid Unicode",)),
+    (substitute("title: square", "title: sq\u2028uare"), ("not valid YAML",)),
+    (substitute("  E: 1.0e6", "  E: !!python/object/apply:os.system [echo]"), ("material", "constructor")),
+    (substitute("  E: 1.0e6", "  E: !custom 1.0e6"), ("constructor", "!custom")),
+], ids=["two-documents", "tab", "utf-16", "utf-32", "latin-1", "stray-bytes", "nul", "escape-char", "empty",
+        "comment-only", "empty-document", "list", "scalar", "unclosed", "list-key", "5000-char-key",
+        "surrogate-escape", "line-separator", "python-tag", "unknown-tag"])
+def test_malformed_files(tmp_path, content, fragments):
+    refuse_text(tmp_path, content, *fragments)
+
+
+def test_a_leading_bom_is_accepted(tmp_path):
+    solves(tmp_path, "\ufeff" + SQUARE_TEXT)
+
+
+# --------------------------------------------------------------------------- keys and values
+
+
+@pytest.mark.parametrize(("old", "new", "fragments"), [
+    ("  E: 1.0e6", "  E: .inf", ("material.E = inf", "finite")),
+    ("  E: 1.0e6", "  E: -.inf", ("material.E = -inf", "finite")),
+    ("  E: 1.0e6", "  E: .nan", ("material.E = nan", "finite")),
+    ("  E: 1.0e6", "  E: 1e400", ("material.E", "finite")),
+    ("  E: 1.0e6", "  E: 1.0e400", ("material.E = inf", "finite")),
+    ("  E: 1.0e6", "  E: 1.0e-400", ("material.E = 0.0", "> 0")),
+    ("  E: 1.0e6", "  E: 0x" + "f" * 500, ("material.E = 0xfff", "integer of 502 characters")),
+    ("  E: 1.0e6", "  E: " + "9" * 5000, ("material.E", "integer of 5000 characters")),
+    ("  E: 1.0e6", "  E: yes", ("material.E = True", "expected a number")),
+    ("  nu: 0.3", "  nu: off", ("material.nu = False", "expected a number")),
+    ("divisions: 4", "divisions: true", ("mesh.divisions = True", "integer")),
+    ("  method: positive", "  method: positive\n  max_iterations: 1.0e1", ("solver.max_iterations", "integer")),
+    ("  E: 1.0e6", "  E: 2001-12-14", ("material.E = 2001-12-14", "expected a number")),
+    ("  E: 1.0e6", "  E: !!binary aGVsbG8=", ("material.E = b'hello'", "expected a number")),
+    ("  E: 1.0e6", "  E: [1.0e6]", ("material.E", "expected a number")),
+    ("  E: 1.0e6", "  E: 1.0e6\n  1: x", ("material.1", "unknown key")),
+    ("  E: 1.0e6", "  E: 1.0e6\n  ~: x", ("material.None", "unknown key")),
+    ("material:", "mat\u200berial:", ("mat\\u200berial", "unknown key")),
+    ("material:", "matеrial:", ("matеrial", "unknown key")),  # a Cyrillic e
+    ("title: square", "title: \u202esquare", ("title", "printable")),
+    ("title: square on a foundation with partial contact", 'title: "\\e[31mred"', ("title", "printable")),
+    ("title: square on a foundation with partial contact", 'title: "two\\nlines"', ("title", "printable")),
+    ("title: square on a foundation with partial contact", "title: " + "t" * 300, ("title", "200")),
+    ("  rectangle: {lower: [0, 0], upper: [1, 1]}",
+     '  rectangle: {lower: [0, 0], upper: [1, 1], names: {bottom: "a\\nb"}}',
+     ("geometry.rectangle.names.bottom", "printable")),
+    ("  left: clamped", "  left: clamped\n  1: free", ("boundary", "part names must be strings")),
+], ids=["inf", "-inf", "nan", "1e400-string", "1e400-float", "underflow", "long-hex", "long-decimal",
+        "bool-yes", "bool-off", "bool-divisions", "float-iterations", "date", "binary", "list", "int-key",
+        "null-key", "zero-width-key", "homoglyph-key", "rtl-title", "escape-title", "newline-title", "long-title",
+        "newline-name", "int-part-name"])
+def test_odd_values_and_keys(tmp_path, old, new, fragments):
+    refuse_text(tmp_path, substitute(old, new), *fragments)
+
+
+@pytest.mark.parametrize("value", ["0x10", "020", "1_6", "16.0e0"], ids=["hex", "octal", "underscore", "float"])
+def test_other_number_spellings_are_read(tmp_path, value):
+    text = substitute("  E: 1.0e6", f"  E: {value}")
+    assert parse_case(text, source="numbers.yaml").material.young == 16.0
+
+
+# --------------------------------------------------------------------------- paths in the case
+
+
+def output_case(tmp_path: Path, directory: str) -> Path:
+    return write(tmp_path, substitute("  directory: results/square", f"  directory: {directory}"))
+
+
+@pytest.mark.parametrize(("directory", "fragments"), [
+    ("a" * 300, ("output.directory", "component of 300 bytes")),
+    ("a" * (NAME_MAX - 10), ("output.directory", "kept for the names")),
+    ("a/" * 2_500, ("output.directory", "5000 bytes long")),
+    ('"res\\0ults"', ("output.directory = 'res\\x00ults'", "NUL")),
+    ('"\\ud800"', ("line 30", "invalid Unicode")),
+], ids=["300", "no-room-for-staging", "5000", "nul", "surrogate"])
+def test_output_directory_paths(tmp_path, monkeypatch, directory, fragments):
+    """Without --out: the case's own directory, relative to the working directory."""
+    monkeypatch.chdir(tmp_path)
+    case = output_case(tmp_path, directory)
+    assert_one_line(invoke("solve", case, "--quiet"), CASE_NAME, *fragments)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [CASE_NAME]
+
+
+def test_the_default_output_directory_of_a_long_case_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    name = "c" * (NAME_MAX - len(".yaml")) + ".yaml"
+    path = write(tmp_path, SQUARE_TEXT.replace("  directory: results/square\n", "  files: [vtu, h5, json]\n"), name)
+    assert_one_line(invoke("solve", path, "--quiet"), "output.directory", "the default")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+
+
+def mesh_file_case(tmp_path: Path, spec: str) -> Path:
+    text = substitute("  rectangle: {lower: [0, 0], upper: [1, 1]}", f"  mesh_file: {spec}")
+    return write(tmp_path, text.replace("  divisions: 4", "  refine: 0"))
+
+
+@pytest.mark.parametrize(("spec", "fragments"), [
+    ("a" * 300 + ".msh", ("component of 304 bytes",)),
+    ("a/" * 2_500 + "m.msh", ("bytes long",)),
+    ('"a\\0.msh"', ("NUL",)),
+    ("/dev/zero", ("not a regular file",)),
+    ("fifo.msh", ("not a regular file",)),
+    (".", ("is a directory",)),
+], ids=["300", "5000", "nul", "dev-zero", "fifo", "directory"])
+def test_mesh_file_paths(tmp_path, spec, fragments):
+    if spec == "fifo.msh":
+        if not hasattr(os, "mkfifo"):
+            pytest.skip("no FIFOs here")
+        os.mkfifo(tmp_path / spec)
+    if spec == "/dev/zero" and not os.path.exists(spec):
+        pytest.skip("no /dev/zero")
+    refuse_file(mesh_file_case(tmp_path, spec), CASE_NAME, "geometry.mesh_file", *fragments)
+
+
+# --------------------------------------------------------------------------- expressions
+
+MANUFACTURED = (ROOT / "cases" / "manufactured.yaml").read_text(encoding="utf-8")
+
+
+def exact_case(ux: str, uy: str = "0") -> str:
+    data = yaml.safe_load(MANUFACTURED)
+    data["mesh"] = {"divisions": [4, 2]}
+    data["exact"]["displacement"] = [ux, uy]
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def balanced(items: list[str], op: str) -> str:
+    while len(items) > 1:
+        items = [f"({a}{op}{b})" for a, b in zip(items[::2], items[1::2])] + (items[-1:] if len(items) % 2 else [])
+    return items[0]
+
+
+@pytest.mark.parametrize(("ux", "fragments"), [
+    ("x % 0", ("modulo by zero",)),
+    ("x % (y-y)", ("modulo by zero",)),
+    ("1 % 0 * x", ("modulo by zero",)),
+    ("0/0", ("not finite",)),
+    ("(0/0)*x", ("not finite",)),
+    ("0**-1", ("not finite",)),
+    ("1/0*x", ("not finite",)),
+    ("log(0)*x", ("not finite",)),
+    ("x**(0**-1)", ("not finite",)),
+    ("10**400*x", ("outside the range of float64",)),
+    ("2**-1100*x", ("outside the range of float64",)),
+    ("9**9**9*x", ("outside the range of float64",)),
+    ("sqrt(-1)*x", ("not a real number",)),
+    ("(" * 60 + "x" + ")" * 60, ("nested too deeply",)),
+    ("x" + "+x" * 600, ("too long",)),
+    ("-" * 80 + "x", ("nested too deeply",)),
+    (balanced([f"sin({i}*x*y)" for i in range(1, 40)], "*"), ("gradient", "simpler")),
+    ("floor(x)", ("cannot be differentiated",)),
+    ("1e-3*x*y", ("frictionless",)),
+], ids=["mod-zero", "mod-simplified-zero", "mod-number", "zero-over-zero", "nan-times-x", "zero-to-minus-one",
+        "one-over-zero", "log-zero", "power-of-zoo", "huge-number", "tiny-number", "power-tower", "imaginary",
+        "deep", "long", "many-signs", "big-gradient", "floor", "sliding"])
+def test_exact_block_corner_cases(tmp_path, ux, fragments):
+    started = time.perf_counter()
+    refuse_text(tmp_path, exact_case(ux), "exact", *fragments)
+    assert time.perf_counter() - started < 5
+
+
+def test_a_tower_of_exponentials_in_both_components_is_refused_before_deriving(tmp_path):
+    tower = "exp(" * 45 + "x*y" + ")" * 45
+    started = time.perf_counter()
+    refuse_text(tmp_path, exact_case(tower, tower), "exact.displacement", "gradient")
+    assert time.perf_counter() - started < 5
+
+
+@pytest.mark.parametrize(("ux", "fragments"), [
+    ("acos(2)*x", ("not finite",)),
+    ("x**1e300", ("not finite",)),
+    ("x**-1", ("not finite",)),
+    ("arctan2(0,0)*x", ("not finite",)),
+    ("(-8)**(1/3)*x", ("not finite",)),
+], ids=["acos-2", "huge-exponent", "pole-on-mesh", "atan2-origin", "negative-cube-root"])
+def test_exact_fields_that_are_not_finite_are_refused_with_the_key(tmp_path, ux, fragments):
+    line = refuse_text(tmp_path, exact_case(ux), *fragments)
+    assert "exact" in line
+
+
+@pytest.mark.parametrize("text", ["x % 0", "0/0", "0**-1", "1/(x-x)", "1e308*1e308", "exp(1000)"])
+def test_load_expressions_that_are_not_finite(tmp_path, text):
+    refuse_text(tmp_path, square(boundary={"left": "clamped", "top": {"traction": [0, text]}, "bottom": "contact"}),
+                "boundary.top.traction", "not finite")
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def polygon_case(holes: list | None = None, vertices: list | None = None, edges: list | None = None) -> str:
+    vertices = vertices if vertices is not None else [[0, 0], [1, 0], [1, 1], [0, 1]]
+    edges = edges if edges is not None else ["bottom", "right", "top", "left"]
+    polygon = {"vertices": vertices, "edges": edges}
+    if holes is not None:
+        polygon["holes"] = holes
+    return square(geometry={"polygon": polygon}, mesh={"size": 0.25})
+
+
+@pytest.mark.parametrize("radius", [1e-300, 1e-12, 1e-8, 1e-7])
+def test_a_tiny_circular_hole_names_the_key(tmp_path, radius):
+    holes = [{"circle": {"center": [0.5, 0.5], "radius": radius}}]
+    refuse_text(tmp_path, polygon_case(holes), "geometry.polygon.holes[0].circle.radius", "must be at least")
+
+
+def test_a_small_hole_above_the_bound_solves(tmp_path):
+    solves(tmp_path, polygon_case([{"circle": {"center": [0.5, 0.5], "radius": 1e-5}}]))
+
+
+def test_a_tiny_circular_hole_far_from_the_origin(tmp_path):
+    vertices = [[1e6, 0], [1e6 + 1, 0], [1e6 + 1, 1], [1e6, 1]]
+    holes = [{"circle": {"center": [1e6 + 0.5, 0.5], "radius": 1e-4}}]
+    refuse_text(tmp_path, polygon_case(holes, vertices), "holes[0].circle.radius", "1e-6 of the centre")
+
+
+def test_a_tiny_polygonal_hole_names_the_key(tmp_path):
+    holes = [{"vertices": [[0.5, 0.5], [0.5 + 1e-8, 0.5], [0.5, 0.5 + 1e-8]], "edges": ["h", "h", "h"]}]
+    refuse_text(tmp_path, polygon_case(holes), "geometry.polygon.holes[0].vertices", "across")
+
+
+def test_an_arc_loop_of_two_equal_vertices_names_the_key(tmp_path):
+    vertices = [[1, 0], [1, 0]]
+    edges = [{"name": "rim", "arc": {"center": [0, 0]}}, {"name": "rim", "arc": {"center": [0, 0]}}]
+    refuse_text(tmp_path, polygon_case(None, vertices, edges), "geometry.polygon.vertices", "too small")
+
+
+def test_too_many_polygon_vertices(tmp_path):
+    n = MAX_POLYGON_VERTICES + 1
+    vertices = [[i, 0] for i in range(n)]
+    started = time.perf_counter()
+    refuse_text(tmp_path, polygon_case(None, vertices, ["e"] * n), "geometry.polygon.vertices",
+                f"at most {MAX_POLYGON_VERTICES}")
+    assert time.perf_counter() - started < 5
+
+
+def test_too_many_holes(tmp_path):
+    holes = [{"circle": {"center": [0.02 + 0.04 * (i % 25), 0.02 + 0.04 * (i // 25)], "radius": 0.01}}
+             for i in range(MAX_POLYGON_VERTICES // 4 + 1)]
+    refuse_text(tmp_path, polygon_case(holes), "geometry.polygon.holes[", f"more than {MAX_POLYGON_VERTICES}")
+
+
+def test_the_limits_are_what_the_documentation_says():
+    assert MAX_CASE_BYTES == 1 << 20
+    assert PATH_MAX >= 256 and NAME_MAX >= 14
