@@ -271,7 +271,7 @@ class _Reader:
             raise self.fail(key, data, "expected a mapping of keys to values")
         for name in data:
             if not isinstance(name, str) or name not in allowed:
-                shown = _short(name if isinstance(name, str) else _show(name), 64)
+                shown = shortened(name if isinstance(name, str) else _show(name), 64)
                 raise CaseError(
                     f"{self.filename}: {_join(key, shown)}: unknown key; "
                     f"expected one of {', '.join(allowed)}"
@@ -360,7 +360,7 @@ def load_case(path: str | Path) -> Case:
         If the file cannot be read or any key is missing, unknown, mistyped or out of range.
     """
     path = Path(path)
-    shown = _short(str(path))
+    shown = shortened(str(path))
     problem = path_problem(path)
     if problem is not None:
         raise CaseError(f"{shown}: the case file's path {problem}")
@@ -368,7 +368,7 @@ def load_case(path: str | Path) -> Case:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
-        raise CaseError(f"{_short(path.name)}: {_not_utf8(data, error)}") from None
+        raise CaseError(f"{shortened(path.name)}: {_not_utf8(data, error)}") from None
     return parse_case(text, source=path)
 
 
@@ -401,7 +401,7 @@ def path_problem(path: str | os.PathLike[str], *, name_reserve: int = 0, path_re
         limit = NAME_MAX - (name_reserve if last else 0)
         if len(part) > limit:
             kept = f" ({NAME_MAX} less {name_reserve} kept for the names made from it)" if last and name_reserve else ""
-            return (f"has a component of {len(part)} bytes ({_short(os.fsdecode(part), 40)!r}); "
+            return (f"has a component of {len(part)} bytes ({shortened(os.fsdecode(part), 40)!r}); "
                     f"expected at most {limit} bytes per file or directory name{kept}")
     limit = PATH_MAX - 1 - path_reserve
     if len(raw) > limit:
@@ -468,7 +468,7 @@ def _not_utf8(data: bytes, error: UnicodeDecodeError) -> str:
 def parse_case(text: str, source: str | Path = "<case>") -> Case:
     """Validate the YAML ``text`` of a case; ``source`` names it in messages and anchors relative paths."""
     source = Path(source)
-    r = _Reader(_short(source.name))
+    r = _Reader(shortened(source.name))
     if not isinstance(text, str):
         raise CaseError(f"{r.filename}: expected the case as text, got {type(text).__name__}")
     if len(text) > MAX_CASE_BYTES:
@@ -619,17 +619,17 @@ class _CaseLoader(yaml.composer.Composer, _Events, yaml.constructor.SafeConstruc
         event = self.peek_event()
         target = self.anchors.get(event.anchor)
         if target is not None and id(target) not in self._measure:
-            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: the "
+            raise _Limit(f"{self._where()} = *{shortened(event.anchor, 40)}: line {event.start_mark.line + 1}: the "
                          "alias refers to a node that contains it; expected a value that does not contain itself")
         node = super().compose_node(parent, index)  # the target; refuses an undefined alias
         size, height = self._measure[id(node)]
         self._values += size
         if self._values > MAX_YAML_VALUES:
-            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
+            raise _Limit(f"{self._where()} = *{shortened(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
                          f"its aliases expanded the document holds more than {MAX_YAML_VALUES} values; expected at "
                          "most that many (an alias counts as a copy at every use)")
         if len(self._path) - 1 + height > MAX_YAML_DEPTH:
-            raise _Limit(f"{self._where()} = *{_short(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
+            raise _Limit(f"{self._where()} = *{shortened(event.anchor, 40)}: line {event.start_mark.line + 1}: with "
                          f"its aliases expanded the document is nested more than {MAX_YAML_DEPTH} levels deep; "
                          "expected the case format's few levels")
         return node
@@ -639,7 +639,7 @@ class _CaseLoader(yaml.composer.Composer, _Events, yaml.constructor.SafeConstruc
         # sexagesimal one (1:2:3) is parsed digit group by digit group: no coordinate needs 100.
         if len(str(node.value)) > 100:
             where = self.keys_at.get((node.start_mark.line, node.start_mark.column)) or "the document"
-            raise _Limit(f"{where} = {_short(str(node.value), 40)}: line {node.start_mark.line + 1}: an integer of "
+            raise _Limit(f"{where} = {shortened(str(node.value), 40)}: line {node.start_mark.line + 1}: an integer of "
                          f"{len(str(node.value))} characters; expected a number of at most 100")
         return super().construct_yaml_int(node)
 
@@ -655,7 +655,7 @@ class _CaseLoader(yaml.composer.Composer, _Events, yaml.constructor.SafeConstruc
                 except TypeError:
                     continue  # unhashable: PyYAML refuses it below
                 if first is not key_node:
-                    where = _join(self._mapping_paths.get(id(node), ""), _short(str(key), 64))
+                    where = _join(self._mapping_paths.get(id(node), ""), shortened(str(key), 64))
                     raise _Limit(f"{where}: the key appears twice in one mapping (lines {first.start_mark.line + 1} "
                                  f"and {key_node.start_mark.line + 1}); expected each key once")
         return super().construct_mapping(node, deep=deep)
@@ -672,7 +672,7 @@ def _path_step(parent: Any, index: Any) -> str:
         if index is None:
             return ".<key>"
         if isinstance(index, yaml.ScalarNode):
-            return "." + _short(str(index.value), 64)
+            return "." + shortened(str(index.value), 64)
         return ".<key>"
     return ""
 
@@ -770,16 +770,16 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
         path = source.parent / path
     problem = path_problem(path)
     if problem is not None:
-        raise r.fail(key, spec, f"the path {'' if path == Path(spec) else f'{_short(str(path))} '}{problem}")
+        raise r.fail(key, spec, f"the path {'' if path == Path(spec) else f'{shortened(str(path))} '}{problem}")
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
-        raise r.fail(key, spec, f"no such file ({_short(str(path))})") from None
+        raise r.fail(key, spec, f"no such file ({shortened(str(path))})") from None
     except (OSError, ValueError) as error:
-        raise r.fail(key, spec, f"cannot read {_short(str(path))} ({_reason(error)})") from None
+        raise r.fail(key, spec, f"cannot read {shortened(str(path))} ({_reason(error)})") from None
     if not stat.S_ISREG(mode):
         kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
-        raise r.fail(key, spec, f"{_short(str(path))} is {kind}; expected a gmsh .msh file")
+        raise r.fail(key, spec, f"{shortened(str(path))} is {kind}; expected a gmsh .msh file")
     return MeshFileGeometry(path), None
 
 
@@ -1151,7 +1151,7 @@ def _show(value: Any) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def _short(text: str, limit: int = 120) -> str:
+def shortened(text: str, limit: int = 120) -> str:
     """``text`` cut in the middle to at most ``limit`` characters (a path keeps its end, the file name)."""
     if len(text) <= limit:
         return text

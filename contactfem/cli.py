@@ -150,16 +150,13 @@ class _CheckedPath(click.Path):
         self.output = output
 
     def convert(self, value, param, ctx):
-        from contactfem.case import (
-            OUTPUT_NAME_RESERVE,
-            OUTPUT_PATH_RESERVE,
-            path_problem,
-        )
+        from contactfem.case import OUTPUT_NAME_RESERVE, OUTPUT_PATH_RESERVE, path_problem, shortened
 
         reserves = {"name_reserve": OUTPUT_NAME_RESERVE, "path_reserve": OUTPUT_PATH_RESERVE} if self.output else {}
         problem = path_problem(value, **reserves) if isinstance(value, (str, bytes, Path)) else None
         if problem is not None:
-            self.fail(f"the path {problem}", param, ctx)
+            text = value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+            self.fail(f"{_printable(shortened(text))}: the path {problem}", param, ctx)
         return super().convert(value, param, ctx)
 
 
