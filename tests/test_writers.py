@@ -589,7 +589,7 @@ def test_hdf5_round_trip(tmp_path: Path) -> None:
 
     assert data["attrs"] == {
         "format": "contactfem-solution",
-        "schema_version": 1,
+        "schema_version": 2,
         "method": "positive",
         "case_hash": "sha256:abc123",
         "version": "0.1.0",
@@ -620,8 +620,10 @@ def test_hdf5_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(data["fields"]["von_mises"], solution.von_mises)
 
     c = solution.contact
-    for name in ["nodes", "edges", "multiplier", "nodal_force", "normal_displacement", "gap"]:
+    for name in ["nodes", "edges", "multiplier", "nodal_force", "normal_displacement", "gap", "abscissa"]:
         np.testing.assert_array_equal(data["contact"][name], getattr(c, name), err_msg=name)
+    np.testing.assert_array_equal(data["contact"]["attrs"]["obstacle_point"], c.obstacle_point)
+    np.testing.assert_array_equal(data["contact"]["attrs"]["obstacle_normal"], c.obstacle_normal)
     assert data["contact"]["active"].dtype == np.uint8
     np.testing.assert_array_equal(data["contact"]["active"], [1, 0])
 
