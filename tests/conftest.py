@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from click.testing import CliRunner
 
 from contactfem.case import Case, parse_case
 
@@ -29,6 +30,14 @@ def square_case_dict(divisions: int = 8) -> dict:
         },
         "obstacle": {"point": [0, 0], "normal": [0, -1]},
     }
+
+
+def make_runner() -> CliRunner:
+    """A runner that keeps stderr apart from stdout (click < 8.2 needs mix_stderr=False; 8.2+ always does)."""
+    try:
+        return CliRunner(mix_stderr=False)
+    except TypeError:
+        return CliRunner()
 
 
 def case_from(data: dict, name: str = "test.yaml", directory: Path | None = None) -> Case:

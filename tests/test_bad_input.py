@@ -14,7 +14,7 @@ from typing import Callable
 
 import pytest
 import yaml
-from click.testing import CliRunner
+from conftest import make_runner
 
 from contactfem.cli import main
 
@@ -23,12 +23,6 @@ SQUARE = ROOT / "cases" / "square.yaml"
 CASE_NAME = "variant.yaml"
 
 
-def make_runner() -> CliRunner:
-    """A runner that keeps stderr apart from stdout (click < 8.2 needs mix_stderr=False; 8.2+ always does)."""
-    try:
-        return CliRunner(mix_stderr=False)
-    except TypeError:
-        return CliRunner()
 
 
 def base_case() -> dict:

@@ -13,7 +13,7 @@ import h5py
 import meshio
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from conftest import make_runner
 
 from contactfem import __version__
 from contactfem.cli import main
@@ -26,12 +26,6 @@ REPORT_KEYS = ("schema_version", "method", "mesh", "newton", "sign_conditions", 
                "contact_force", "equilibrium", "timings")
 
 
-def make_runner() -> CliRunner:
-    """A runner that keeps stderr apart from stdout (click < 8.2 needs mix_stderr=False; 8.2+ always does)."""
-    try:
-        return CliRunner(mix_stderr=False)
-    except TypeError:
-        return CliRunner()
 
 
 def invoke(*args: str):

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner
+from conftest import make_runner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -37,11 +37,6 @@ CASE_NAME = "fuzzed.yaml"
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 
 
-def runner() -> CliRunner:
-    try:
-        return CliRunner(mix_stderr=False)
-    except TypeError:
-        return CliRunner()
 
 
 def snapshot(directory: Path) -> dict[str, bytes]:
@@ -56,7 +51,7 @@ class Results:
         self.out = root / "results"
         case = root / "base.yaml"
         case.write_text(yaml.safe_dump(BASE), encoding="utf-8")
-        result = runner().invoke(main, ["solve", str(case), "--out", str(self.out), "--quiet"])
+        result = make_runner().invoke(main, ["solve", str(case), "--out", str(self.out), "--quiet"])
         assert result.exit_code == 0, result.stderr
         self.before = snapshot(self.out)
 
@@ -74,13 +69,13 @@ def check(results: Results, text: str | bytes, key: str | None, files: dict[str,
         for name, data in (files or {}).items():
             (Path(tmp) / name).write_bytes(data)
         fresh = Path(tmp) / "fresh"
-        first = runner().invoke(main, ["solve", str(case), "--out", str(fresh), "--quiet"])
+        first = make_runner().invoke(main, ["solve", str(case), "--out", str(fresh), "--quiet"])
         assert first.exception is None or isinstance(first.exception, SystemExit), repr(first.exception)
         for stream in (first.stdout, first.stderr):
             assert "Traceback" not in stream and "Warning" not in stream, stream
         if first.exit_code == 0:
             # A valid case: solve it over the existing results too, which must then change together.
-            result = runner().invoke(main, ["solve", str(case), "--out", str(results.out), "--quiet", "--overwrite"])
+            result = make_runner().invoke(main, ["solve", str(case), "--out", str(results.out), "--quiet", "--overwrite"])
             assert result.exit_code == 0, result.stderr
             results.before = snapshot(results.out)
             return 0
@@ -93,7 +88,7 @@ def check(results: Results, text: str | bytes, key: str | None, files: dict[str,
             if key is not None:
                 assert key in lines[0], (key, lines[0])
         # The same case over existing results leaves them untouched.
-        again = runner().invoke(main, ["solve", str(case), "--out", str(results.out), "--quiet", "--overwrite"])
+        again = make_runner().invoke(main, ["solve", str(case), "--out", str(results.out), "--quiet", "--overwrite"])
         assert again.exit_code == first.exit_code, (again.exit_code, again.stderr)
         assert snapshot(results.out) == results.before
         assert not list(results.root.glob(".tmp-*"))
@@ -306,13 +301,13 @@ def test_numbers_at_the_edge_of_float64(results):
 def test_control_characters_in_keys_stay_on_one_line(tmp_path):
     """Found by the fuzzer: a key holding U+001E (a record separator, which splitlines()
     breaks at) made the refusal two lines. Messages escape such characters."""
-    from conftest import CASES
+    from conftest import CASES, make_runner
 
     data = yaml.safe_load((CASES / "square.yaml").read_text(encoding="utf-8"))
     data["boundary"]["bottom"] = {"\x1e": None}
     case = tmp_path / "fuzzed.yaml"
     case.write_text(yaml.safe_dump(data), encoding="utf-8")
-    result = runner().invoke(main, ["solve", str(case), "--out", str(tmp_path / "out"), "--quiet"])
+    result = make_runner().invoke(main, ["solve", str(case), "--out", str(tmp_path / "out"), "--quiet"])
     assert result.exit_code == 2
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and "\\x1e" in lines[0] and "boundary.bottom" in lines[0]

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from click.testing import CliRunner
+from conftest import make_runner
 
 from contactfem.case import (
     MAX_CASE_BYTES,
@@ -37,15 +37,10 @@ SQUARE_TEXT = (ROOT / "cases" / "square.yaml").read_text(encoding="utf-8").repla
 CASE_NAME = "hostile.yaml"
 
 
-def runner() -> CliRunner:
-    try:
-        return CliRunner(mix_stderr=False)
-    except TypeError:
-        return CliRunner()
 
 
 def invoke(*args: object):
-    return runner().invoke(main, [str(a) for a in args])
+    return make_runner().invoke(main, [str(a) for a in args])
 
 
 def assert_one_line(result, *fragments: str, code: int = 2) -> str:
