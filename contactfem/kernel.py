@@ -15,6 +15,18 @@ the reaction of the fixed normal unknowns and μ = B⁻¹(Bμ).
 Plain Newton can revisit an active set on hard problems. The kernel detects the repeat
 and continues with Murty's least-index rule (change only the lowest-numbered node whose
 condition fails), which terminates for P-matrix complementarity problems like this one.
+
+Every decision is relative to the data's own scales, so that multiplying E and the loads
+by any factor, or c by any factor, changes nothing: after a solve, d = G exactly on A and
+Bμ = 0 exactly on I, so the indicator Bμ + c (d − G) reduces to Bμ on A and to c (d − G)
+on I and its sign is decided against the force scale on A and against the displacement
+scale on I; c never enters (it only matters to a caller predicting the first active set).
+
+Before reporting CONVERGED the kernel certifies the final iterate against the discrete
+problem's own conditions (:class:`Certificate`): equilibrium, the signs, complementarity
+and finiteness, each against a tolerance stated in the system's units. A result that
+fails is returned with status NOT_CERTIFIED and the failed condition named; a singular
+or numerically singular stiffness is reported by :mod:`contactfem.linalg` (SolverError).
 """
 
 from __future__ import annotations
@@ -28,23 +40,42 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from contactfem.linalg import factorize
+from contactfem.errors import SolverError
+from contactfem.linalg import FactorCheck, check_factorization, factorize, probe_vector
 
-# Nodes whose active-set indicator lies within this fraction of the problem's force
-# scale of zero are degenerate (no force and no gap, to round-off): they keep their
-# current state, so that round-off cannot make the active set flicker.
-DEGENERACY_TOLERANCE = 1e-12
-# Iterative refinement of each linear solve: at most this many corrections, stopping once
-# the relative residual of the equations is below the target or stops decreasing.
+EPS = float(np.finfo(float).eps)
+#: Iterative refinement of each linear solve: at most this many corrections, stopping once
+#: the residual of the equations is within their round-off bound (:func:`roundoff_bound`)
+#: or stops decreasing.
 REFINEMENT_STEPS = 3
-REFINEMENT_TARGET = 1e-13
+#: A certificate is only issued when the equilibrium equations resolve the forces to at
+#: least three significant digits: when the round-off bound of evaluating K u + Nᵀ Λ − F
+#: (γ_k times the sum of the magnitudes of its terms) exceeds this fraction of the force
+#: scale, the forces in play are lost in the cancellation of much larger terms (a huge
+#: rigid motion prescribed with nothing to resist it, a body far too slender for double
+#: precision), and a residual "within round-off" says nothing about the answer. Measured
+#: bounds: ≤ 2e-12 on the shipped cases and the square up to 131 000 unknowns, 2e-5 on
+#: a 1:1000 strip of 1000 × 4 cells; the square translated by a prescribed 1e45 gives 1.8.
+FORCE_RESOLUTION_LIMIT = 1e-3
+
+
+def roundoff_bound(terms: int) -> float:
+    """γ_k = k ε / (1 − k ε): the relative error bound of a sum of k floating-point products.
+
+    Evaluating one row of K u + Nᵀ Λ − F in floating point errs by at most γ_k times the
+    sum of the magnitudes of its terms (Higham, Accuracy and Stability of Numerical
+    Algorithms, §3.1), k the row's stored entries plus the load and the contact force; no
+    solver, however accurate, can certify a residual below it.
+    """
+    return terms * EPS / (1.0 - terms * EPS)
 
 
 class Status(enum.Enum):
     CONVERGED = "converged"
     MAX_ITERATIONS = "max_iterations"
     CYCLING = "cycling"
-    INACCURATE = "inaccurate"
+    #: The active set settled but the iterate fails its certificate (see :class:`Certificate`).
+    NOT_CERTIFIED = "not_certified"
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,6 +111,10 @@ class ContactSystem:
 
 @dataclass
 class Iteration:
+    """One Newton step. The residuals are scale-free: ``equilibrium_residual`` is
+    ‖K u + Nᵀ Λ − F‖∞ over the force scale, ``complementarity_residual`` the natural
+    residual max |min(Λ / force scale, (G − d) / displacement scale)| (see :class:`Certificate`)."""
+
     active: int
     added: int
     removed: int
@@ -88,11 +123,94 @@ class Iteration:
     seconds: float
 
 
+@dataclass(frozen=True)
+class Check:
+    """One condition of a certificate: ``value`` must not exceed ``tolerance``."""
+
+    value: float
+    tolerance: float
+    passed: bool
+    meaning: str
+
+    def __post_init__(self) -> None:
+        # Plain Python numbers, whatever numpy handed in, so that reports serialise them.
+        object.__setattr__(self, "value", float(self.value))
+        object.__setattr__(self, "tolerance", float(self.tolerance))
+        object.__setattr__(self, "passed", bool(self.passed))
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The discrete problem's own conditions, measured on the returned iterate.
+
+    Scales (in the system's units, ``scales``):
+
+    - ``force`` S_F = ‖F‖∞ + ‖K u‖∞ + ‖Nᵀ Λ‖∞ over all unknowns (the applied loads, the
+      internal forces with the support reactions, the contact forces);
+    - ``displacement`` S_D = max(‖u‖∞, ‖G‖∞);
+    - ``roundoff``: γ_k max_i (|K| |u| + |F| + |Nᵀ Λ|)_i / S_F over the equations, the
+      relative error bound of evaluating the equilibrium equations themselves
+      (:func:`roundoff_bound`); its ratio to γ_k is a condition estimate of the forces;
+    - ``condition_estimate`` κ̂ of the factorised stiffness the iterate was computed with
+      (the probe of :func:`contactfem.linalg.check_factorization`),
+      and ``relative_precision`` ε κ̂, the relative forward error a solve can have.
+
+    Checks (``checks``, in this order; the message names the first that fails), with the
+    tolerances ``tol_F`` = max(solver tolerance, roundoff) for forces and
+    ``tol_D`` = max(solver tolerance, γ_2) for displacements:
+
+    - ``finite``: no NaN or infinity in u, μ, Bμ (tolerance 0 entries);
+    - ``force_resolution``: roundoff ≤ :data:`FORCE_RESOLUTION_LIMIT`;
+    - ``equilibrium``: ‖K u + Nᵀ Λ − F‖∞ / S_F over the unsupported unknowns ≤ tol_F;
+    - ``force_sign``: max(−Λ) / S_F ≤ tol_F over every contact node, Λ = Bμ (method (4):
+      λ ≥ 0, as D > 0; method (5): (M θ)_x ≥ 0);
+    - ``penetration``: max(N u − G) / S_D ≤ tol_D;
+    - ``complementarity``: max |Λ_x (N u − G)_x| / (S_F S_D) ≤ max(tol_F, tol_D).
+    """
+
+    checks: dict[str, Check]
+    scales: dict[str, float]
+
+    @property
+    def passed(self) -> bool:
+        return all(check.passed for check in self.checks.values())
+
+    @property
+    def failed(self) -> list[str]:
+        """Names of the failed checks, in order."""
+        return [name for name, check in self.checks.items() if not check.passed]
+
+    @property
+    def message(self) -> str:
+        """One line: the first failed condition with its value and tolerance, or 'certified'."""
+        if self.passed:
+            return "certified"
+        name = self.failed[0]
+        check = self.checks[name]
+        return f"{name}: {check.meaning} = {check.value:.2e} exceeds its tolerance {check.tolerance:.2e}"
+
+    def to_dict(self) -> dict:
+        """JSON-ready figures (non-finite numbers become None)."""
+        def number(value: float) -> float | None:
+            return float(value) if np.isfinite(value) else None
+
+        return {
+            "passed": self.passed,
+            "failed": self.failed,
+            "checks": {name: {"value": number(c.value), "tolerance": number(c.tolerance), "passed": c.passed,
+                              "meaning": c.meaning} for name, c in self.checks.items()},
+            "scales": {name: number(value) for name, value in self.scales.items()},
+        }
+
+
 @dataclass(eq=False)
 class KernelResult:
-    """What the kernel returns; it never raises on non-convergence, the caller decides.
+    """What the kernel returns; it never raises on non-convergence or a failed certificate,
+    the caller decides.
 
-    ``displacement`` (n,), ``multiplier`` μ (m,), ``nodal_force`` Bμ (m,), ``active`` (m,) bool.
+    ``displacement`` (n,), ``multiplier`` μ (m,), ``nodal_force`` Bμ (m,), ``active`` (m,) bool;
+    ``certificate`` the final iterate's :class:`Certificate` (whatever the status; status
+    CONVERGED implies it passed).
     """
 
     status: Status
@@ -106,6 +224,7 @@ class KernelResult:
     cycle_detected_at: int | None = None
     factorizations: int = 0
     column_solves: int = 0
+    certificate: Certificate | None = None
 
     @property
     def iterations(self) -> int:
@@ -133,26 +252,36 @@ def solve_contact(
     on_iteration: Callable[[Iteration], None] | None = None,
     safeguard: bool = True,
 ) -> KernelResult:
-    """Run the primal–dual active set iteration until the active set repeats.
+    """Run the primal–dual active set iteration until the active set repeats, then certify.
 
     Parameters
     ----------
     system : ContactSystem
     c : float, optional
-        Weight of the gap against the force in the active set indicator; default
-        :func:`default_c`.
+        Weight of the gap against the force in the active set indicator Bμ + c (d − G);
+        default :func:`default_c`. Recorded only: after a solve the indicator's sign is
+        that of Bμ on A and of d − G on I, so the iteration does not depend on c.
     tolerance : float
-        Bound on the relative equilibrium and complementarity residuals at convergence.
+        Relative bound of every condition of the certificate (raised to the round-off
+        bound of the equations where that is larger), and the band within which a nodal
+        force or a gap counts as zero when the active set is updated.
     max_iterations : int
     backend : str
         Sparse direct solver backend (see :mod:`contactfem.linalg`).
     initial_active : (m,) bool, optional
-        Starting active set; default: the nodes that start inside the obstacle (G < 0).
+        Starting active set; default: the nodes that start inside the obstacle (G < 0),
+        the indicator at u = 0, Bμ = 0 for any c.
     on_iteration : callable, optional
         Called with each :class:`Iteration` record (progress reporting).
     safeguard : bool
         When the active set repeats, go on with least-index single changes (default);
         False stops with status CYCLING instead.
+
+    Raises
+    ------
+    SolverError
+        If the stiffness (with its supports and an active set fixed) is singular or
+        numerically singular: there is no answer to certify.
     """
     normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
     gap = np.asarray(system.gap, dtype=float)
@@ -166,17 +295,16 @@ def solve_contact(
     # bodies pressed flat but makes bending-dominated ones (a slender beam lifting off)
     # release one node per step.
     active = (gap < 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
-    linear = ActiveSetSolver(system, backend)
-    stiffness, load = linear.stiffness, linear.load
-    equations = linear.free_rows
-    stiffness_norm = linear.norm
+    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     history: list[Iteration] = []
-    displacement = np.zeros(len(load))
+    displacement = np.zeros(len(linear.load))
     multiplier = np.zeros(m)
     nodal_force = np.zeros(m)
     status, message = Status.MAX_ITERATIONS, f"no convergence in {max_iterations} iterations"
+    certificate: Certificate | None = None
+    gap_floor = roundoff_bound(2)  # d − G: one subtraction of two numbers within S_D
 
     for iteration in range(1, max_iterations + 1):
         started = time.perf_counter()
@@ -187,29 +315,28 @@ def solve_contact(
         multiplier = mass_solver(reaction_at_contact) if m else multiplier
         # The method's own complementarity rows: its multiplier times its mass.
         nodal_force = mass @ multiplier if m else nodal_force
-        normal = displacement[normal_dofs]
-        indicator = nodal_force + c * (normal - gap)
+        slack = displacement[normal_dofs] - gap
+        scales = linear.measure(displacement, nodal_force)
 
-        # Normwise backward error: residuals are measured against ‖K‖ ‖u‖ + ‖F‖, what a
-        # backward-stable direct solve can reach whatever the conditioning (slender bodies
-        # have κ ~ (L/H)^4), and which scales with E and the loads like the residual.
-        force_scale = max(np.abs(load[equations]).max(initial=0.0) + stiffness_norm * np.abs(displacement).max(initial=0.0),
-                          np.abs(nodal_force).max(initial=0.0), np.finfo(float).tiny)
-        threshold = DEGENERACY_TOLERANCE * max(force_scale, np.abs(indicator).max(initial=0.0))
-        new_active = (indicator > threshold) | (active & (indicator >= -threshold))
+        # Newton's update of the active set, decided per node in the data's scales: on A
+        # (slack exactly 0) by the sign of the reaction, on I (reaction exactly 0) by the
+        # sign of the slack. Values within the certificate's tolerance of zero keep their
+        # node's state, so that round-off cannot make the set flicker and whatever the
+        # kernel treats as zero the certificate accepts.
+        force_band = max(tolerance, scales.roundoff) * scales.force
+        gap_band = max(tolerance, gap_floor) * scales.displacement
+        new_active = np.where(active, reaction_at_contact >= -force_band, slack > gap_band)
+        finite = bool(np.isfinite(displacement).all() and np.isfinite(nodal_force).all())
 
-        contact_load = np.zeros(len(load))
-        np.add.at(contact_load, normal_dofs, nodal_force)
-        residual = (stiffness @ displacement + contact_load - load)[equations]
-        equilibrium = np.abs(residual).max(initial=0.0) / force_scale
-        complementarity = (
-            np.abs(nodal_force - np.maximum(0.0, indicator)).max(initial=0.0) / force_scale
-        )
+        with np.errstate(invalid="ignore", over="ignore"):
+            complementarity = np.abs(
+                np.minimum(nodal_force / scales.force, -slack / scales.displacement)
+            ).max(initial=0.0)
         record = Iteration(
             active=int(active.sum()),
             added=int((new_active & ~active).sum()),
             removed=int((active & ~new_active).sum()),
-            equilibrium_residual=float(equilibrium),
+            equilibrium_residual=float(scales.equilibrium),
             complementarity_residual=float(complementarity),
             seconds=time.perf_counter() - started,
         )
@@ -217,8 +344,14 @@ def solve_contact(
         if on_iteration is not None:
             on_iteration(record)
 
+        if not finite:
+            certificate = linear.certify(displacement, multiplier, nodal_force, scales, tolerance)
+            status = Status.NOT_CERTIFIED
+            message = f"iteration {iteration} is not certified: {certificate.message}"
+            break
         if np.array_equal(new_active, active):
-            if equilibrium <= tolerance and complementarity <= tolerance:
+            certificate = linear.certify(displacement, multiplier, nodal_force, scales, tolerance)
+            if certificate.passed:
                 status = Status.CONVERGED
                 message = f"converged in {iteration} iterations, {int(active.sum())} active nodes"
                 if cycle_detected_at is not None:
@@ -227,11 +360,10 @@ def solve_contact(
                         "resolved by least-index single changes"
                     )
             else:
-                status = Status.INACCURATE
+                status = Status.NOT_CERTIFIED
                 message = (
-                    f"active set settled after {iteration} iterations but the residuals "
-                    f"(equilibrium {equilibrium:.1e}, complementarity {complementarity:.1e}) "
-                    f"exceed the tolerance {tolerance:.0e}: the linear solves are inaccurate"
+                    f"active set settled after {iteration} iterations ({int(active.sum())} active nodes) "
+                    f"but the result is not certified: {certificate.message}"
                 )
             break
         key = np.packbits(new_active).tobytes()
@@ -260,6 +392,10 @@ def solve_contact(
                 break
         active = new_active
 
+    if certificate is None and history:
+        # Stopped before the set settled (cap, cycling, non-finite): the figures of the last
+        # iterate still tell the caller how far it is from an answer.
+        certificate = linear.certify(displacement, multiplier, nodal_force, scales, tolerance)
     return KernelResult(
         status=status,
         message=message,
@@ -272,7 +408,18 @@ def solve_contact(
         cycle_detected_at=cycle_detected_at,
         factorizations=linear.factorizations,
         column_solves=linear.column_solves,
+        certificate=certificate,
     )
+
+
+@dataclass(frozen=True)
+class Scales:
+    """The data's scales at one iterate (see :class:`Certificate`) and its equilibrium residual."""
+
+    force: float
+    displacement: float
+    roundoff: float
+    equilibrium: float
 
 
 class ActiveSetSolver:
@@ -290,11 +437,17 @@ class ActiveSetSolver:
         [   −Eᵀ Z_r          −Eᵀ Z_d ] [ μ ] = [G_d − Eᵀ z0 ],   z0 = K00⁻¹ b0,
 
     then u = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor and
-    is kept for later iterations; beyond ``max_changes`` changed nodes the matrix is
-    factorised anew with the current set as reference.
+    is kept for later iterations; beyond ``max_changes`` changed nodes, or when the Schur
+    solve cannot meet the certificate's equilibrium bound (``tolerance``) even after
+    iterative refinement, the matrix is factorised anew with the current set as
+    reference. Every factorisation is probed for singularity
+    (:func:`contactfem.linalg.check_factorization`), the probe's solve riding along with
+    the first solve of the factor.
     """
 
-    def __init__(self, system: ContactSystem, backend: str, max_changes: int = 64) -> None:
+    def __init__(self, system: ContactSystem, backend: str, max_changes: int = 64,
+                 tolerance: float = 1e-10) -> None:
+        self.tolerance = tolerance
         self.stiffness = sp.csr_matrix(system.stiffness)
         self.stiffness.sort_indices()
         self.load = np.asarray(system.load, dtype=float)
@@ -316,49 +469,137 @@ class ActiveSetSolver:
         self.column_solves = 0
         self.reference: np.ndarray | None = None
         self.factor = None
-        # ‖K‖∞ over the equations: the scale of backward errors.
-        row_sums = np.bincount(self.entry_rows, np.abs(k.data), minlength=n)
-        self.norm = float(row_sums[~self.supported].max(initial=0.0))
+        self.checks: list[FactorCheck] = []
+        self._solved: np.ndarray | None = None
+        self._internal: np.ndarray | None = None
+        # |K|, for the round-off bound of the equations: k products and the load and contact force.
+        self.absolute = sp.csr_matrix((np.abs(k.data), k.indices, k.indptr), shape=k.shape)
+        self.gamma = roundoff_bound(int(np.diff(k.indptr).max(initial=0)) + 2)
 
     @property
     def free_rows(self) -> np.ndarray:
         """Rows of the residual that are equations (not supports), for residual checks."""
         return ~self.supported
 
+    @property
+    def condition(self) -> float:
+        """The condition estimate κ̂ of the current factorisation (1 before any)."""
+        return self.checks[-1].condition if self.checks else 1.0
+
+    def measure(self, u: np.ndarray, nodal_force: np.ndarray) -> Scales:
+        """Force and displacement scales of the iterate (u, Λ = Bμ) and its equilibrium residual."""
+        contact = np.zeros(len(u))
+        contact[self.normal_dofs] = nodal_force
+        # K u of the last solve, when this is its u (it was computed for its acceptance test).
+        internal = self._internal if u is self._solved else self.stiffness @ u
+        equations = ~self.supported
+        with np.errstate(invalid="ignore", over="ignore"):
+            residual = (internal + contact - self.load)[equations]
+            terms = (self.absolute @ np.abs(u) + np.abs(self.load) + np.abs(contact))[equations]
+            force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
+                     + np.abs(nodal_force).max(initial=0.0))
+            force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
+            displacement = max(np.abs(u).max(initial=0.0), np.abs(self.gap).max(initial=0.0))
+            displacement = max(displacement, np.finfo(float).tiny) if np.isfinite(displacement) else np.inf
+            return Scales(
+                force=float(force),
+                displacement=float(displacement),
+                roundoff=float(self.gamma * terms.max(initial=0.0) / force),
+                equilibrium=float(np.abs(residual).max(initial=0.0) / force),
+            )
+
+    def certify(self, u: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray, scales: Scales,
+                tolerance: float) -> Certificate:
+        """The :class:`Certificate` of the iterate (u, μ, Λ = Bμ) with its ``scales``."""
+        force_tolerance = max(tolerance, scales.roundoff)
+        gap_tolerance = max(tolerance, roundoff_bound(2))
+        non_finite = int(sum(np.count_nonzero(~np.isfinite(a)) for a in (u, multiplier, nodal_force)))
+        checks = {"finite": Check(float(non_finite), 0.0, non_finite == 0, "non-finite entries of u, mu, B mu")}
+        if non_finite == 0:
+            slack = u[self.normal_dofs] - self.gap
+            force, displacement = scales.force, scales.displacement
+            pushed = max(0.0, -nodal_force.min(initial=0.0)) / force
+            penetration = max(0.0, slack.max(initial=0.0)) / displacement
+            product = np.abs(nodal_force * slack).max(initial=0.0) / max(force * displacement, np.finfo(float).tiny)
+            both = max(force_tolerance, gap_tolerance)
+            checks.update({
+                "force_resolution": Check(scales.roundoff, FORCE_RESOLUTION_LIMIT,
+                                          scales.roundoff <= FORCE_RESOLUTION_LIMIT,
+                                          "round-off bound of the equilibrium equations / force scale (forces lost in cancellation)"),
+                "equilibrium": Check(scales.equilibrium, force_tolerance, scales.equilibrium <= force_tolerance,
+                                     "max |K u + N^T Lambda - F| / force scale"),
+                "force_sign": Check(pushed, force_tolerance, pushed <= force_tolerance,
+                                    "max(-Lambda) / force scale (Lambda = B mu >= 0)"),
+                "penetration": Check(penetration, gap_tolerance, penetration <= gap_tolerance,
+                                     "max(N u - G) / displacement scale"),
+                "complementarity": Check(float(product), both, product <= both,
+                                         "max |Lambda (N u - G)| / (force scale * displacement scale)"),
+            })
+        return Certificate(
+            checks=checks,
+            scales={
+                "force": scales.force,
+                "displacement": scales.displacement,
+                "roundoff": scales.roundoff,
+                "condition_estimate": self.condition,
+                "relative_precision": EPS * self.condition,
+                "solver_tolerance": float(tolerance),
+            },
+        )
+
     def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
         changes = 0 if self.reference is None else np.count_nonzero(active != self.reference)
         if self.reference is None or changes > self.max_changes:
             self._factorize(active)
+        u, reaction, accurate = self._solve_refined(active)
+        if not accurate and np.any(active != self.reference):
+            # The Schur update carries the errors of the reference factorisation, amplified
+            # when that reference is much worse conditioned than the current set (a body held
+            # by a tiny clamp until the contact takes hold): factorise the current set itself.
+            self._factorize(active)
+            u, reaction, _ = self._solve_refined(active)
+        return u, reaction
+
+    def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """u, the reactions at the active normals, and whether the equilibrium residual meets
+        the certificate's bound (see :class:`Certificate`)."""
         released = np.flatnonzero(self.reference & ~active)
         added = np.flatnonzero(~self.reference & active)
         u = self._solve_changed(released, added, self.base, self.load, self.values, self.gap[added])
-        # Iterative refinement towards a backward error of round-off, for solves that are not
-        # backward stable (SuperLU without pivoting, long chains of Schur updates); it
+        # Iterative refinement down to the round-off bound of the equations, for solves that
+        # are not backward stable (SuperLU without pivoting, long chains of Schur updates); it
         # corrects with the same factor and Schur structure while the residual improves.
         equations = ~self.supported
         equations[self.normal_dofs[active]] = False
-        scale = max(np.abs(self.load[equations]).max(initial=0.0) + self.norm * np.abs(u).max(initial=0.0),
-                    np.finfo(float).tiny)
+        with np.errstate(invalid="ignore", over="ignore"):
+            target = self.gamma * (self.absolute @ np.abs(u) + np.abs(self.load))[equations].max(initial=0.0)
         residual = np.where(equations, self.load - self.stiffness @ u, 0.0)
         for _ in range(REFINEMENT_STEPS):
             size = np.abs(residual).max(initial=0.0)
-            if size <= REFINEMENT_TARGET * scale:
+            if not size > target:  # also stops on NaN: the certificate reports it
                 break
             correction_base = self.factor.solve(np.where(self.free, residual, 0.0))
             correction = self._solve_changed(
                 released, added, correction_base, residual, np.zeros_like(u), np.zeros(len(added))
             )
             trial = np.where(equations, residual - self.stiffness @ correction, 0.0)
-            if np.abs(trial).max(initial=0.0) >= size:
+            if not np.abs(trial).max(initial=0.0) < size:
                 break
             u, residual = u + correction, trial
         fixed = self.normal_dofs[active]
         # Active normals satisfy u_n = G through the Schur system only to round-off; they
         # are constraints, so they are returned exactly (complementarity holds exactly).
         u[fixed] = self.gap[active]
-        reaction = self.load[fixed] - self.stiffness[fixed] @ u
-        return u, reaction
+        with np.errstate(invalid="ignore", over="ignore"):
+            internal = self.stiffness @ u
+            self._solved, self._internal = u, internal
+            reaction = self.load[fixed] - internal[fixed]
+            force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
+                     + np.abs(reaction).max(initial=0.0))
+            size = np.abs(self.load - internal)[equations].max(initial=0.0)
+            accurate = bool(size <= max(self.tolerance * force, target))
+        return u, reaction, accurate
 
     def _factorize(self, active: np.ndarray) -> None:
         k = self.stiffness
@@ -372,11 +613,19 @@ class ActiveSetSolver:
         data = np.where(keep, k.data, 0.0)
         data[self.diagonal[fixed]] = 1.0
         masked = sp.csr_matrix((data, k.indices, k.indptr), shape=k.shape)
-        self.factor = factorize(masked, self.backend)
+        name = "the stiffness matrix with its supports and active contact normals fixed"
+        self.factor = factorize(masked, self.backend, check=False, name=name)
         self.factorizations += 1
         rhs = self.load - k @ self.values
         rhs[fixed] = self.values[fixed]
-        self.base = self.factor.solve(rhs)
+        # The singularity probe's solve rides along with the first solve of the factor.
+        probe = probe_vector(len(rhs), self.free)
+        both = np.asarray(self.factor.solve(np.column_stack([rhs, probe]))).reshape(len(rhs), 2)
+        self.base = np.ascontiguousarray(both[:, 0])
+        # ‖K00‖∞ over its equations: the masked rows keep only their free columns.
+        norm = float((self.absolute @ self.free.astype(float))[self.free].max(initial=0.0))
+        self.checks.append(check_factorization(masked, self.factor, equations=self.free, probe=probe,
+                                               solution=both[:, 1], norm=norm, name=name))
         self.columns: dict[int, np.ndarray] = {}
 
     def _columns(self, nodes: np.ndarray) -> np.ndarray:
@@ -422,7 +671,13 @@ class ActiveSetSolver:
         top = np.hstack([k_rr - k_r0 @ z_r, -(k_r0 @ z_d)])
         bottom = np.hstack([-z_r[dofs_d], -z_d[dofs_d]])
         rhs = np.concatenate([b_r - k_r0 @ z0, added_values - z0[dofs_d]])
-        solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+        try:
+            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+        except np.linalg.LinAlgError as error:
+            raise SolverError(
+                f"the stiffness matrix is singular once {len(released)} contact nodes are released and "
+                f"{len(added)} added (Schur complement: {error}); is part of the body held only by contact?"
+            ) from error
         u_r, mu = solution[: len(released)], solution[len(released):]
         u = z0 - z_r @ u_r - z_d @ mu
         u[dofs_r] = u_r

@@ -176,3 +176,87 @@ def test_safeguard_changes_nothing_on_an_easy_problem(start):
     assert on.cycle_detected_at is None
     assert [r.active for r in on.history] == [r.active for r in off.history]
     np.testing.assert_array_equal(on.displacement, off.displacement)
+
+
+# The 4-unknown chain scaled to a stiffness of 1e6: its free solution (1, 2, 3, 4) penetrates
+# the obstacle at the last node by 3, so c (d − G) = 3e-6 for c = 1e-6, far below any
+# absolute threshold tied to the forces (‖K‖ ‖u‖ ~ 1e7).
+CHAIN_K = 1e6 * (2 * np.eye(4) - np.eye(4, k=1) - np.eye(4, k=-1))
+CHAIN_F = np.array([0.0, 0.0, 0.0, 5e6])
+CHAIN_G = np.array([10.0, 10.0, 10.0, 1.0])
+
+
+@pytest.mark.parametrize("c", [1e-6, 1.0, 1e6, 1e-6 * 2e6, 1e6 * 2e6])
+def test_c_does_not_change_the_answer(c):
+    """c = 1e-6, 1, 1e6 (absolute, and relative to the default 2e6): the same active sets,
+    iterations and answer, u = (1/4, 1/2, 3/4, 1), μ4 = 3.75e6 (the chain's solution)."""
+    reference = solve_contact(system(CHAIN_K, CHAIN_F, CHAIN_G))
+    result = solve_contact(system(CHAIN_K, CHAIN_F, CHAIN_G), c=c)
+    assert result.status is Status.CONVERGED, result.message
+    assert [r.active for r in result.history] == [r.active for r in reference.history]
+    np.testing.assert_array_equal(result.active, [False, False, False, True])
+    np.testing.assert_allclose(result.displacement, [0.25, 0.5, 0.75, 1.0], rtol=1e-10)
+    np.testing.assert_allclose(result.multiplier, [0, 0, 0, 3.75e6], rtol=1e-10, atol=1e-10 * 3.75e6)
+    np.testing.assert_allclose(result.displacement, reference.displacement, rtol=1e-10, atol=0)
+    assert result.c == c
+
+
+@pytest.mark.parametrize("factor", [1e-6, 1e6])
+@pytest.mark.parametrize("start", [None, "cycling"])
+def test_scaling_stiffness_and_loads_keeps_every_active_set(factor, start):
+    """K and F times 1e±6: the same sequence of active sets (also through the least-index
+    safeguard of the cycling problem), the same u and μ scaled by the factor, to 1e-10."""
+    k, f, g, initial = (CHAIN_K, CHAIN_F, CHAIN_G, None) if start is None else (
+        CYCLING_K, CYCLING_F, CYCLING_G, CYCLING_START)
+    base = solve_contact(system(k, f, g), initial_active=initial, max_iterations=100)
+    scaled = solve_contact(system(factor * k, factor * f, g), initial_active=initial, max_iterations=100)
+    assert base.status is scaled.status is Status.CONVERGED
+    assert [(r.active, r.added, r.removed) for r in scaled.history] == [
+        (r.active, r.added, r.removed) for r in base.history]
+    np.testing.assert_array_equal(scaled.active, base.active)
+    np.testing.assert_allclose(scaled.displacement, base.displacement, rtol=1e-10,
+                               atol=1e-10 * np.abs(base.displacement).max())
+    np.testing.assert_allclose(scaled.multiplier / factor, base.multiplier, rtol=1e-10,
+                               atol=1e-10 * np.abs(base.multiplier).max())
+
+
+def test_a_finite_element_system_is_independent_of_c_and_of_units():
+    """The square of the core issue (16 x 16): c = 1e-6, 1, 1e6 (absolute, the default being
+    about 3e6) and 1e±6 times the default, and E with the loads times 1e±6, give the same
+    active set and the same answer to 1e-10."""
+    from dataclasses import replace
+
+    from conftest import case_from, square_case_dict
+
+    from contactfem.kernel import default_c
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    problem = prepare(case_from(square_case_dict(16)))
+    for method in ("positive", "standard"):
+        sys_ = problem.contact_system(get_method(method)).system
+        base = solve_contact(sys_)
+        assert base.status is Status.CONVERGED and 0 < base.active.sum() < len(base.active)
+        scale_u = np.abs(base.displacement).max()
+        scale_mu = np.abs(base.multiplier).max()
+        for c in (1e-6, 1.0, 1e6, 1e-6 * default_c(sys_), 1e6 * default_c(sys_)):
+            other = solve_contact(sys_, c=c)
+            assert other.status is Status.CONVERGED, other.message
+            np.testing.assert_array_equal(other.active, base.active)
+            np.testing.assert_allclose(other.displacement, base.displacement, rtol=0, atol=1e-10 * scale_u)
+        for factor in (1e-6, 1e6):
+            scaled = solve_contact(replace(sys_, stiffness=factor * sys_.stiffness, load=factor * sys_.load))
+            assert scaled.status is Status.CONVERGED, scaled.message
+            np.testing.assert_array_equal(scaled.active, base.active)
+            assert scaled.iterations == base.iterations
+            np.testing.assert_allclose(scaled.displacement, base.displacement, rtol=0, atol=1e-10 * scale_u)
+            np.testing.assert_allclose(scaled.multiplier / factor, base.multiplier, rtol=0, atol=1e-10 * scale_mu)
+
+
+def test_converged_results_carry_a_passed_certificate():
+    """Every CONVERGED result above comes with its certificate, all checks passed."""
+    result = solve_contact(system(CHAIN_K, CHAIN_F, CHAIN_G))
+    assert result.status is Status.CONVERGED
+    assert result.certificate is not None and result.certificate.passed
+    assert set(result.certificate.checks) == {
+        "finite", "force_resolution", "equilibrium", "force_sign", "penetration", "complementarity"}

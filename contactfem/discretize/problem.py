@@ -60,7 +60,7 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0) -> DiscreteProbl
     """Assemble stiffness and loads, impose the supports and find the contact nodes."""
     material = case.material
     law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
-    stiffness = stiffness_matrix(mesh.points, mesh.triangles, law)
+    stiffness = stiffness_matrix(mesh.points, mesh.triangles, law, topology=mesh.topology)
     loads = compile_loads(case, mesh)
     dirichlet_dofs, dirichlet_values, symmetry_nodes, symmetry_normals = supports(case, mesh)
     contact = contact_boundary(case, mesh, dirichlet_dofs, symmetry_nodes, symmetry_normals)
