@@ -150,7 +150,12 @@ class _CheckedPath(click.Path):
         self.output = output
 
     def convert(self, value, param, ctx):
-        from contactfem.case import OUTPUT_NAME_RESERVE, OUTPUT_PATH_RESERVE, path_problem, shortened
+        from contactfem.case import (
+            OUTPUT_NAME_RESERVE,
+            OUTPUT_PATH_RESERVE,
+            path_problem,
+            shortened,
+        )
 
         reserves = {"name_reserve": OUTPUT_NAME_RESERVE, "path_reserve": OUTPUT_PATH_RESERVE} if self.output else {}
         problem = path_problem(value, **reserves) if isinstance(value, (str, bytes, Path)) else None
@@ -252,7 +257,7 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
         with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
-            result = solve_case(case, method=method, refine=refine, progress=progress)
+            result = solve_case(case, method=method, refine=refine, progress=progress, accept_uncertified=True)
             with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
                 report = _write_solution(staging, case, result, build_report(case, result), progress)
                 names = _files_of(case.output.files)
@@ -267,6 +272,18 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
         click.echo(to_json(report), nl=False)
     elif not quiet:
         click.echo(_summary(report, written))
+    _refuse_uncertified(case, result, directory)
+
+
+def _refuse_uncertified(case, result, directory: Path) -> None:
+    """Exit 1 for a result the kernel could not certify: its files are written (report.json
+    says status not_certified, with each check) but it is not an answer."""
+    from contactfem.errors import SolverError
+    from contactfem.kernel import Status
+
+    if result.kernel.status is Status.NOT_CERTIFIED:
+        _fail(SolverError(f"{case.source.name}: method {result.method}: not certified, "
+                          f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
 
 
 def _files_of(formats: tuple[str, ...]) -> list[str]:
@@ -657,6 +674,19 @@ def _estimate(case, problem) -> dict:
     return {"backend": backend, **estimate_cost(problem.n_unknowns, backend)}
 
 
+def _certificate_line(certificate: dict | None) -> str:
+    """The kernel's certificate in one line: each condition's relative value against its tolerance."""
+    if certificate is None:
+        return "  certificate  none (no iteration ran)"
+    checks = certificate["checks"]
+    shown = ", ".join(f"{name.replace('_', ' ')} {checks[name]['value']:.1e}"
+                      + ("" if checks[name]["passed"] else f" > {checks[name]['tolerance']:.1e}")
+                      for name in ("equilibrium", "force_sign", "penetration", "complementarity")
+                      if name in checks and checks[name]["value"] is not None)
+    verdict = "passed" if certificate["passed"] else "FAILED (" + ", ".join(certificate["failed"]) + ")"
+    return f"  certificate  {verdict}: {shown} (relative to the force and displacement scales)"
+
+
 def _summary(report: dict, written: list[Path]) -> str:
     zone = report["contact_zone"]
     signs = report["sign_conditions"]
@@ -674,6 +704,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         f"  signs        min multiplier {signs['min_multiplier']:.3g}, "
         f"max u_n - g {signs['max_normal_displacement_minus_gap']:.3g}",
         f"  equilibrium  relative residual {report['equilibrium']['relative_force_residual']:.1e}",
+        _certificate_line(report["solver"].get("certificate")),
         "  time         " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()),
     ]
     for warning in report.get("warnings", []):

@@ -73,6 +73,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             "factorizations": kernel.factorizations,
             "column_solves": kernel.column_solves,
             "sequencing": dict(result.sequencing),
+            "certificate": kernel.certificate.to_dict() if kernel.certificate is not None else None,
         },
         "newton": [
             {"iteration": i + 1, **{k: getattr(r, k) for k in

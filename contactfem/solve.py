@@ -94,16 +94,21 @@ def solve_case(
     refine: int | None = None,
     progress: Progress | None = None,
     problem: DiscreteProblem | None = None,
+    accept_uncertified: bool = False,
 ) -> SolveResult:
     """Mesh, assemble and solve ``case`` with ``method`` (default: the case's).
 
     A ``problem`` already assembled for this case (see :func:`prepare`) skips meshing and
-    assembly, which is how ``compare`` solves both methods on one system.
+    assembly, which is how ``compare`` solves both methods on one system. With
+    ``accept_uncertified``, a solve whose active set settled but whose iterate fails the
+    kernel's certificate is returned (``result.kernel.status`` says so) rather than raised,
+    so that its figures can be reported.
 
     Raises
     ------
     SolverError
-        If the kernel does not converge (cycling, iteration cap, inaccurate solves).
+        If the kernel does not converge (cycling, iteration cap, a singular system) or,
+        unless accepted, its result is not certified.
     """
     say = progress or (lambda message: None)
     method_name = method or case.solver.method
@@ -137,7 +142,8 @@ def solve_case(
         on_iteration=on_iteration,
     )
     timings["solve"] = time.perf_counter() - clock
-    if kernel.status is not Status.CONVERGED:
+    accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
+    if kernel.status not in accepted:
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()

@@ -222,10 +222,12 @@ def two_piece_mesh(directory: Path) -> Path:
     return write_gmsh(mesh, directory / "two.msh")
 
 
-def test_a_mesh_of_two_pieces_one_held_by_a_traction_is_a_solver_error(tmp_path):
+def test_a_mesh_of_two_pieces_one_held_by_a_traction_is_refused_naming_the_piece(tmp_path):
     """The finite element version: the old kernel moved the second piece by ~1e11 and said
-    CONVERGED."""
+    CONVERGED. Each connected piece must be held by its own supports: the case is refused
+    before any solve, and the kernel alone would still call the system singular."""
     from contactfem.case import load_case
+    from contactfem.errors import CaseError
     from contactfem.methods import get_method
     from contactfem.solve import prepare
 
@@ -235,7 +237,16 @@ def test_a_mesh_of_two_pieces_one_held_by_a_traction_is_a_solver_error(tmp_path)
             "obstacle": {"point": [0, 0], "normal": [0, -1]}}
     path = tmp_path / "two.yaml"
     path.write_text(yaml.safe_dump(case), encoding="utf-8")
-    system = prepare(load_case(path)).contact_system(get_method("positive")).system
+    with pytest.raises(CaseError, match=r"two.yaml: boundary: the mesh has 2 separate pieces .* not held"):
+        prepare(load_case(path))
+    import contactfem.discretize.supports as supports
+
+    unchecked = pytest.MonkeyPatch()
+    unchecked.setattr(supports, "_refuse_rigid_motion", lambda *args: None)
+    try:
+        system = prepare(load_case(path)).contact_system(get_method("positive")).system
+    finally:
+        unchecked.undo()
     with pytest.raises(SolverError, match="singular"):
         solve_contact(system)
 
@@ -387,3 +398,56 @@ def test_the_shipped_cases_are_certified_for_both_methods(path):
         outcome = solve_case(case, method=method, problem=problem)
         system = outcome.problem.contact_system(get_method(method)).system
         assert_certified(system, outcome.kernel, tolerance=case.solver.tolerance)
+
+
+# --- through the command line -------------------------------------------------------------------
+
+def _cli_case(tmp_path, change) -> Path:
+    data = square_case_dict(8)
+    change(data)
+    path = tmp_path / "variant.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return path
+
+
+def test_an_uncertified_result_exits_1_in_one_line_and_its_files_say_so(tmp_path):
+    """A prescribed displacement of 1e45 (inside the documented bounds): the forces are lost in
+    cancellation. Exit 1, one line naming the failed condition and its value; report.json
+    carries status not_certified and the failed check."""
+    import json
+
+    from conftest import make_runner
+
+    from contactfem.cli import main
+
+    path = _cli_case(tmp_path, lambda d: d["boundary"].update(left={"displacement": [1e45, 0]}))
+    out = tmp_path / "out"
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(out), "--quiet"])
+    assert result.exit_code == 1
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and "variant.yaml" in lines[0] and "not certified" in lines[0]
+    assert "force_resolution" in lines[0] and "exceeds its tolerance" in lines[0]
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["solver"]["status"] == "not_certified"
+    assert report["solver"]["certificate"]["failed"] == ["force_resolution"]
+
+
+@pytest.mark.parametrize("c", [1e-6, 1e6])
+def test_a_tiny_or_huge_c_gives_the_answer_of_c_one_through_the_command_line(tmp_path, c):
+    """solver.c only starts the iteration: the certified answer is the same as with c = 1."""
+    import json
+
+    from conftest import make_runner
+
+    from contactfem.cli import main
+
+    reports = {}
+    for value in (1.0, c):
+        path = _cli_case(tmp_path, lambda d: d.update(solver={"c": value}))
+        out = tmp_path / f"out-{value:g}"
+        result = make_runner().invoke(main, ["solve", str(path), "--out", str(out), "--quiet"])
+        assert result.exit_code == 0, result.stderr
+        reports[value] = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert reports[c]["solver"]["certificate"]["passed"]
+    assert reports[c]["contact_zone"] == reports[1.0]["contact_zone"]
+    assert reports[c]["contact_force"]["normal"] == pytest.approx(reports[1.0]["contact_force"]["normal"], rel=1e-10)

@@ -89,26 +89,61 @@ def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.
     return np.concatenate(nodes), np.concatenate(normals)
 
 
+#: A piece whose constraints see a rigid motion (unit translations, rotations scaled by the
+#: piece's size) weaker than this fraction of the strongest leaves that motion free: the
+#: Gram matrix's eigenvalue ratio, so 1e-14 is a singular value ratio of 1e-7.
+RIGID_MOTION_TOLERANCE = 1e-14
+
+
 def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
                          symmetry_normals: np.ndarray) -> None:
-    """The supports must pin the three rigid motions: translations along x and y, rotation."""
+    """Every connected piece of the mesh must have its three rigid motions (translations along
+    x and y, rotation) pinned by its own supports: a piece joined to the rest by no edge is
+    held by nothing else."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = mesh.topology.edges
+    n_pieces, piece_of = connected_components(
+        coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(mesh.n_points, mesh.n_points)),
+        directed=False)
+    used = np.zeros(mesh.n_points, dtype=bool)
+    used[mesh.triangles.ravel()] = True
     # Each constraint holds u(p) · d = 0 for a point p and direction d: a prescribed
     # component (d = e_x or e_y) or a symmetry line (d = n_s).
     directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals])
-    p = mesh.points[np.concatenate([dofs // 2, symmetry_nodes])]
-    centre = p.mean(axis=0) if len(p) else np.zeros(2)
-    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc), seen through each constraint.
-    modes = np.zeros((len(p), 3))
-    modes[:, 0] = directions[:, 0]
-    modes[:, 1] = directions[:, 1]
-    modes[:, 2] = -(p[:, 1] - centre[1]) * directions[:, 0] + (p[:, 0] - centre[0]) * directions[:, 1]
-    scale = np.ptp(mesh.points, axis=0).max()
-    modes[:, 2] /= scale
-    singular = np.linalg.svd(modes, compute_uv=False) if len(modes) else np.zeros(0)
-    rank = int((singular > 1e-8 * max(singular.max(initial=0.0), 1.0)).sum())
-    if rank < 3:
-        names = ", ".join(case.dirichlet_parts)
+    nodes = np.concatenate([dofs // 2, symmetry_nodes])
+    piece = piece_of[nodes]
+    # Each piece's own centre and size, so that its rotation is measured in its own units.
+    count = np.bincount(piece_of[used], minlength=n_pieces).astype(float)
+    centre = np.stack([np.bincount(piece_of[used], mesh.points[used, k], minlength=n_pieces) for k in range(2)],
+                      axis=1) / np.maximum(count, 1)[:, None]
+    low = np.full((n_pieces, 2), np.inf)
+    high = np.full((n_pieces, 2), -np.inf)
+    np.minimum.at(low, piece_of[used], mesh.points[used])
+    np.maximum.at(high, piece_of[used], mesh.points[used])
+    size = np.where(count > 0, (high - low).max(axis=1), 1.0)
+    size = np.where(size > 0, size, 1.0)
+    arm = (mesh.points[nodes] - centre[piece]) / size[piece][:, None]
+    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc)/size, seen through each constraint.
+    modes = np.stack([directions[:, 0], directions[:, 1],
+                      -arm[:, 1] * directions[:, 0] + arm[:, 0] * directions[:, 1]], axis=1)
+    gram = np.zeros((n_pieces, 3, 3))
+    np.add.at(gram, piece, modes[:, :, None] * modes[:, None, :])
+    eigenvalues = np.linalg.eigvalsh(gram)
+    free = (eigenvalues[:, 0] <= RIGID_MOTION_TOLERANCE * np.maximum(eigenvalues[:, 2], 1.0)) & (count > 0)
+    if not free.any():
+        return
+    names = ", ".join(case.dirichlet_parts) or "none"
+    if n_pieces - int((count == 0).sum()) == 1:
         raise CaseError(
             f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body "
             "free, so the problem is ill-posed; prescribe both components on a part of positive length"
         )
+    loose = int(np.flatnonzero(free)[0])
+    where = mesh.points[np.flatnonzero(piece_of == loose)[0]]
+    raise CaseError(
+        f"{case.source.name}: boundary: the mesh has {int((count > 0).sum())} separate pieces (no edge joins "
+        f"them) and the one through ({where[0]:g}, {where[1]:g}) is not held: the supports ({names}) leave "
+        "a rigid motion of it free; join the pieces in the mesh or support each one"
+    )
