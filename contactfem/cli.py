@@ -165,6 +165,18 @@ class _CheckedPath(click.Path):
         return super().convert(value, param, ctx)
 
 
+class _FiniteFloatRange(click.FloatRange):
+    """A float range that also refuses nan and ±inf (click's own range lets them through)."""
+
+    def convert(self, value, param, ctx):
+        import math
+
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{number} is not a finite number", param, ctx)
+        return number
+
+
 case_argument = click.argument("case_file", metavar="CASE", type=_CheckedPath(dir_okay=False))
 refine_option = click.option("--refine", type=click.IntRange(0, 12), default=None,
                              help="Uniform refinements of the case's mesh (each halves h).")
@@ -243,16 +255,13 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       contactfem solve cases/square.yaml --overwrite      # replace results/square
       contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
     """
-    from contactfem.case import load_case
     from contactfem.io.atomic import claimed_directory
     from contactfem.report import build_report
     from contactfem.solve import solve_case
 
     progress = _progress(quiet)
     try:
-        case = load_case(case_file)
-        if backend is not None:
-            case = case.with_solver(backend=backend)
+        case = _load(case_file, backend)
         if make_plot and "h5" not in case.output.files:
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
@@ -286,6 +295,23 @@ def _refuse_uncertified(case, result, directory: Path) -> None:
                           f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
 
 
+def _load(case_file: Path, backend: str | None = None):
+    """The validated case, with --backend applied; a backend that is not installed is bad input."""
+    from contactfem.case import load_case
+    from contactfem.errors import SolverError
+    from contactfem.linalg import resolve_backend
+
+    case = load_case(case_file)
+    if backend is not None:
+        case = case.with_solver(backend=backend)
+    try:
+        resolve_backend(case.solver.backend)
+    except SolverError as error:
+        key = "--backend" if backend is not None else "solver.backend"
+        raise CaseError(f"{case_file.name}: {key} = {case.solver.backend}: {error}") from None
+    return case
+
+
 def _files_of(formats: tuple[str, ...]) -> list[str]:
     from contactfem.io.registry import FORMATS
 
@@ -308,6 +334,7 @@ def _write_solution(staging: Path, case, result, report: dict, progress) -> dict
 @refine_option
 @json_option
 @click.option("--quiet", "-q", is_flag=True, help="Print nothing; the exit code tells (0 valid, 2 not).")
+@_interruptible
 def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = False) -> None:
     """Validate CASE and mesh it, without solving; print what it models.
 
@@ -315,11 +342,10 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     Example:
       contactfem check cases/hole.yaml
     """
-    from contactfem.case import load_case
     from contactfem.solve import prepare
 
     try:
-        case = load_case(case_file)
+        case = _load(case_file)
         problem = prepare(case, refine=refine)
     except ContactFemError as error:
         _fail(error)
@@ -379,14 +405,13 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     Example:
       contactfem compare cases/square.yaml --refine 1
     """
-    from contactfem.case import load_case
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
     from contactfem.plots import plot_contact_profiles
     from contactfem.studies import compare_methods
 
     try:
-        case = load_case(case_file)
+        case = _load(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-compare")
         with claimed_directory(directory, markers=(COMPARE_JSON,), overwrite=overwrite) as claim:
             figures, outcomes = compare_methods(case, refine=refine, progress=_progress(quiet))
@@ -449,14 +474,13 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
     Example:
       contactfem converge cases/square.yaml --levels 4
     """
-    from contactfem.case import load_case
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
     from contactfem.plots import plot_convergence
     from contactfem.studies import convergence_study
 
     try:
-        case = load_case(case_file)
+        case = _load(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-convergence")
         kept: list = []  # (label, solution) of every level and method, for convergence-*.pvd
         with claimed_directory(directory, markers=(CONVERGENCE_JSON,), overwrite=overwrite) as claim:
@@ -490,7 +514,8 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
         index = row["level"] - 1
         cells = []
         for norm in short:
-            rate = f"({rates[norm][index]:.2f})" if index >= 0 else ""
+            value = rates[norm][index] if index >= 0 else None
+            rate = "" if index < 0 else ("(n/a)" if value is None else f"({value:.2f})")
             cells.append(f"{row[norm]:.3e} {rate:>6}")
         click.echo(f"  {row['method']:<9}{row['h']:>9.4f}{row['unknowns']:>10}{row['iterations']:>7}"
                    f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells))
@@ -502,13 +527,13 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
 
 @main.command()
 @case_argument
-@click.option("--target", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--target", type=_FiniteFloatRange(min=0, min_open=True), default=None,
               help="Stop once the estimate η is at most this (energy norm, the case's units).")
 @click.option("--max-unknowns", type=click.IntRange(min=1), default=100_000, show_default=True,
               help="Do not solve a mesh with more displacement unknowns than this.")
-@click.option("--max-seconds", type=click.FloatRange(min=0, min_open=True), default=600.0, show_default=True,
+@click.option("--max-seconds", type=_FiniteFloatRange(min=0, min_open=True), default=600.0, show_default=True,
               help="Stop after the step that passes this many seconds.")
-@click.option("--theta", type=click.FloatRange(0, 1, min_open=True), default=0.5, show_default=True,
+@click.option("--theta", type=_FiniteFloatRange(0, 1, min_open=True), default=0.5, show_default=True,
               help="Dörfler bulk marking: refine a smallest set carrying θ of Σ η_T².")
 @click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Output directory. Default: <output.directory>-adapt.")
@@ -532,14 +557,13 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
       contactfem adapt cases/manufactured.yaml --target 2e-5 --theta 0.3
     """
     from contactfem.adaptive import adapt as adaptive_loop
-    from contactfem.case import load_case
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
     from contactfem.report import build_report
 
     progress = _progress(quiet)
     try:
-        case = load_case(case_file)
+        case = _load(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-adapt")
         with claimed_directory(directory, markers=(ADAPT_JSON, *RESULT_MARKERS), overwrite=overwrite) as claim:
             run = adaptive_loop(case, theta=theta, target=target, max_unknowns=max_unknowns,

@@ -147,7 +147,10 @@ def convergence_study(
         mine = [r for r in rows if r["method"] == name]
         h = [r["h"] for r in mine]
         rates[name] = {
-            norm: [float(v) for v in observed_rates(h, [r[norm] for r in mine])] for norm in NORM_NAMES
+            # A rate is undefined where an error is zero or not finite (an unloaded body: u = 0
+            # on every mesh): null, not NaN.
+            norm: [float(v) if np.isfinite(v) else None for v in observed_rates(h, [r[norm] for r in mine])]
+            for norm in NORM_NAMES
         }
     return {
         "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},

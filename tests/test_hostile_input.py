@@ -477,3 +477,66 @@ def test_too_many_holes(tmp_path):
 def test_the_limits_are_what_the_documentation_says():
     assert MAX_CASE_BYTES == 1 << 20
     assert PATH_MAX >= 256 and NAME_MAX >= 14
+
+
+# --------------------------------------------------------------------- hostile options and states
+
+
+def _square(tmp_path, **changes) -> Path:
+    data = yaml.safe_load(SQUARE_TEXT)
+    data.update(changes)
+    path = tmp_path / CASE_NAME
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("option, value", [("--theta", "nan"), ("--theta", "inf"), ("--target", "inf"),
+                                           ("--target", "nan"), ("--max-seconds", "nan"),
+                                           ("--max-seconds", "-inf"), ("--max-unknowns", "1e9")])
+def test_adapt_refuses_non_finite_budgets(tmp_path, option, value):
+    out = tmp_path / "out"
+    assert_one_line(invoke("adapt", _square(tmp_path), option, value, "--out", out), option)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["solve", "check", "compare", "converge", "adapt"])
+def test_a_backend_that_is_not_installed_is_bad_input_for_every_command(tmp_path, command):
+    from contactfem.linalg import BACKEND_NAMES, available_backends
+
+    missing = [name for name in BACKEND_NAMES if name not in available_backends()]
+    if not missing:
+        pytest.skip("every backend is installed here")
+    path = _square(tmp_path, solver={"backend": missing[0]})
+    extra = () if command == "check" else ("--out", tmp_path / "out")
+    assert_one_line(invoke(command, path, *extra), CASE_NAME, "solver.backend", missing[0], "not installed")
+    assert not (tmp_path / "out").exists()
+
+
+def test_converge_on_an_unloaded_body_reports_undefined_rates_as_null(tmp_path):
+    """u = 0 on every mesh: every error is zero and no rate exists; the study says so (null)
+    instead of writing NaN or failing."""
+    import json
+
+    data = yaml.safe_load(SQUARE_TEXT)
+    data["boundary"]["top"] = "free"
+    path = tmp_path / CASE_NAME
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    out = tmp_path / "out"
+    result = invoke("converge", path, "--levels", "2", "--out", out, "--quiet")
+    assert result.exit_code == 0, result.stderr
+    study = json.loads((out / "convergence.json").read_text(encoding="utf-8"))
+    assert all(rate is None for rates in study["rates"].values() for values in rates.values() for rate in values)
+
+
+@pytest.mark.parametrize("content", [b"", b"garbage", b"\x89HDF\r\n\x1a\n" + b"\x00" * 64])
+def test_plot_on_a_corrupt_archive_is_one_line(tmp_path, content):
+    (tmp_path / "solution.h5").write_bytes(content)
+    line = assert_one_line(invoke("plot", tmp_path), "solution.h5", code=1)
+    assert "cannot read" in line
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["solution.h5"]
+
+
+def test_an_option_on_the_wrong_command_is_one_line(tmp_path):
+    assert_one_line(invoke("check", _square(tmp_path), "--overwrite"), "--overwrite")
+    assert_one_line(invoke("solve"), "CASE")
+    assert_one_line(invoke("nonsense"), "nonsense")
