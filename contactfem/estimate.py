@@ -10,6 +10,8 @@ assembly and writing add about 25%. Expect ±50% on other machines.
 
 from __future__ import annotations
 
+import os
+
 REFERENCE_UNKNOWNS = 2.1e6
 FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0}
 PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9}
@@ -22,3 +24,23 @@ def estimate_cost(unknowns: int, backend: str) -> dict[str, float]:
     seconds = 1.3 * FACTOR_SECONDS[backend] * scale**GROWTH * 1.25
     peak = PEAK_BYTES[backend] * scale + 0.15e9  # the interpreter and libraries
     return {"seconds": seconds, "bytes": peak}
+
+
+def largest_mesh_points(backend: str, memory: int) -> int:
+    """The most mesh nodes whose solve the model fits in ``memory`` bytes with ``backend``."""
+    scale = max(memory - 0.15e9, 0.0) / PEAK_BYTES[backend]
+    return int(scale * REFERENCE_UNKNOWNS / 2)
+
+
+def unknowns_of_triangles(triangles: int) -> int:
+    """Displacement unknowns of a P1 mesh of ``triangles`` triangles: a planar triangulation has
+    about half as many nodes as triangles, with two unknowns each."""
+    return int(triangles)
+
+
+def machine_memory() -> int:
+    """This machine's physical memory in bytes (16 GiB when the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 16 * 2**30

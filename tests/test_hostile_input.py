@@ -540,3 +540,51 @@ def test_an_option_on_the_wrong_command_is_one_line(tmp_path):
     assert_one_line(invoke("check", _square(tmp_path), "--overwrite"), "--overwrite")
     assert_one_line(invoke("solve"), "CASE")
     assert_one_line(invoke("nonsense"), "nonsense")
+
+
+SLIVER = """
+geometry:
+  polygon:
+    vertices: [[0, 0], [1, 0], [0.5, 1.0e-8]]
+    edges: [bottom, right, left]
+mesh: {size: 0.05}
+material: {E: 1.0e6, nu: 0.3}
+boundary: {bottom: contact, left: clamped, right: {traction: [0, -1]}}
+obstacle: {point: [0, 0], normal: [0, -1]}
+"""
+
+
+def test_a_sliver_that_needs_far_more_triangles_than_its_size_says_is_refused_within_memory(tmp_path, monkeypatch):
+    """A triangle 1e-8 high: its size says about a thousand triangles, a 30-degree quality mesh
+    needs millions. Triangle is capped at what the machine can solve (here a 1 GiB machine),
+    and the case is refused in one line naming the key."""
+    import contactfem.discretize.meshing as meshing
+
+    monkeypatch.setattr(meshing, "machine_memory", lambda: 2**30)
+    path = tmp_path / CASE_NAME
+    path.write_text(SLIVER, encoding="utf-8")
+    assert_one_line(invoke("check", path), CASE_NAME, "geometry.polygon", "feature far smaller than the mesh size")
+
+
+@pytest.mark.parametrize("refine", [3, 4, 5, 6, 7])
+def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeypatch, refine):
+    """check refuses exactly the meshes whose estimated peak memory (the figure it prints for
+    the others) exceeds the machine's memory; here a machine of 4 GiB."""
+    import json
+
+    import contactfem.discretize.meshing as meshing
+
+    memory = 4 * 2**30
+    monkeypatch.setattr(meshing, "machine_memory", lambda: memory)
+    path = tmp_path / CASE_NAME
+    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32"), encoding="utf-8")
+    result = invoke("check", path, "--refine", refine, "--json")
+    from contactfem.estimate import estimate_cost
+    from contactfem.linalg import resolve_backend
+
+    expected = estimate_cost(2 * 32 * 32 * 4**refine, resolve_backend("auto"))["bytes"]
+    if expected > memory:
+        assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB")
+    else:
+        assert result.exit_code == 0, result.stderr
+        assert json.loads(result.stdout)["estimate"]["bytes"] <= memory

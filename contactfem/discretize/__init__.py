@@ -12,14 +12,12 @@ from contactfem.discretize.contact import ContactBoundary, FlatObstacle
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, NaturalBoundary
 from contactfem.discretize.meshing import (
-    BYTES_PER_TRIANGLE,
     build_mesh,
     estimate_triangles,
 )
 from contactfem.discretize.problem import DiscreteProblem, build_problem
 
 __all__ = [
-    "BYTES_PER_TRIANGLE",
     "ContactBoundary",
     "DiscreteProblem",
     "FlatObstacle",

@@ -6,6 +6,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError, MeshError
+from contactfem.estimate import largest_mesh_points, machine_memory
 from contactfem.mesh import (
     Mesh,
     check_mesh,
@@ -31,9 +32,9 @@ def build_mesh(case: Case, refine: int | None = None) -> Mesh:
             f"named {missing[0]!r}; it has {', '.join(mesh.part_names)}"
         )
     times = case.mesh.refine if refine is None else refine
-    if isinstance(case.geometry, MeshFileGeometry):
-        # Only now is the mesh file's size known: refuse its refinements before they allocate.
-        _refuse_oversized(case, refine, base=mesh.n_triangles)
+    # Only now is the mesh's real size known (a mesh file, or a polygon with small features
+    # meshed finer than its size asked): the same model checks it before refinements allocate.
+    _refuse_oversized(case, refine, base=mesh.n_triangles)
     if times:
         mesh = refine_uniform(mesh, times)
     try:
@@ -42,11 +43,6 @@ def build_mesh(case: Case, refine: int | None = None) -> Mesh:
         kind = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
         raise MeshError(f"{case.source.name}: geometry.{kind[type(case.geometry)]}: {error}") from None
     return mesh
-
-
-# Peak memory of a solve per triangle, measured on the square case at 2.1M triangles
-# (assembly, CHOLMOD factor, outputs), about 2 kB, with a margin.
-BYTES_PER_TRIANGLE = 2500
 
 
 def estimate_triangles(case: Case, refine: int | None = None) -> int:
@@ -116,24 +112,35 @@ def _mesh_origin(case: Case) -> str:
     return "the mesh"
 
 
-def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
-    """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before refining."""
-    import os
+def _backend(case: Case) -> str:
+    from contactfem.errors import SolverError
+    from contactfem.linalg import resolve_backend
 
     try:
-        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        memory = 16 * 2**30
+        return resolve_backend(case.solver.backend)
+    except SolverError as error:
+        raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: {error}") from None
+
+
+def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
+    """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before
+    refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
+    ``contactfem check`` prints) says this machine's memory cannot hold."""
+    from contactfem.estimate import estimate_cost, unknowns_of_triangles
+
     if base is None:
         triangles = estimate_triangles(case, refine)
     else:
         triangles = base * 4 ** (case.mesh.refine if refine is None else refine)
-    limit = memory // BYTES_PER_TRIANGLE
-    if triangles > limit:
+    backend = _backend(case)
+    unknowns = unknowns_of_triangles(triangles)
+    needed = estimate_cost(unknowns, backend)["bytes"]
+    memory = machine_memory()
+    if needed > memory:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
-            f"more than the {limit:.3g} this machine's {memory / 2**30:.0f} GiB can solve; "
-            "use fewer divisions, a larger mesh.size or fewer refinements"
+            f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
+            f"this machine's {memory / 2**30:.3g} GiB; use fewer divisions, a larger mesh.size or fewer refinements"
         )
 
 
@@ -149,6 +156,7 @@ def _mesh_geometry(case: Case) -> Mesh:
         mesh = triangulate_domain(
             geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
             size=_contact_grading(case) if settings.contact_size is not None else None,
+            max_points=largest_mesh_points(_backend(case), machine_memory()),
         )
     else:
         assert isinstance(geometry, MeshFileGeometry)

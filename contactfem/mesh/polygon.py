@@ -468,10 +468,10 @@ def _area_switch(area: float) -> str:
 
 
 def _refine_to_size(result: dict, holes: np.ndarray | None, size: SizeField, min_angle: float,
-                    rounds: int = 12) -> dict:
+                    rounds: int = 12, steiner: str = "") -> dict:
     """Refine Triangle's mesh until every triangle is at most the equilateral one of edge
     h(centroid); Triangle's ``r`` switch keeps segments and their markers."""
-    switches = f"rpq{float(min_angle):.6f}aQ"
+    switches = f"rpq{float(min_angle):.6f}aQ{steiner}"
     for _ in range(rounds):
         vertices = np.asarray(result["vertices"])
         tri = np.asarray(result["triangles"])
@@ -496,7 +496,7 @@ def _loop_label(index: int) -> str:
 
 def triangulate_domain(
     outer: Loop, holes: list[Loop], max_edge: float, min_angle: float = 30.0,
-    size: SizeField | None = None,
+    size: SizeField | None = None, max_points: int | None = None,
 ) -> Mesh:
     """Quality triangulation of the region inside ``outer`` and outside every hole.
 
@@ -517,6 +517,10 @@ def triangulate_domain(
         A size field h(points (k, 2)) -> (k,), at most ``max_edge``: boundary points are
         spaced by it and triangles refined until each is no larger than the
         equilateral triangle of edge h at its centroid (a graded mesh).
+    max_points : int, optional
+        The most nodes the mesh may have: Triangle adds no more Steiner points than that
+        allows (a sliver or a tiny feature can call for far more than ``max_edge``
+        suggests), and a mesh that would need more is refused.
 
     Returns
     -------
@@ -575,10 +579,18 @@ def triangulate_domain(
             [_interior_point(boundary.points[h], _loop_label(h)) for h in range(1, len(loops))]
         )
     max_area = max_edge**2 * math.sqrt(3) / 4
-    switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q"
+    # Triangle's S switch caps the Steiner points it adds, so that memory stays bounded.
+    steiner = "" if max_points is None else f"S{max(int(max_points) - len(points), 0)}"
+    switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q{steiner}"
     result = triangle.triangulate(pslg, switches)
     if size is not None:
-        result = _refine_to_size(result, pslg.get("holes"), size, min_angle)
+        result = _refine_to_size(result, pslg.get("holes"), size, min_angle, steiner=steiner)
+    if max_points is not None and len(result["vertices"]) >= max_points:
+        raise MeshError(
+            f"meshing with a smallest angle of {min_angle:g} degrees needs more than {max_points:.3g} nodes, "
+            "more than this machine can solve: the geometry has a feature far smaller than the mesh size "
+            "(a sliver, a narrow gap or a tiny edge); widen it or remove it"
+        )
     tri = result.get("triangles")
     if tri is None or len(tri) == 0:
         raise MeshError("Triangle produced no triangles; are the holes inside the outer loop?")
