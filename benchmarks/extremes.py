@@ -72,7 +72,10 @@ class Extreme:
     name: str
     group: str
     data: dict
-    refuse: str | None = None          # a fragment of the expected one-line refusal
+    refuse: str | None = None          # a fragment of the expected one-line refusal (bad input, exit 2)
+    #: A fragment of the expected one-line failure (exit 1): a system the kernel cannot certify
+    #: or a numerically singular one; the answer is not called a success.
+    unsolvable: str | None = None
     expect: dict = field(default_factory=dict)  # e.g. {"active": "all" | "none", "warning": True}
     mesh_file: dict | None = None      # {"n": .., "angle": ..}: a gmsh file written next to the case
 
@@ -168,8 +171,24 @@ def catalogue(fast: bool, largest: int = 1024) -> list[Extreme]:
         add(Extreme(f"rotated {angle}", "rotation", rotated_case(n, angle), mesh_file={"n": n, "angle": angle}))
     # Both methods and small/large c on an FE problem.
     add(Extreme("standard", "method", with_(square(n), "solver", {"method": "standard"})))
-    for c in (1e-3, 1e9):
+    for c in (1e-6, 1e-3, 1e6, 1e9):
         add(Extreme(f"c={c:g}", "method", with_(square(n), "solver", {"c": c})))
+    # Hostile data: results that used to exit 0 as "converged" although wrong.
+    add(Extreme("u_D = 1e45 (away)", "hostile", with_(square(n), "boundary.left", {"displacement": [1e45, 0]}),
+                unsolvable="not certified"))
+    add(Extreme("u_D = -1e45 (pressing)", "hostile",
+                with_(square(n), "boundary.left", {"displacement": [0, -1e45]})))
+    slender = square(0)
+    slender["geometry"] = {"rectangle": {"lower": [0, 0], "upper": [1, 1e-6]}}
+    slender["mesh"] = {"divisions": [64, 2]}
+    slender["boundary"]["top"] = {"traction": [0.0, "-1.0*(1-1.5*x)"]}
+    add(Extreme("body 1 x 1e-6", "hostile", slender, unsolvable="singular"))
+    add(Extreme("sliver 1e-8 high", "hostile", {
+        "geometry": {"polygon": {"vertices": [[0, 0], [1, 0], [0.5, 1.0e-8]], "edges": ["bottom", "right", "left"]}},
+        "mesh": {"size": 0.05}, "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"bottom": "contact", "left": "clamped", "right": {"traction": [0, -1]}},
+        "obstacle": {"point": [0, 0], "normal": [0, -1]}}, refuse="geometry.polygon"))
+    add(Extreme("refine beyond memory", "hostile", with_(square(32), "mesh.refine", 7), refuse="mesh"))
     return cases
 
 
@@ -235,6 +254,12 @@ def run_case(case: Extreme, workdir: Path) -> Outcome:
         ok = result.exit_code == 2 and len(lines) == 1 and case.refuse in lines[0] and not out.exists()
         return Outcome(case.name, case.group, "refused" if ok else "failed",
                        lines[0] if lines else f"exit {result.exit_code}, expected a refusal naming {case.refuse}")
+    if case.unsolvable is not None:
+        ok = result.exit_code == 1 and len(lines) == 1 and case.unsolvable in lines[0]
+        if ok and (out / "report.json").exists():  # files written for an uncertified result say so
+            ok = json.loads((out / "report.json").read_text(encoding="utf-8"))["solver"]["status"] != "converged"
+        return Outcome(case.name, case.group, "refused" if ok else "failed",
+                       lines[0] if lines else f"exit {result.exit_code}, expected a failure naming {case.unsolvable}")
     if result.exit_code != 0:
         status = "refused" if result.exit_code == 2 and len(lines) == 1 else "failed"
         return Outcome(case.name, case.group, status if status == "failed" else "failed",
