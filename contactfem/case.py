@@ -171,10 +171,15 @@ class BoundaryPart:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """The rigid half-plane {p : (p − point)·normal ≥ 0}; ``normal`` is a unit vector pointing into it."""
+    """The rigid half-plane {p : (p − point)·normal ≥ 0}; ``normal`` is a unit vector pointing into it.
+
+    ``ends`` are the two end points of a finite obstacle (a segment: a table, a punch), None
+    for an infinite one: only the part of the surface between them exists.
+    """
 
     point: tuple[float, float]
     normal: tuple[float, float]
+    ends: tuple[tuple[float, float], tuple[float, float]] | None = None
 
 
 @dataclass(frozen=True)
@@ -1077,25 +1082,30 @@ def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None,
 
 
 def _obstacle(r: _Reader, data: Any) -> Obstacle:
-    data = r.mapping(data, "obstacle", ("point", "normal", "points"))
-    if "points" in data:
-        if "point" in data or "normal" in data:
-            raise r.fail("obstacle", data, "give either point and normal, or points")
-        points = data["points"]
+    data = r.mapping(data, "obstacle", ("point", "normal", "points", "segment"))
+    given = [key for key in ("points", "segment") if key in data]
+    if given:
+        key = given[0]
+        if len(given) > 1 or "point" in data or "normal" in data:
+            raise r.fail("obstacle", data, "give one of: point and normal, points (an infinite line), "
+                                           "or segment (a finite one)")
+        points = data[key]
         if not isinstance(points, list) or len(points) != 2:
-            raise r.fail("obstacle.points", points, "expected two points [[x0, y0], [x1, y1]] on the obstacle's surface")
-        p0 = np.array(r.point(points[0], "obstacle.points[0]"))
-        p1 = np.array(r.point(points[1], "obstacle.points[1]"))
+            raise r.fail(f"obstacle.{key}", points, "expected two points [[x0, y0], [x1, y1]] on the obstacle's surface")
+        p0 = np.array(r.point(points[0], f"obstacle.{key}[0]"))
+        p1 = np.array(r.point(points[1], f"obstacle.{key}[1]"))
         d = p1 - p0
         length = np.hypot(*d)
-        if not length > 0:
-            raise r.fail("obstacle.points", points, "the two points must differ")
+        scale = max(np.abs(p0).max(), np.abs(p1).max(), 1e-300)
+        if not length > 1e-9 * scale:
+            raise r.fail(f"obstacle.{key}", points, "the two points must differ (a segment of positive length)")
         # The obstacle lies to the right of the line walked from the first point to the second.
         normal = (d[1] / length, -d[0] / length)
-        return Obstacle(point=tuple(p0), normal=normal)
+        ends = (tuple(float(v) for v in p0), tuple(float(v) for v in p1)) if key == "segment" else None
+        return Obstacle(point=tuple(float(v) for v in p0), normal=normal, ends=ends)
     for key in ("point", "normal"):
         if key not in data:
-            raise CaseError(f"{r.filename}: obstacle.{key}: missing (give point and normal, or points)")
+            raise CaseError(f"{r.filename}: obstacle.{key}: missing (give point and normal, points, or segment)")
     point = r.point(data["point"], "obstacle.point")
     normal = np.array(r.point(data["normal"], "obstacle.normal"))
     length = np.hypot(*normal)

@@ -342,6 +342,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     Example:
       contactfem check cases/hole.yaml
     """
+    from contactfem.report import obstacle_figures
     from contactfem.solve import prepare
 
     try:
@@ -361,7 +362,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
                  "h_min": float(diameters.min()), "h_max": float(diameters.max())},
         "unknowns": problem.n_unknowns,
         "contact_nodes": int(len(problem.contact.nodes)),
-        "obstacle": {"point": list(case.obstacle.point), "normal": list(case.obstacle.normal)},
+        "obstacle": obstacle_figures(problem),
         "method": case.solver.method,
         "estimate": _estimate(case, problem),
     }
@@ -377,8 +378,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     click.echo(f"  mesh       {mesh.n_points} nodes, {mesh.n_triangles} triangles, h in "
                f"[{diameters.min():.3g}, {diameters.max():.3g}]")
     click.echo(f"  unknowns   {problem.n_unknowns} displacement, {len(problem.contact.nodes)} contact nodes")
-    n = case.obstacle.normal
-    click.echo(f"  obstacle   through {list(case.obstacle.point)}, normal ({n[0]:g}, {n[1]:g})")
+    click.echo(f"  obstacle   {_obstacle_text(summary['obstacle'])}")
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
                f"{cost['backend']} (measured on 2 cores; ±50%)")
@@ -696,6 +696,21 @@ def _estimate(case, problem) -> dict:
 
     backend = resolve_backend(case.solver.backend)
     return {"backend": backend, **estimate_cost(problem.n_unknowns, backend)}
+
+
+def _obstacle_text(obstacle: dict) -> str:
+    """The obstacle of report.obstacle_figures in words, with plain numbers."""
+    def point(p) -> str:
+        return f"({p[0]:g}, {p[1]:g})"
+
+    normal = f"normal {point(obstacle['normal'])}"
+    if obstacle["ends"] is None:
+        return f"the line through {point(obstacle['point'])}, {normal}"
+    low, high = obstacle["extent"]
+    facing = obstacle["facing_nodes"]
+    total = facing + obstacle["beyond_nodes"]
+    return (f"the segment from {point(obstacle['ends'][0])} to {point(obstacle['ends'][1])}, {normal}; "
+            f"{facing} of {total} contact nodes face it (positions [{low:g}, {high:g}] along the obstacle)")
 
 
 def _certificate_line(certificate: dict | None) -> str:

@@ -85,6 +85,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             solution.method, contact.gap, contact.normal_displacement, contact.multiplier, contact.nodal_force
         ),
         "contact_zone": contact_zone(problem, contact.active),
+        "obstacle": obstacle_figures(problem),
         "contact_force": {
             "normal": float(contact.nodal_force.sum()),
             "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
@@ -153,6 +154,20 @@ def sign_conditions(
         negative = multiplier < 0
         figures["negative_multiplier_nodes"] = int(negative.sum())
     return figures
+
+
+def obstacle_figures(problem: DiscreteProblem) -> dict:
+    """The obstacle as solved: its surface, a finite one's ends, and which nodes of ΓC face it."""
+    contact = problem.contact
+    obstacle = contact.obstacle
+    return {
+        "point": obstacle.point.tolist(),
+        "normal": obstacle.normal.tolist(),
+        "ends": None if obstacle.ends is None else obstacle.ends.tolist(),
+        "extent": None if obstacle.extent is None else list(obstacle.extent),
+        "facing_nodes": int(len(contact.nodes)),
+        "beyond_nodes": int(len(contact.beyond)),
+    }
 
 
 def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:

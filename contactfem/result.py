@@ -35,6 +35,8 @@ class ContactFields:
         Position of each contact node along the obstacle (its coordinate along the tangent).
     obstacle_point, obstacle_normal : (2,) float64
         The flat obstacle: a point of its surface and its unit normal n.
+    obstacle_ends : (2, 2) float64 or None
+        The end points of a finite obstacle (a segment), None for an infinite one.
     """
 
     nodes: np.ndarray
@@ -47,6 +49,7 @@ class ContactFields:
     abscissa: np.ndarray
     obstacle_point: np.ndarray
     obstacle_normal: np.ndarray
+    obstacle_ends: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -206,6 +206,7 @@ def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, k
             abscissa=contact.abscissa,
             obstacle_point=contact.obstacle.point,
             obstacle_normal=contact.obstacle.normal,
+            obstacle_ends=contact.obstacle.ends,
         ),
         newton=_history_arrays(kernel.history),
     )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -15,19 +15,42 @@ from contactfem.methods import ContactBoundaryMasses
 
 @dataclass(frozen=True, eq=False)
 class FlatObstacle:
-    """The rigid half-plane {p : (p − point)·normal ≥ 0}.
+    """The rigid half-plane {p : (p − point)·normal ≥ 0}, or the finite segment of its surface
+    between two ends.
 
     ``point`` (2,), ``normal`` (2,) the unit normal pointing from the body into the
-    obstacle, ``tangent`` (2,) = (−n_y, n_x): the direction abscissae are measured along.
+    obstacle, ``tangent`` (2,) = (−n_y, n_x): the direction abscissae are measured along;
+    ``ends`` (2, 2) the segment's end points, None for an infinite obstacle.
     """
 
     point: np.ndarray
     normal: np.ndarray
+    ends: np.ndarray | None = None
 
     @classmethod
     def from_case(cls, case: Case) -> "FlatObstacle":
+        ends = None if case.obstacle.ends is None else np.asarray(case.obstacle.ends, dtype=float)
         return cls(point=np.asarray(case.obstacle.point, dtype=float),
-                   normal=np.asarray(case.obstacle.normal, dtype=float))
+                   normal=np.asarray(case.obstacle.normal, dtype=float), ends=ends)
+
+    @property
+    def extent(self) -> tuple[float, float] | None:
+        """The segment's abscissa range (low, high), None for an infinite obstacle."""
+        if self.ends is None:
+            return None
+        low, high = sorted(self.abscissa(self.ends))
+        return float(low), float(high)
+
+    def faces(self, points: np.ndarray) -> np.ndarray:
+        """Whether each of ``points`` (k, 2) lies in front of the obstacle (k,): its projection
+        along the normal falls on the segment (ends included, to round-off), always for an
+        infinite obstacle."""
+        extent = self.extent
+        if extent is None:
+            return np.ones(len(points), dtype=bool)
+        s = self.abscissa(points)
+        slack = 1e-9 * max(extent[1] - extent[0], float(np.abs(extent).max()))
+        return (s >= extent[0] - slack) & (s <= extent[1] + slack)
 
     @property
     def tangent(self) -> np.ndarray:
@@ -48,7 +71,9 @@ class ContactBoundary:
 
     ``nodes`` (m,) sorted by ``abscissa`` (coordinate along the obstacle's tangent),
     ``edges`` (k, 2) the ΓC edges, ``gap`` (m,), ``masses`` the two boundary masses,
-    ``obstacle`` the flat obstacle they face.
+    ``obstacle`` the flat obstacle they face. ``beyond`` (j,) are the nodes of ΓC that a
+    finite obstacle does not reach (their projection falls beyond its ends): they carry
+    no constraint.
     """
 
     nodes: np.ndarray
@@ -57,6 +82,7 @@ class ContactBoundary:
     abscissa: np.ndarray
     obstacle: FlatObstacle
     masses: ContactBoundaryMasses
+    beyond: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def normal(self) -> np.ndarray:
@@ -97,7 +123,17 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
     along_line = np.abs(symmetry_normals @ obstacle.tangent) > 1 - 1e-12
     supported[symmetry_nodes[~along_line]] = True
     gamma_nodes = np.unique(edges)
-    nodes = gamma_nodes[~supported[gamma_nodes]]
+    candidates = gamma_nodes[~supported[gamma_nodes]]
+    facing = obstacle.faces(mesh.points[candidates])
+    nodes, beyond = candidates[facing], candidates[~facing]
+    if obstacle.ends is not None and len(nodes) == 0:
+        span = obstacle.abscissa(mesh.points[gamma_nodes])
+        low, high = obstacle.extent
+        raise CaseError(
+            f"{case.source.name}: obstacle.segment: no node of the contact parts "
+            f"({', '.join(f'boundary.{n}' for n in case.contact_parts)}) lies in front of the segment: "
+            f"it spans [{low:g}, {high:g}] along the obstacle, the contact parts [{span.min():g}, {span.max():g}]"
+        )
     abscissa = obstacle.abscissa(mesh.points[nodes])
     order = np.argsort(abscissa, kind="stable")
     nodes, abscissa = nodes[order], abscissa[order]
@@ -107,5 +143,5 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
     consistent = full_mass[nodes][:, nodes].tocsr()
     return ContactBoundary(
         nodes=nodes, edges=edges, gap=obstacle.gap(mesh.points[nodes]), abscissa=abscissa, obstacle=obstacle,
-        masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent),
+        masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent), beyond=beyond,
     )

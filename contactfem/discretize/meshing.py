@@ -97,13 +97,49 @@ def _contact_grading(case: Case):
                 n = max(2, int(4 * radius * abs(sweep) / settings.contact_size) + 2)
                 angle = a0 + sweep * np.linspace(0.0, 1.0, n)
                 samples.append(center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
-    tree = cKDTree(np.concatenate(samples))
+    samples = np.concatenate(samples)
+    ends = _segment_ends_on_body(case, samples)
+    if case.obstacle.ends is not None:
+        # Only the part of ΓC in front of a finite obstacle can touch it.
+        from contactfem.discretize.contact import FlatObstacle
+
+        facing = FlatObstacle.from_case(case).faces(samples)
+        samples = samples[facing] if facing.any() else samples
+    tree = cKDTree(samples)
+    end_tree = cKDTree(ends) if len(ends) else None
 
     def size(points: np.ndarray) -> np.ndarray:
         distance, _ = tree.query(points)
-        return np.minimum(settings.size, settings.contact_size + settings.grading * distance)
+        h = np.minimum(settings.size, settings.contact_size + settings.grading * distance)
+        if end_tree is not None:
+            # The pressure is singular (like 1/√r) at the end of a finite obstacle pressed
+            # into the body: the mesh is finer there still.
+            to_end, _ = end_tree.query(points)
+            h = np.minimum(h, settings.contact_size / END_REFINEMENT + settings.grading * to_end)
+        return h
 
     return size
+
+
+#: How much finer than ``mesh.contact_size`` the mesh is at the ends of a finite obstacle
+#: that lie on the body (a flat punch's edges).
+END_REFINEMENT = 4
+
+
+def _segment_ends_on_body(case: Case, samples: np.ndarray) -> np.ndarray:
+    """The points of ΓC (from ``samples`` (k, 2)) facing the ends of a finite obstacle that lie
+    within ΓC's extent along it (a punch narrower than the body), (e, 2); empty otherwise."""
+    if case.obstacle.ends is None:
+        return np.zeros((0, 2))
+    from contactfem.discretize.contact import FlatObstacle
+
+    obstacle = FlatObstacle.from_case(case)
+    along = obstacle.abscissa(samples)
+    found = []
+    for end in obstacle.abscissa(obstacle.ends):
+        if along.min() < end < along.max():
+            found.append(samples[np.argmin(np.abs(along - end))])
+    return np.array(found).reshape(-1, 2)
 
 
 def _mesh_origin(case: Case) -> str:

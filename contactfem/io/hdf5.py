@@ -26,7 +26,9 @@ Layout, schema version 2 (version 1 lacked ``/contact/abscissa`` and the obstacl
     /contact/active        (m,) uint8, 0/1
     /contact/abscissa      (m,) float64, position of each node along the obstacle
     /contact               attrs: obstacle_point (2,), obstacle_normal (2,) float64: the
-                                  flat obstacle {p : (p − point)·normal ≥ 0}
+                                  flat obstacle {p : (p − point)·normal ≥ 0}; and
+                                  obstacle_ends (2, 2) float64 for a finite obstacle (a
+                                  segment between those points), absent for an infinite one
     /newton/<key>          (n_iterations,) one dataset per key of Solution.newton
 
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
@@ -169,6 +171,8 @@ def write_hdf5(
             _dataset(g, "abscissa", contact.abscissa, np.float64)
             g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
             g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
+            if contact.obstacle_ends is not None:
+                g.attrs["obstacle_ends"] = np.asarray(contact.obstacle_ends, dtype=np.float64)
 
             g = f.create_group("newton")
             for key, values in solution.newton.items():
