@@ -10,6 +10,7 @@ import scipy.sparse.linalg as spla
 
 from contactfem.assembly import (
     Elasticity,
+    body_force_points,
     body_force_vector,
     boundary_mass,
     stiffness_matrix,
@@ -89,15 +90,18 @@ def test_plane_stress_has_no_out_of_plane_stress():
     np.testing.assert_allclose(von_mises(stress), young * exx, rtol=1e-12)
 
 
-def test_body_force_quadrature_exact_for_linear_force():
-    """Σ_i F_i = ∫ f and Σ_i x_i F_i = ∫ x f (because Σ φ_i x_i = x) for f = (1 + 2x − y, 3y)
-    on (0,2)x(0,1): ∫ f_x = 2 + 4 − 1 = 5, ∫ x f_x = 2 + 16/3 − 1 = 19/3, ∫ f_y = 3."""
+def test_body_force_quadrature_exact_for_quartic_force():
+    """The 7-point rule is exact for f·φ of degree 5. Σ_i F_i = ∫ f and Σ_i x_i F_i = ∫ x f
+    (because Σ φ_i x_i = x) for f = (x⁴ − y³ x, 3y) on (0,2)x(0,1):
+    ∫ f_x = 32/5 − 2/4 = 5.9, ∫ x f_x = 64/6 − (8/3)/4 = 10, ∫ f_y = 3."""
     mesh = structured_rectangle((0.0, 0.0), (2.0, 1.0), 5, 3, diagonal="left")
-    load = body_force_vector(mesh.points, mesh.triangles, (lambda x, y: 1 + 2 * x - y, lambda x, y: 3 * y))
+    where = body_force_points(mesh.points, mesh.triangles)
+    values = np.stack([where[..., 0] ** 4 - where[..., 1] ** 3 * where[..., 0], 3 * where[..., 1]], axis=-1)
+    load = body_force_vector(mesh.points, mesh.triangles, values)
     fx, fy = load[0::2], load[1::2]
-    assert fx.sum() == pytest.approx(5.0, rel=1e-14)
-    assert (mesh.points[:, 0] * fx).sum() == pytest.approx(19 / 3, rel=1e-14)
-    assert fy.sum() == pytest.approx(3.0, rel=1e-14)
+    assert fx.sum() == pytest.approx(5.9, rel=1e-13)
+    assert (mesh.points[:, 0] * fx).sum() == pytest.approx(10.0, rel=1e-13)
+    assert fy.sum() == pytest.approx(3.0, rel=1e-13)
 
 
 def test_traction_quadrature_exact_for_quadratic_traction_and_pressure():

@@ -12,10 +12,15 @@ from typing import Callable
 
 import numpy as np
 
-from contactfem.assembly import body_force_vector, edge_geometry, edge_load_vector
-from contactfem.case import Case
+from contactfem.assembly import (
+    body_force_points,
+    body_force_vector,
+    edge_geometry,
+    edge_load_vector,
+)
+from contactfem.case import SCALE_LIMIT, Case
 from contactfem.discretize.exact_checks import refuse_non_finite_exact
-from contactfem.discretize.finite import check_finite
+from contactfem.discretize.finite import check_finite, refuse_non_finite
 from contactfem.mesh import Mesh
 from contactfem.quadrature import EDGE_RULE_POINTS
 
@@ -56,40 +61,55 @@ class NaturalBoundary:
 
 @dataclass(frozen=True, eq=False)
 class Loads:
-    """The body force (None without one) and the natural boundary with its surface forces."""
+    """The body force (None without one) and the natural boundary with its surface forces.
+
+    ``body_force_values`` (q, n_triangles, 2) is f at the points of the triangle rule
+    (:func:`contactfem.assembly.body_force_points`), evaluated once.
+    """
 
     body_force: VectorField | None
     natural: NaturalBoundary
+    body_force_values: np.ndarray | None = None
 
     def load_vector(self, mesh: Mesh) -> np.ndarray:
         """F (2 n_points,): ∫ f·v + ∫ g·v."""
-        load = np.zeros(2 * mesh.n_points)
-        if self.body_force is not None:
-            force = self.body_force
-            load += body_force_vector(mesh.points, mesh.triangles,
-                                      (lambda x, y: force(x, y)[..., 0], lambda x, y: force(x, y)[..., 1]))
-        return load + self.natural.load_vector(mesh.n_points)
+        load = self.natural.load_vector(mesh.n_points)
+        if self.body_force_values is not None:
+            load += body_force_vector(mesh.points, mesh.triangles, self.body_force_values)
+        return load
 
 
 def compile_loads(case: Case, mesh: Mesh) -> Loads:
     """The case's loads on ``mesh``, checked finite where they are integrated."""
-    return Loads(body_force=_body_force(case, mesh), natural=_natural_boundary(case, mesh))
+    force = _body_force(case)
+    values = None
+    if force is not None:
+        where = body_force_points(mesh.points, mesh.triangles)
+        flat = where.reshape(-1, 2)
+        values = np.broadcast_to(force(flat[:, 0], flat[:, 1]), flat.shape).reshape(where.shape)
+        _refuse_non_finite_body_force(case, values.reshape(-1, 2), flat)
+    return Loads(body_force=force, natural=_natural_boundary(case, mesh), body_force_values=values)
 
 
-def _body_force(case: Case, mesh: Mesh) -> VectorField | None:
-    points, triangles = mesh.points, mesh.triangles
-    # The load integrates f at the edge midpoints: that is where it must be finite.
-    midpoints = (0.5 * (points[triangles] + np.roll(points[triangles], -1, axis=1))).reshape(-1, 2)
+def _body_force(case: Case) -> VectorField | None:
     if case.exact is not None:
-        exact = case.exact.solution
-        refuse_non_finite_exact(case, "body_force = 'exact' (-div sigma)", exact.body_force(*midpoints.T), midpoints)
-        return exact.body_force
+        return case.exact.solution.body_force
     if case.body_force is None:
         return None
-    check_finite(case, "body_force", case.body_force, midpoints)
     fx, fy = case.body_force
     return lambda x, y: np.stack([np.broadcast_to(fx(x, y), np.shape(x)), np.broadcast_to(fy(x, y), np.shape(x))],
                                  axis=-1)
+
+
+def _refuse_non_finite_body_force(case: Case, values: np.ndarray, where: np.ndarray) -> None:
+    """f must be finite (and integrable in float64) at every point where it is integrated."""
+    if case.exact is not None:
+        refuse_non_finite_exact(case, "body_force = 'exact' (-div sigma)", values, where)
+        return
+    for component, expression in enumerate(case.body_force):
+        bad = ~(np.abs(values[:, component]) <= SCALE_LIMIT)
+        if bad.any():
+            refuse_non_finite(case, f"body_force[{component}]", expression, values[:, component], where)
 
 
 def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:

@@ -27,6 +27,8 @@ def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
                 prescribed = np.zeros(len(nodes))
             else:
                 key = f"boundary.{part.name}.displacement[{component}]"
+                if part.exact:
+                    key += " (from exact.displacement)"
                 x, y = mesh.points[nodes].T
                 prescribed = np.broadcast_to(components[component](x, y), x.shape)
                 refuse_non_finite(case, key, components[component], prescribed, mesh.points[nodes])
