@@ -327,3 +327,16 @@ def test_adapt_refuses_existing_results_and_a_failure_leaves_them_whole(tmp_path
     failed = run("adapt", SQUARE, "--max-unknowns", "900", "--out", out, "--quiet", "--overwrite")
     assert failed.exit_code == 1 and "disk full" in failed.stderr
     assert snapshot(out) == before
+
+
+def test_the_directory_removal_after_a_refusal_needs_the_lock(tmp_path, monkeypatch):
+    """A loser that believed it created the directory (the race) leaves it and the lock alone."""
+    import contactfem.io.atomic as atomic
+
+    out = tmp_path / "raced"
+    with atomic.claimed_directory(out):
+        monkeypatch.setattr(atomic, "_missing_ancestors", lambda directory: [directory])
+        with pytest.raises(OutputError, match="another contactfem run"):
+            with atomic.claimed_directory(out):
+                pass
+        assert out.is_dir() and (out / LOCK_FILE).exists()

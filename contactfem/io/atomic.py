@@ -361,10 +361,11 @@ def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
     except OSError as exc:
         _remove_created(created)
         raise _wrap(directory, exc) from exc
-    switched = False
+    switched = locked = False
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            locked = True
         except BlockingIOError:
             raise OutputError(f"cannot write {directory}: another contactfem run is writing into it; "
                               "wait for it to finish or choose another output directory") from None
@@ -386,8 +387,9 @@ def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
         yield claim
         switched = True
     finally:
-        if not switched and created and not any(p.name != LOCK_FILE for p in directory.iterdir()):
-            # A run refused or failed before writing anything leaves no directory behind.
+        if locked and not switched and created and not any(p.name != LOCK_FILE for p in directory.iterdir()):
+            # A run refused or failed before writing anything leaves no directory behind (only
+            # the lock's holder may remove it: another run may be working in it).
             _remove_quietly(lock)
             _remove_created(created)
         os.close(fd)  # closing the descriptor releases the lock
