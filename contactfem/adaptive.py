@@ -26,6 +26,9 @@ from contactfem.norms import exact_errors
 from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, solve_case
 
+#: Version of adapt.json's layout (contactfem/schemas/adapt.schema.json).
+ADAPT_SCHEMA_VERSION = 1
+
 #: error_of(problem, solution) -> {"displacement_energy": ..., ...}
 ErrorFunction = Callable[[DiscreteProblem, Solution], dict]
 
@@ -48,7 +51,9 @@ class AdaptiveRun:
         """adapt.json's content."""
         case = self.case
         return {
+            "schema_version": ADAPT_SCHEMA_VERSION,
             "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+            "units": case.units.to_dict(),
             "method": "positive",
             "estimator": "residual (Hild & Nicaise), energy-norm scaled; see contactfem/estimator.py",
             "settings": self.settings,

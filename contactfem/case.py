@@ -20,12 +20,14 @@ take much memory, and every refusal stays one line:
 - paths (the case file, ``geometry.mesh_file``, ``output.directory``) are checked as
   text against the file system's limits (:data:`NAME_MAX` bytes per component,
   :data:`PATH_MAX` in all) and for NUL characters before anything opens them;
-- a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops
-  (its checks compare every pair of edges).
+- a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops;
+  a profile file (``geometry.profile.file``) is read like the case file, at most
+  :data:`MAX_PROFILE_BYTES` of a regular file, and holds at most that many points.
 """
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
 import os
@@ -41,7 +43,14 @@ from contactfem.errors import CaseError, MeshError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
 from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
 from contactfem.linalg import BACKEND_CHOICES
-from contactfem.mesh.polygon import Arc, Loop, circle_loop, polygon_problems
+from contactfem.mesh.polygon import (
+    Arc,
+    Loop,
+    circle_loop,
+    first_crossing,
+    loop_outline,
+    polygon_problems,
+)
 from contactfem.methods import METHOD_NAMES
 
 if TYPE_CHECKING:
@@ -62,8 +71,8 @@ MAX_DIVISIONS = 100_000
 #: the P1 stiffness is singular to round-off (its condition number grows like lambda/mu) and
 #: the solution is pure locking. A warning starts far earlier (report.LOCKING_WARNING_RATIO).
 MAX_LAME_RATIO = 1e8
-#: The largest case file, in bytes. Cases are a few kB (a polygon of MAX_POLYGON_VERTICES
-#: vertices is under 100 kB); the bound keeps a mistaken argument (a log, /dev/zero) from
+#: The largest case file, in bytes. Cases are a few kB (a polygon of 2000 vertices is
+#: under 100 kB; longer outlines come from a profile file); the bound keeps a mistaken argument (a log, /dev/zero) from
 #: being read whole.
 MAX_CASE_BYTES = 1 << 20
 #: The most YAML values (scalars, lists and mappings) a case may hold, each alias counted
@@ -72,9 +81,11 @@ MAX_YAML_VALUES = 100_000
 #: The deepest nesting of YAML values; the deepest key of the format
 #: (geometry.polygon.holes[i].edges[j].arc.center[k]) is 10 levels down.
 MAX_YAML_DEPTH = 32
-#: The most vertices of a polygon geometry, its holes included: the simplicity check
-#: compares every pair of edges (about a second and 100 MB at this bound).
-MAX_POLYGON_VERTICES = 2000
+#: The most vertices of a polygon geometry, its holes included, or of a profile's outline.
+#: The simplicity check is a sweep, O(k log k) in time and O(k) in memory (about 2 s and
+#: 0.5 GB at this bound); inline YAML lists stay far below it (MAX_YAML_VALUES), a profile
+#: read from a file may reach it.
+MAX_POLYGON_VERTICES = 1_000_000
 
 
 def _os_limit(name: str, fallback: int) -> int:
@@ -210,6 +221,28 @@ class OutputSettings:
     files: tuple[str, ...]
 
 
+#: Stress units named by their (force, length) pair; any other pair is written force/length².
+_STRESS_UNITS = {("N", "m"): "Pa", ("kN", "m"): "kPa", ("MN", "m"): "MPa", ("N", "mm"): "MPa",
+                 ("kN", "mm"): "GPa", ("lbf", "in"): "psi", ("kip", "in"): "ksi"}
+
+
+@dataclass(frozen=True)
+class Units:
+    """The case's unit system, used for labels (pictures, report.json, VTU metadata); the
+    solver itself is unit-free. Forces are per unit thickness in 2D."""
+
+    length: str = "m"
+    force: str = "N"
+
+    @property
+    def stress(self) -> str:
+        """Stresses and contact pressures: force / length²."""
+        return _STRESS_UNITS.get((self.force, self.length), f"{self.force}/{self.length}²")
+
+    def to_dict(self) -> dict[str, str]:
+        return {"length": self.length, "force": self.force, "stress": self.stress}
+
+
 @dataclass(frozen=True)
 class Case:
     """A validated case. ``text`` is the file as read, ``digest`` its SHA-256.
@@ -231,6 +264,7 @@ class Case:
     solver: SolverSettings
     output: OutputSettings
     exact: ExactBlock | None = None
+    units: Units = Units()
 
     def part(self, name: str) -> BoundaryPart:
         return next(p for p in self.parts if p.name == name)
@@ -277,8 +311,10 @@ class _Reader:
         for name in data:
             if not isinstance(name, str) or name not in allowed:
                 shown = shortened(name if isinstance(name, str) else _show(name), 64)
+                close = difflib.get_close_matches(name, allowed, n=1) if isinstance(name, str) else []
+                hint = f" (did you mean {close[0]}?)" if close else ""
                 raise CaseError(
-                    f"{self.filename}: {_join(key, shown)}: unknown key; "
+                    f"{self.filename}: {_join(key, shown)}: unknown key{hint}; "
                     f"expected one of {', '.join(allowed)}"
                 )
         for name in required:
@@ -496,7 +532,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     top = r.mapping(
         data, "",
         ("title", "description", "geometry", "mesh", "material", "body_force",
-         "boundary", "obstacle", "solver", "output", "exact"),
+         "boundary", "obstacle", "solver", "output", "exact", "units"),
         required=("geometry", "material", "boundary", "obstacle"),
     )
     title = top.get("title", source.stem)
@@ -517,6 +553,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     exact = None if exact_displacement is None else _exact_block(r, exact_displacement, material, obstacle)
     solver = _solver(r, top.get("solver", {}))
     output = _output(r, top.get("output", {}), source)
+    units = _units(r, top.get("units", {}))
     return Case(
         source=source,
         text=text,
@@ -531,6 +568,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
         solver=solver,
         output=output,
         exact=exact,
+        units=units,
     )
 
 
@@ -730,7 +768,7 @@ def _yaml_problem(error: yaml.YAMLError, text: str) -> str:
 
 def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str, ...] | None]:
     """The geometry and the part names it defines (None when only the mesh file knows them)."""
-    kinds = ("rectangle", "polygon", "mesh_file")
+    kinds = ("rectangle", "polygon", "profile", "mesh_file")
     data = r.mapping(data, "geometry", kinds)
     if len(data) != 1:
         raise r.fail("geometry", data, f"expected exactly one of {', '.join(kinds)}")
@@ -746,6 +784,8 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
         names = r.mapping(spec.get("names", {}), f"{key}.names", SIDES)
         side_names = {side: r.name(names.get(side, side), f"{key}.names.{side}") for side in SIDES}
         return RectangleGeometry(lower, upper, side_names), tuple(dict.fromkeys(side_names.values()))
+    if kind == "profile":
+        return _profile(r, spec, key, source)
     if kind == "polygon":
         spec = r.mapping(spec, key, ("vertices", "edges", "holes"), required=("vertices", "edges"))
         outer = _loop(r, spec["vertices"], spec["edges"], key)
@@ -788,19 +828,261 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
     return MeshFileGeometry(path), None
 
 
+PROFILE_SOURCES = ("file", "heights", "expression")
+
+
+def _profile(r: _Reader, spec: Any, key: str, source: Path) -> tuple[Geometry, tuple[str, ...]]:
+    """A body whose bottom edge is a height profile, closed by two straight sides and a top.
+
+    The profile is a graph h(s) over the line through ``origin`` along ``direction``:
+    point i is origin + s_i d + h_i n, d the unit direction and n its left normal (the
+    body's side). The top runs at height ``depth`` over the line, the sides at the first
+    and last s. With s strictly increasing and depth above every height the outline is a
+    simple counter-clockwise polygon; it is still checked (in O(k log k)) like any other.
+    """
+    spec = r.mapping(spec, key, (*PROFILE_SOURCES, "spacing", "start", "x", "points", "name", "depth", "sides",
+                                 "top", "origin", "direction"), required=("depth",))
+    given = [name for name in PROFILE_SOURCES if name in spec]
+    if len(given) != 1:
+        raise r.fail(key, {name: "..." for name in given} or spec,
+                     f"expected exactly one of {', '.join(PROFILE_SOURCES)} (the heights)")
+    (kind,) = given
+    allowed = {"file": ("spacing", "start"), "heights": ("spacing", "start"), "expression": ("x", "points")}[kind]
+    for option in ("spacing", "start", "x", "points"):
+        if option in spec and option not in allowed:
+            raise r.fail(f"{key}.{option}", spec[option], f"not used with {kind}; {kind} takes "
+                         f"{' and '.join(allowed)}" + (" (a one-column file)" if kind == "file" else ""))
+    limit = MAX_POLYGON_VERTICES - 2  # the top's two corners complete the polygon
+    if kind == "expression":
+        s, h = _profile_expression(r, spec, key, limit)
+    elif kind == "heights":
+        values = spec["heights"]
+        if not isinstance(values, list) or len(values) < 2:
+            raise r.fail(f"{key}.heights", values, "expected a list of at least 2 heights")
+        if len(values) > limit:
+            raise r.fail(f"{key}.heights", f"<{len(values)} heights>", f"expected at most {limit} heights")
+        h = np.array([r.number(v, f"{key}.heights[{i}]", low=-SCALE_LIMIT, high=SCALE_LIMIT)
+                      for i, v in enumerate(values)])
+        s = _equally_spaced(r, spec, key, len(h), "heights")
+    else:
+        s, h = _profile_file(r, spec, key, source, limit)
+    depth = r.number(spec["depth"], f"{key}.depth", low=-SCALE_LIMIT, high=SCALE_LIMIT)
+    if not depth > h.max():
+        raise r.fail(f"{key}.depth", depth, f"the top must lie above the highest point of the profile, "
+                     f"h = {h.max():.6g}; expected a depth greater than that")
+    origin = r.point(spec.get("origin", [0, 0]), f"{key}.origin")
+    direction = r.point(spec.get("direction", [1, 0]), f"{key}.direction")
+    norm = math.hypot(*direction)
+    if not norm > 0 or not math.isfinite(norm):
+        raise r.fail(f"{key}.direction", list(direction), "expected a nonzero vector [dx, dy] along the profile")
+    d = np.array(direction) / norm
+    n = np.array([-d[1], d[0]])
+    name = r.name(spec.get("name", "base"), f"{key}.name")
+    top = r.name(spec.get("top", "top"), f"{key}.top")
+    sides = spec.get("sides", ["left", "right"])
+    if isinstance(sides, str):
+        sides = [sides, sides]
+    if not isinstance(sides, list) or len(sides) != 2:
+        raise r.fail(f"{key}.sides", sides, "expected [first, last]: the names of the sides at the first and the "
+                     "last point (or one name for both)")
+    first_side, last_side = (r.name(v, f"{key}.sides[{i}]") for i, v in enumerate(sides))
+    s_all = np.concatenate([s, [s[-1], s[0]]])
+    h_all = np.concatenate([h, [depth, depth]])
+    with np.errstate(over="ignore", invalid="ignore"):
+        points = np.asarray(origin) + s_all[:, None] * d + h_all[:, None] * n
+    if not np.all(np.isfinite(points)) or np.abs(points).max() > SCALE_LIMIT:
+        raise r.fail(key, f"<{len(h)} points>", f"the body's coordinates must lie within ±{SCALE_LIMIT:g}")
+    names = (name,) * (len(h) - 1) + (last_side, top, first_side)
+    problem = polygon_problems(points)
+    if problem is not None:  # e.g. points that coincide once placed, in float64
+        raise r.fail(key, f"<{len(h)} points>", f"the outline it makes is not a simple polygon: {problem}")
+    _check_extent(r, key, points)
+    loop = Loop(vertices=points, edge_names=names)
+    return PolygonGeometry(loop, ()), tuple(dict.fromkeys(names))
+
+
+def _equally_spaced(r: _Reader, spec: dict, key: str, count: int, what: str) -> np.ndarray:
+    if "spacing" not in spec:
+        raise CaseError(f"{r.filename}: {key}.spacing: missing (required with {what}: the distance between "
+                        "consecutive heights)")
+    spacing = r.number(spec["spacing"], f"{key}.spacing", low=0, low_open=True, high=SCALE_LIMIT)
+    start = r.number(spec.get("start", 0), f"{key}.start", low=-SCALE_LIMIT, high=SCALE_LIMIT)
+    return start + spacing * np.arange(count)
+
+
+def _profile_expression(r: _Reader, spec: dict, key: str, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    for name in ("x", "points"):
+        if name not in spec:
+            raise CaseError(f"{r.filename}: {key}.{name}: missing (required with expression: the interval "
+                            "[x0, x1] and the number of points sampled on it)")
+    interval = spec["x"]
+    if not isinstance(interval, list) or len(interval) != 2:
+        raise r.fail(f"{key}.x", interval, "expected the interval [x0, x1] the profile spans")
+    x0, x1 = (r.number(v, f"{key}.x[{i}]", low=-SCALE_LIMIT, high=SCALE_LIMIT) for i, v in enumerate(interval))
+    if not x1 > x0:
+        raise r.fail(f"{key}.x", interval, "expected x0 < x1")
+    count = r.integer(spec["points"], f"{key}.points", low=2, high=limit)
+    expression = r.expression(spec["expression"], f"{key}.expression")
+    if "y" in expression.variables:
+        raise r.fail(f"{key}.expression", expression.text, "expected the height as an expression in x only")
+    s = np.linspace(x0, x1, count)
+    h = expression(s, np.zeros_like(s))
+    bad = np.flatnonzero(~np.isfinite(h) | (np.abs(h) > SCALE_LIMIT))
+    if bad.size:
+        raise r.fail(f"{key}.expression", expression.text,
+                     f"is {h[bad[0]]:g} at x = {s[bad[0]]:.17g}; expected finite heights within ±{SCALE_LIMIT:g}")
+    return s, h
+
+
+#: The largest profile file, in bytes: room for MAX_POLYGON_VERTICES lines of two numbers
+#: written to full precision; at most this many bytes plus one are read.
+MAX_PROFILE_BYTES = 64 << 20
+
+
+def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    """The points of a CSV profile: two columns x, h, or one column of heights with ``spacing``."""
+    fkey = f"{key}.file"
+    text = spec["file"]
+    if not isinstance(text, str) or not text:
+        raise r.fail(fkey, text, "expected the path of a CSV file (x, h per line, or h per line with spacing)")
+    path = Path(text)
+    if not path.is_absolute():
+        path = source.parent / path
+    shown = shortened(str(path))
+    problem = path_problem(path)
+    if problem is not None:
+        raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
+    data = _read_profile_bytes(r, fkey, text, path)
+    try:
+        content = data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = data.count(b"\n", 0, error.start) + 1
+        raise r.fail(fkey, text, f"byte 0x{data[error.start]:02x} on line {line} is not UTF-8; expected "
+                     "a text file") from None
+    lines = content.splitlines()
+    table, line_of_row = _parse_columns(r, fkey, text, lines, limit)
+    if table.shape[1] == 2:
+        for option in ("spacing", "start"):
+            if option in spec:
+                raise r.fail(f"{key}.{option}", spec[option], "only for a one-column file; this one gives x and h")
+        s, h = table[:, 0], table[:, 1]
+        steps = np.flatnonzero(~(np.diff(s) > 0))
+        if steps.size:
+            line = line_of_row(int(steps[0]) + 1)
+            raise r.fail(fkey, text, f"line {line}: x = {s[steps[0] + 1]:.17g} does not exceed the x before it, "
+                         f"{s[steps[0]]:.17g}; expected x strictly increasing (a height profile h(x))")
+    else:
+        h = table[:, 0]
+        s = _equally_spaced(r, spec, key, len(h), "a one-column file")
+    return s, h
+
+
+def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
+    """At most MAX_PROFILE_BYTES of a regular file, reading no more than one byte past it."""
+    shown = shortened(str(path))
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise r.fail(fkey, text, f"no such file ({shown})") from None
+    except (OSError, ValueError) as error:
+        raise r.fail(fkey, text, f"cannot read {shown} ({_reason(error)})") from None
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+    chunks, size = [], 0
+    fd = None
+    try:
+        if stat.S_ISREG(mode):
+            fd = os.open(path, flags)
+            mode = os.fstat(fd).st_mode  # the file opened, which may differ from the one looked at
+        if not stat.S_ISREG(mode):
+            kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
+            raise r.fail(fkey, text, f"{shown} is {kind}; expected a CSV file")
+        while size <= MAX_PROFILE_BYTES:
+            chunk = os.read(fd, min(MAX_PROFILE_BYTES + 1 - size, 1 << 24))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as error:
+        raise r.fail(fkey, text, f"cannot read {shown} ({_reason(error)})") from None
+    finally:
+        if fd is not None:
+            os.close(fd)
+    if size > MAX_PROFILE_BYTES:
+        raise r.fail(fkey, text, f"{shown} is larger than {MAX_PROFILE_BYTES} bytes (64 MiB); expected a profile "
+                     f"of at most {MAX_POLYGON_VERTICES - 2} lines")
+    return b"".join(chunks)
+
+
+def _parse_columns(r: _Reader, fkey: str, text: str, lines: list[str], limit: int):
+    """The numbers of a one- or two-column CSV (comma, semicolon, tab or spaces between
+    them; ``#`` comments, blank lines and one header line allowed) as an (n, c) array,
+    and a function from a row to its line number in the file."""
+    def content(line: str) -> str:
+        return line.split("#", 1)[0].strip()
+
+    data_lines = [i for i, line in enumerate(lines) if content(line)]
+    if not data_lines:
+        raise r.fail(fkey, text, "the file holds no numbers; expected lines x, h (or h with spacing)")
+    first = content(lines[data_lines[0]])
+    delimiter = next((d for d in (",", ";", "\t") if d in first), None)
+
+    def fields(line: str) -> list[str]:
+        return [f.strip() for f in content(line).split(delimiter)]
+
+    def is_number(field: str) -> bool:
+        try:
+            float(field)
+        except ValueError:
+            return False
+        return True
+
+    if not all(is_number(f) for f in fields(lines[data_lines[0]])):
+        data_lines = data_lines[1:]  # a header
+    if len(data_lines) < 2:
+        raise r.fail(fkey, text, f"{len(data_lines)} data lines; expected at least 2 points")
+    if len(data_lines) > limit:
+        raise r.fail(fkey, text, f"{len(data_lines)} data lines; expected at most {limit} points")
+    columns = len(fields(lines[data_lines[0]]))
+    if columns not in (1, 2):
+        raise r.fail(fkey, text, f"line {data_lines[0] + 1} has {columns} columns; expected two (x, h) or one "
+                     "(h, with spacing)")
+    try:
+        table = np.loadtxt([lines[i] for i in data_lines], delimiter=delimiter, comments="#", ndmin=2,
+                           dtype=np.float64)
+        if table.shape != (len(data_lines), columns):
+            raise ValueError("shape")
+    except ValueError:
+        for i in data_lines:
+            row = fields(lines[i])
+            if len(row) != columns:
+                raise r.fail(fkey, text, f"line {i + 1} has {len(row)} columns; expected {columns} like the "
+                             "first line of numbers") from None
+            bad = next((f for f in row if not is_number(f)), None)
+            if bad is not None:
+                raise r.fail(fkey, text, f"line {i + 1}: {shortened(bad, 40)!r} is not a number") from None
+        raise r.fail(fkey, text, "cannot read the numbers; expected lines x, h (or h with spacing)") from None
+    bad = np.flatnonzero(~np.all(np.isfinite(table) & (np.abs(table) <= SCALE_LIMIT), axis=1))
+    if bad.size:
+        raise r.fail(fkey, text, f"line {data_lines[bad[0]] + 1}: {table[bad[0]].tolist()}: expected finite numbers "
+                     f"within ±{SCALE_LIMIT:g}")
+    return table, lambda row: data_lines[row] + 1
+
+
 def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
     if not isinstance(vertices, list) or len(vertices) < 2:
         raise r.fail(f"{key}.vertices", vertices, "expected a list of at least 2 points [x, y]")
     if len(vertices) > MAX_POLYGON_VERTICES:
         raise r.fail(f"{key}.vertices", f"<{len(vertices)} vertices>",
                      f"expected at most {MAX_POLYGON_VERTICES} vertices (use a gmsh mesh_file for finer outlines)")
-    points = np.array([r.point(v, f"{key}.vertices[{i}]") for i, v in enumerate(vertices)])
+    # A vertex may be null at an end of an arc given by its angles: the arc then places it.
+    points = np.array([(np.nan, np.nan) if v is None else r.point(v, f"{key}.vertices[{i}]")
+                       for i, v in enumerate(vertices)])
     if not isinstance(edges, list) or len(edges) != len(points):
         raise r.fail(
             f"{key}.edges", edges,
             f"expected a list of {len(points)} edges (one per vertex: edge i runs from vertex i to i+1)",
         )
-    names, arcs = [], []
+    names, arcs, by_center = [], [], []
     for i, edge in enumerate(edges):
         ekey = f"{key}.edges[{i}]"
         if isinstance(edge, str):
@@ -812,9 +1094,19 @@ def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
         if "arc" not in edge:
             arcs.append(None)
             continue
-        arc = r.mapping(edge["arc"], f"{ekey}.arc", ("center", "direction"), required=("center",))
+        arc = r.mapping(edge["arc"], f"{ekey}.arc", ("center", "direction", "radius", "angles"), required=("center",))
         center = r.point(arc["center"], f"{ekey}.arc.center")
+        if "radius" in arc or "angles" in arc:
+            arcs.append(_arc_by_angles(r, arc, f"{ekey}.arc", center, points, i, key))
+            continue
         direction = r.choice(arc.get("direction", "ccw"), f"{ekey}.arc.direction", ("ccw", "cw"))
+        arcs.append(Arc(center=center, ccw=direction == "ccw"))
+        by_center.append((i, ekey, center))
+    missing = np.flatnonzero(np.isnan(points[:, 0]))
+    if missing.size:
+        raise r.fail(f"{key}.vertices[{missing[0]}]", None,
+                     "expected a point [x, y] (null only at an end of an arc given by radius and angles)")
+    for i, ekey, center in by_center:
         start, end = points[i], points[(i + 1) % len(points)]
         r0, r1 = np.hypot(*(start - center)), np.hypot(*(end - center))
         if r0 == 0 or abs(r0 - r1) > 1e-9 * max(r0, r1):
@@ -822,7 +1114,6 @@ def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
                 f"{ekey}.arc.center", list(center),
                 f"must be equally far from the edge's end points (distances {r0:g} and {r1:g})",
             )
-        arcs.append(Arc(center=center, ccw=direction == "ccw"))
     has_arc = any(a is not None for a in arcs)
     # The straight polygon through the vertices must be simple; with arcs the chords are
     # checked, which catches crossings but leaves bulges to the mesher's own checks.
@@ -835,6 +1126,50 @@ def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
         return Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
     except MeshError as error:
         raise r.fail(f"{key}.vertices", points.tolist(), str(error)) from None
+
+
+#: How far (relative to the radius) a listed vertex may lie from the end of an arc given by its
+#: angles; it is then moved onto the arc.
+ARC_END_TOLERANCE = 1e-6
+
+
+def _arc_by_angles(r: _Reader, arc: dict, key: str, center: tuple[float, float], points: np.ndarray,
+                   index: int, loop_key: str) -> Arc:
+    """An arc given by ``{center, radius, angles: [from, to]}`` (degrees, counter-clockwise when
+    to > from): places its end points in ``points`` (vertices ``index`` and ``index + 1``)."""
+    for name in ("radius", "angles"):
+        if name not in arc:
+            raise CaseError(f"{r.filename}: {key}.{name}: missing (an arc by angles needs radius and angles)")
+    radius = r.number(arc["radius"], f"{key}.radius", low=1 / SCALE_LIMIT, high=SCALE_LIMIT)
+    angles = arc["angles"]
+    if not isinstance(angles, list) or len(angles) != 2:
+        raise r.fail(f"{key}.angles", angles, "expected [from, to] in degrees (counter-clockwise when to > from)")
+    first, last = (r.number(a, f"{key}.angles[{j}]", low=-3600, high=3600) for j, a in enumerate(angles))
+    if not 0 < abs(last - first) < 360:
+        raise r.fail(f"{key}.angles", angles, "the arc must sweep more than 0 and less than 360 degrees")
+    ccw = last > first
+    if "direction" in arc and r.choice(arc["direction"], f"{key}.direction", ("ccw", "cw")) != ("ccw" if ccw else "cw"):
+        raise r.fail(f"{key}.direction", arc["direction"],
+                     f"contradicts the angles {angles} (from < to is ccw); leave direction out")
+    k = len(points)
+    for j, degrees in ((index, first), ((index + 1) % k, last)):
+        # Exact multiples of 90 degrees land exactly on the axes.
+        turns = degrees / 90
+        if turns == round(turns):
+            offset = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][round(turns) % 4]
+        else:
+            offset = (math.cos(math.radians(degrees)), math.sin(math.radians(degrees)))
+        end = np.array([center[0] + radius * offset[0], center[1] + radius * offset[1]])
+        given = points[j]
+        if np.isnan(given[0]):
+            points[j] = end
+        elif np.hypot(*(given - end)) > ARC_END_TOLERANCE * radius:
+            raise r.fail(f"{loop_key}.vertices[{j}]", given.tolist(),
+                         f"is not the end of the arc of {key} at {degrees:g} degrees, {end.tolist()} (within "
+                         f"{ARC_END_TOLERANCE:g} of the radius); write it as null to take the arc's end")
+        elif np.hypot(*(given - np.asarray(center))) != radius:
+            points[j] = end
+    return Arc(center=center, ccw=ccw)
 
 
 def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
@@ -868,9 +1203,16 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
             raise r.fail(f"{key}.vertices", loop.vertices.tolist(),
                          f"the hole is {span:.3g} across; expected at least the body's extent / {MAX_DIVISIONS} "
                          f"= {least:.3g}, the finest mesh size")
-    inside = _points_inside(outer.vertices, loop.vertices)
-    if not inside.all():
-        raise r.fail(key, loop.vertices[~inside][0].tolist(), "hole vertex outside the outer polygon")
+    # Against the curves themselves, arcs included (sampled every degree: within 4e-5 of
+    # a radius), so that a hole in a round body's bulge is allowed and one that crosses
+    # an arc is refused.
+    outline, hole_outline = loop_outline(outer), loop_outline(loop)
+    crossing = first_crossing(outline, hole_outline)
+    if crossing is not None:
+        raise r.fail(key, crossing.tolist(), "the hole's boundary meets the body's outer boundary (arcs "
+                     "included) near this point; a hole must lie inside the body")
+    if not _points_inside(outline, hole_outline[:1])[0]:
+        raise r.fail(key, hole_outline[0].tolist(), "the hole lies outside the body's outer boundary (arcs included)")
     return loop
 
 
@@ -1112,6 +1454,18 @@ def _obstacle(r: _Reader, data: Any) -> Obstacle:
     if abs(length - 1.0) > 1e-6:
         raise r.fail("obstacle.normal", normal.tolist(), "expected a unit vector pointing into the obstacle")
     return Obstacle(point=point, normal=tuple(normal / length))
+
+
+def _units(r: _Reader, data: Any) -> Units:
+    data = r.mapping(data if data is not None else {}, "units", ("length", "force"))
+    names = {}
+    for key, default in (("length", "m"), ("force", "N")):
+        value = data.get(key, default)
+        if not isinstance(value, str) or not value or len(value) > 16 or not value.isprintable() or " " in value:
+            raise r.fail(f"units.{key}", value, "expected a unit symbol (at most 16 printable characters, no "
+                         f"spaces), e.g. {default}")
+        names[key] = value
+    return Units(**names)
 
 
 def _solver(r: _Reader, data: Any) -> SolverSettings:

@@ -120,12 +120,14 @@ def _refuse_non_finite(case, solution, report: dict) -> None:
 
 
 def _progress(quiet: bool):
-    """Stage messages on stderr when it is a terminal and --quiet is not given."""
-    if quiet or not sys.stderr.isatty():
+    """Stage messages on stderr unless --quiet: live lines (rich) on a terminal, plain lines
+    otherwise (a pipe, a log, CI, a notebook; see contactfem/progress.py). stdout is left to
+    the command's result (the summary, or the JSON of --json)."""
+    if quiet:
         return None
-    from contactfem.progress import StageProgress  # rich: one live line per stage
+    from contactfem.progress import PlainProgress, StageProgress
 
-    reporter = StageProgress()
+    reporter = StageProgress() if sys.stderr.isatty() else PlainProgress(sys.stderr)
     context = click.get_current_context(silent=True)
     if context is not None:
         context.meta.setdefault("contactfem.progress", []).append(reporter)
@@ -226,6 +228,7 @@ def main() -> None:
       contactfem converge cases/square.yaml --levels 4
       contactfem plot results/square              # deformed.png, contact_profile.png
       contactfem init my-case.yaml                # a commented starter case
+      contactfem sweep cases/sweeps/square.yaml   # many solves in parallel (Dask): sweep.csv/.json/.png
     """
 
 
@@ -618,33 +621,36 @@ def _pictures(result_dir: Path, out_dir: Path, progress, **options) -> list[str]
 @click.option("--json", "as_json", is_flag=True, help="Print the written files and the factor as JSON.")
 @_interruptible
 def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: bool, as_json: bool) -> None:
-    """Draw the result in RESULT_DIR (read from its solution.h5) as two PNGs.
+    """Draw the result in RESULT_DIR as PNGs: a solve's, a compare's or a converge's.
 
-    deformed.png: the deformed mesh coloured by von Mises stress, the magnification
-    factor written in the picture, the obstacle's line and the contact zone in red;
-    contact_profile.png: the contact pressure and the gap g0 − u_n along ΓC.
-    Rendered off-screen (VTK's EGL window): no display is needed.
+    A solve (solution.h5): deformed.png, the body at x + f·u coloured by von Mises stress,
+    with axes, units, a scale bar, the obstacle, the contact zone in red and a zoom on it
+    (the magnification never draws the body across the obstacle: the caption says how);
+    contact_profile.png, the contact pressure and the gap g0 − u_n along the obstacle.
+    A compare (compare.json): compare.png. A converge (convergence.json): convergence_h.png
+    and convergence_time.png. Rendered off-screen: no display is needed.
 
     \b
     Examples:
       contactfem plot results/square
       contactfem plot results/square --size 1600x1000 --scale 20 --out figures
+      contactfem plot results/square-compare          # compare.png from compare.json
+      contactfem plot results/square-convergence      # the convergence PNGs
     """
     from contactfem.io.atomic import claimed_directory
-    from contactfem.io.registry import PICTURES
-    from contactfem.render import load_result, make_pictures, parse_scale, parse_size
+    from contactfem.render import check_directory, draw_directory, parse_scale, parse_size
 
     try:
         pixels = parse_size(size)
         factor = parse_scale(scale)
-        load_result(result_dir)  # a missing or unreadable result is refused before anything is touched
+        names = check_directory(result_dir)  # nothing to draw, or unreadable: refused before anything is touched
         progress = _progress(quiet)
         directory = out_dir if out_dir is not None else result_dir
         with claimed_directory(directory) as claim:
-            with claim.stage(replaces=PICTURES) as staging:
+            with claim.stage(replaces=names) as staging:
                 if progress is not None:
                     progress("rendering pictures")
-                made = make_pictures(result_dir, staging, size=pixels, scale=factor)
+                made = draw_directory(result_dir, staging, size=pixels, scale=factor)
         made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
     except ContactFemError as error:
         _fail(error)
@@ -653,8 +659,8 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
     if as_json:
         click.echo(json.dumps(made, indent=2, sort_keys=True))
     elif not quiet:
-        click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}, "
-                   f"displacement x {made['scale']:.3g})")
+        magnified = f", displacement x {made['scale']:.3g}" if made["scale"] is not None else ""
+        click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}{magnified})")
 
 
 @main.command()
@@ -713,6 +719,23 @@ def _obstacle_text(obstacle: dict) -> str:
             f"{facing} of {total} contact nodes face it (positions [{low:g}, {high:g}] along the obstacle)")
 
 
+def _force_lines(forces: dict | None) -> list[str]:
+    """One line per boundary part that carries a force: its condition, force and moment."""
+    if not forces:
+        return []
+    lines = []
+    for name, entry in forces["parts"].items():
+        fx, fy = entry["force"]
+        if fx == 0 and fy == 0 and entry["moment"] == 0:
+            continue
+        label = "forces" if not lines else ""
+        lines.append(f"  {label:<12} {name} ({entry['condition']}): ({fx:.6g}, {fy:.6g}), moment {entry['moment']:.6g}")
+    total = forces["total"]
+    lines.append(f"  {'':<12} sum: relative {total['relative_force_residual']:.1e} "
+                 f"(moments about ({forces['moment_about'][0]:.4g}, {forces['moment_about'][1]:.4g}))")
+    return lines
+
+
 def _certificate_line(certificate: dict | None) -> str:
     """The kernel's certificate in one line: each condition's relative value against its tolerance."""
     if certificate is None:
@@ -744,6 +767,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         f"max u_n - g {signs['max_normal_displacement_minus_gap']:.3g}",
         f"  equilibrium  relative residual {report['equilibrium']['relative_force_residual']:.1e}",
         _certificate_line(report["solver"].get("certificate")),
+        *_force_lines(report.get("boundary_forces")),
         "  time         " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()),
     ]
     for warning in report.get("warnings", []):
@@ -757,6 +781,188 @@ def _summary(report: dict, written: list[Path]) -> str:
     if written:
         lines.append(f"  wrote        {', '.join(str(p) for p in written)}")
     return "\n".join(lines)
+
+
+@main.command()
+@click.argument("sweep_file", metavar="SWEEP", type=_CheckedPath(dir_okay=False))
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
+              help="Output directory. Default: the sweep file's output.directory (results/<sweep file name>).")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786. Default: a local cluster.")
+@click.option("--workers", type=click.IntRange(1, 4096), default=None,
+              help="Worker processes of the local cluster. Default: one per core, at most one per point.")
+@quiet_option
+@click.option("--json", "as_json", is_flag=True, help="Print sweep.json on stdout.")
+@overwrite_option
+@_interruptible
+def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers: int | None, quiet: bool,
+          as_json: bool, overwrite: bool) -> None:
+    """Solve many variants of a case, as independent points in parallel on Dask.
+
+    SWEEP names a base case and the values of any of its keys by dotted path, as a grid
+    (cartesian product) or a list of points (README: "Sweeps"). Each point is a full
+    solve; its figures are stored in OUT/points/ as soon as it finishes, so a rerun solves
+    only what is missing. Writes sweep.csv, sweep.json and sweep.png (error against
+    seconds, Pareto front marked). Runs on a local Dask cluster (one single-threaded
+    worker per core), on --scheduler's cluster, or without Dask one point after another.
+    Exit 1 when a point failed (the others are in the table all the same).
+
+    \b
+    Examples:
+      contactfem sweep cases/sweeps/square.yaml
+      contactfem sweep cases/sweeps/square.yaml --workers 1 --out results/sweep-1
+      contactfem sweep study.yaml --scheduler tcp://10.0.0.5:8786 --overwrite
+    """
+    from contextlib import nullcontext
+
+    from contactfem import sweep as sweeps
+    from contactfem.errors import SolverError
+    from contactfem.io.atomic import (
+        TEMP_PREFIX,
+        atomic_write_text,
+        claimed_directory,
+        ensure_directory,
+    )
+
+    def say(line: str) -> None:
+        if not quiet:
+            click.echo(_printable(line), err=True)
+
+    def finished(row: dict, done: int, total: int) -> None:
+        if row["reused"]:
+            return
+        seconds = row["seconds"].get("total")
+        timing = f", {seconds:.2f} s" if seconds is not None else ""
+        size = f", {row['unknowns']} unknowns" if row["unknowns"] is not None else ""
+        reason = f": {row['message']}" if row["status"] != "ok" and row["message"] else ""
+        say(f"[{done}/{total}] point {row['index']} {row['label']}: {row['status']}{timing}{size}{reason}")
+
+    try:
+        if scheduler is not None and workers is not None:
+            raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
+                            "(the cluster's own workers run the points)")
+        plan = sweeps.load_sweep(sweep_file)
+        directory = Path(out_dir if out_dir is not None else plan.directory)
+        with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
+            points = directory / sweeps.POINTS_DIR
+            done = sweeps.finished_points(points, plan)
+            pending = plan.pending(done)
+            if done:
+                reused = sum(p.digest in done for p in plan.points)
+                say(f"{reused} of {len(plan.points)} points are already solved in {points}; not solving them again")
+            engine_context = (sweeps.open_engine(scheduler, workers, len(pending)) if pending
+                              else nullcontext(sweeps.SerialEngine()))
+            with engine_context as engine:
+                if engine.note:
+                    say(f"note: {engine.note}")
+                if pending and engine.kind == "dask":
+                    where = f"the cluster at {scheduler}" if scheduler else "a local cluster"
+                    say(f"solving {len(pending)} points on {engine.workers} Dask workers of {where}")
+                ensure_directory(points)
+                for leftover in points.glob(f"{TEMP_PREFIX}*"):  # a killed run's unfinished write
+                    leftover.unlink(missing_ok=True)
+                table = sweeps.run_sweep(
+                    plan, engine, finished=done, progress=finished,
+                    store=lambda record: atomic_write_text(points / sweeps.point_file(record["digest"]),
+                                                           sweeps.point_json(record)))
+            with claim.stage(replaces=sweeps.SWEEP_FILES, last=sweeps.SWEEP_JSON) as staging:
+                atomic_write_text(staging / sweeps.SWEEP_CSV, sweeps.table_csv(table))
+                _plot_sweep(staging / sweeps.SWEEP_PNG, table)
+                atomic_write_text(staging / sweeps.SWEEP_JSON, to_json(table))
+    except ContactFemError as error:
+        _fail(error)
+        return
+    if as_json:
+        click.echo(to_json(table), nl=False)
+    elif not quiet:
+        click.echo(_sweep_summary(table, directory))
+    failed = sweeps.failed_rows(table)
+    if failed:
+        statuses = ", ".join(f"{sum(r['status'] == s for r in failed)} {s}" for s in sweeps.STATUSES
+                             if any(r["status"] == s for r in failed))
+        _fail(SolverError(f"{plan.source.name}: {len(failed)} of {len(table['points'])} points did not solve "
+                          f"({statuses}); first, point {failed[0]['index']}: {failed[0]['message']}; "
+                          f"{directory / sweeps.SWEEP_CSV} lists every point"))
+
+
+def _sweep_summary(table: dict, directory: Path) -> str:
+    engine = table["engine"]
+    where = ("this process" if engine["kind"] == "serial" else
+             f"{engine['workers']} Dask workers" + (f" at {engine['scheduler']}" if engine["scheduler"] else ""))
+    counts = table["counts"]
+    rows = table["points"]
+    width = min(max([len(r["label"]) for r in rows] + [6]), 60)
+    lines = [f"{table['sweep']['title']}: {counts['points']} points ({counts['solved']} solved on {where}, "
+             f"{counts['reused']} reused) in {table['wall_seconds']:.1f} s"
+             + (f" (and {engine['startup_seconds']:.1f} s to start the cluster)" if engine["startup_seconds"] else ""),
+             (f"  {'#':>4}  {'values':<{width}}  {'status':<13}{'unknowns':>9}{'Newton':>7}{'seconds':>9}"
+              f"{'contact force':>15}{'error':>11}  front")]
+    for r in rows:
+        def number(value, spec):
+            return format(value, spec) if value is not None else "-"
+        label = r["label"] if len(r["label"]) <= width else r["label"][: width - 3] + "..."
+        lines.append(f"  {r['index']:>4}  {label:<{width}}  {r['status']:<13}{number(r['unknowns'], 'd'):>9}"
+                     f"{number(r['iterations'], 'd'):>7}{number(r['seconds'].get('total'), '.2f'):>9}"
+                     f"{number(r['contact_force'], '.6g'):>15}{number(r['error'], '.3e'):>11}"
+                     f"  {'*' if r['pareto'] else ''}")
+    lines.append("  (error: energy norm against the exact solution, or |‖u_h‖ - ‖u_finest‖| in the energy norm "
+                 "within each group; * = on its group's Pareto front of error against seconds)")
+    lines.append(f"  wrote {directory}/sweep.csv, sweep.json, sweep.png; each point in {directory}/points/")
+    return "\n".join(lines)
+
+
+def _plot_sweep(path: Path, table: dict) -> None:
+    """sweep.png: each point's error against its seconds, one colour per group, the Pareto fronts drawn."""
+    import itertools
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    from contactfem.io.atomic import atomic_path
+    from contactfem.sweep import pareto_series
+
+    series = list(pareto_series(table))
+    figure, axes = plt.subplots(figsize=(8.5, 6))
+    colours = itertools.cycle(plt.rcParams["axes.prop_cycle"].by_key()["color"])
+    for (group, rows, front), colour in zip(series, colours):
+        axes.scatter([r["seconds"]["total"] for r in rows], [r["error"] for r in rows], s=24, color=colour,
+                     label=group or "all points", zorder=3)
+        axes.plot([r["seconds"]["total"] for r in front], [r["error"] for r in front], "-", color=colour, lw=1.2)
+        axes.scatter([r["seconds"]["total"] for r in front], [r["error"] for r in front], s=90,
+                     facecolors="none", edgecolors="black", lw=1.0, zorder=4)
+        for r in front:
+            axes.annotate(str(r["index"]), (r["seconds"]["total"], r["error"]), textcoords="offset points",
+                          xytext=(5, 4), fontsize=7)
+    kinds = {r["error_kind"] for _, rows, _ in series for r in rows}
+    if series:
+        axes.set_xscale("log")
+        axes.set_yscale("log")
+        seconds = FuncFormatter(lambda value, _: f"{value:g}")
+        axes.xaxis.set_major_formatter(seconds)
+        axes.xaxis.set_minor_formatter(seconds)
+        axes.tick_params(axis="x", which="minor", labelsize=7)
+        axes.scatter([], [], s=90, facecolors="none", edgecolors="black", label="Pareto front (point number)")
+        axes.legend(fontsize=7, loc="best")
+    else:
+        axes.text(0.5, 0.5, "no point has an error to plot\n(one solved point per group, or none solved)",
+                  ha="center", va="center", transform=axes.transAxes)
+    axes.set_xlabel("seconds per point (meshing, assembly, solve, report)")
+    axes.set_ylabel("energy-norm error ‖u − u_h‖" if kinds == {"exact"} else
+                    "|‖u_h‖ − ‖u_finest‖|, energy norm (finest point of the group)" if kinds == {"finest"} else
+                    "error (energy norm)")
+    failed = sum(r["status"] != "ok" for r in table["points"])
+    axes.set_title(f"{table['sweep']['title']}: error against time"
+                   + (f" ({failed} point(s) without figures)" if failed else ""), fontsize=10)
+    axes.grid(True, which="both", alpha=0.3)
+    figure.tight_layout()
+    try:
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, format="png", dpi=110)
+    finally:
+        plt.close(figure)
 
 
 if __name__ == "__main__":

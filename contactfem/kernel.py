@@ -41,7 +41,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from contactfem.errors import SolverError
-from contactfem.linalg import FactorCheck, check_factorization, factorize, probe_vector
+from contactfem.linalg import FactorCheck, Factorizer, check_factorization, probe_vector
 
 EPS = float(np.finfo(float).eps)
 #: Iterative refinement of each linear solve: at most this many corrections, stopping once
@@ -57,6 +57,12 @@ REFINEMENT_STEPS = 3
 #: bounds: ≤ 2e-12 on the shipped cases and the square up to 131 000 unknowns, 2e-5 on
 #: a 1:1000 strip of 1000 × 4 cells; the square translated by a prescribed 1e45 gives 1.8.
 FORCE_RESOLUTION_LIMIT = 1e-3
+#: Rate assumed for the dense Schur complement's LU (flop/s), in the cost model that
+#: chooses between Schur updates and a refactorisation; measured 5–15e9 on 2 cores.
+DENSE_FLOPS = 5e9
+#: The most bytes the cached Schur columns (one full-length vector each) may hold: beyond
+#: it the kernel refactorises, whatever the cost model says (at 2.1M unknowns: 32 columns).
+COLUMN_BYTES = 2**29
 
 
 def roundoff_bound(terms: int) -> float:
@@ -298,6 +304,8 @@ def solve_contact(
     linear = ActiveSetSolver(system, backend, tolerance=tolerance)
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
+    least_index = False
+    flips = np.zeros(m, dtype=np.int64)
     history: list[Iteration] = []
     displacement = np.zeros(len(linear.load))
     multiplier = np.zeros(m)
@@ -356,8 +364,9 @@ def solve_contact(
                 message = f"converged in {iteration} iterations, {int(active.sum())} active nodes"
                 if cycle_detected_at is not None:
                     message += (
-                        f"; the active set cycled at iteration {cycle_detected_at}, "
-                        "resolved by least-index single changes"
+                        f"; the active set cycled at iteration {cycle_detected_at}, resolved by "
+                        + ("least-index single changes" if least_index else
+                           "holding the oscillating nodes but the least-index one")
                     )
             else:
                 status = Status.NOT_CERTIFIED
@@ -375,12 +384,24 @@ def solve_contact(
             )
             break
         if key in seen and cycle_detected_at is None:
-            # Plain Newton revisits a set: from now on change one node at a time, the
+            # Plain Newton revisits a set. On a fragmented contact zone the nodes that
+            # ping-pong are few among many correct changes: first keep every change of a
+            # node that has not flipped back and forth, and only the lowest-numbered of the
+            # oscillating ones. If a set repeats even so, change one node at a time, the
             # lowest-numbered one whose sign condition fails (Murty's least-index rule),
             # which terminates on P-matrix problems such as ours (S = P K⁻¹ Pᵀ is SPD).
             cycle_detected_at = iteration
-        if cycle_detected_at is not None:
-            first_wrong = np.flatnonzero(new_active != active)[0]
+        changing = new_active != active
+        if cycle_detected_at is not None and not least_index:
+            oscillating = changing & (flips >= 2)
+            if oscillating.any():
+                held = np.flatnonzero(oscillating)[1:]
+                new_active[held] = active[held]
+                changing = new_active != active
+            if np.packbits(new_active).tobytes() in seen:
+                least_index = True
+        if least_index:
+            first_wrong = np.flatnonzero(changing)[0]
             new_active = active.copy()
             new_active[first_wrong] = not active[first_wrong]
             if np.packbits(new_active).tobytes() in seen and iteration > cycle_detected_at:
@@ -390,6 +411,7 @@ def solve_contact(
                     "even under the least-index safeguard"
                 )
                 break
+        flips += new_active != active
         active = new_active
 
     if certificate is None and history:
@@ -437,15 +459,22 @@ class ActiveSetSolver:
         [   −Eᵀ Z_r          −Eᵀ Z_d ] [ μ ] = [G_d − Eᵀ z0 ],   z0 = K00⁻¹ b0,
 
     then u = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor and
-    is kept for later iterations; beyond ``max_changes`` changed nodes, or when the Schur
-    solve cannot meet the certificate's equilibrium bound (``tolerance``) even after
-    iterative refinement, the matrix is factorised anew with the current set as
-    reference. Every factorisation is probed for singularity
+    is kept for later iterations (the missing ones are solved as one block). The matrix is
+    factorised anew, with the current set as reference, when that is cheaper than the
+    missing columns: a cost model compares their number times the measured seconds per
+    column (plus the dense solve, k³/3 flops at :data:`DENSE_FLOPS`) with the measured
+    seconds of the last factorisation, which for CHOLMOD reuses the first one's ordering
+    and symbolic analysis (:class:`contactfem.linalg.Factorizer`). With SuperLU a
+    factorisation costs about 50 columns, with CHOLMOD about 20. ``max_changes``, when
+    given, replaces the cost model by a fixed bound on the changed nodes. The columns never
+    hold more than :data:`COLUMN_BYTES`; a Schur solve that cannot meet the certificate's
+    equilibrium bound (``tolerance``) even after iterative refinement also refactorises.
+    Every factorisation is probed for singularity
     (:func:`contactfem.linalg.check_factorization`), the probe's solve riding along with
     the first solve of the factor.
     """
 
-    def __init__(self, system: ContactSystem, backend: str, max_changes: int = 64,
+    def __init__(self, system: ContactSystem, backend: str, max_changes: int | None = None,
                  tolerance: float = 1e-10) -> None:
         self.tolerance = tolerance
         self.stiffness = sp.csr_matrix(system.stiffness)
@@ -467,6 +496,10 @@ class ActiveSetSolver:
             raise ValueError("the stiffness matrix must store its whole diagonal")
         self.factorizations = 0
         self.column_solves = 0
+        self.factorizer = Factorizer(
+            backend, name="the stiffness matrix with its supports and active contact normals fixed")
+        #: Measured seconds of one column solve within a block (None before any solve).
+        self.column_seconds: float | None = None
         self.reference: np.ndarray | None = None
         self.factor = None
         self.checks: list[FactorCheck] = []
@@ -549,8 +582,7 @@ class ActiveSetSolver:
 
     def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
-        changes = 0 if self.reference is None else np.count_nonzero(active != self.reference)
-        if self.reference is None or changes > self.max_changes:
+        if self.reference is None or self._refactorize_first(active):
             self._factorize(active)
         u, reaction, accurate = self._solve_refined(active)
         if not accurate and np.any(active != self.reference):
@@ -560,6 +592,18 @@ class ActiveSetSolver:
             self._factorize(active)
             u, reaction, _ = self._solve_refined(active)
         return u, reaction
+
+    def _refactorize_first(self, active: np.ndarray) -> bool:
+        """Whether factorising ``active`` itself is cheaper than the Schur update from the reference."""
+        changed = np.flatnonzero(active != self.reference)
+        if self.max_changes is not None:
+            return len(changed) > self.max_changes
+        missing = sum(1 for j in changed if int(j) not in self.columns)
+        if (len(self.columns) + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
+            return True
+        k = len(changed)
+        update = missing * (self.column_seconds or 0.0) + k**3 / 3 / DENSE_FLOPS
+        return update > self.factorizer.seconds[-1]
 
     def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """u, the reactions at the active normals, and whether the equilibrium residual meets
@@ -613,14 +657,18 @@ class ActiveSetSolver:
         data = np.where(keep, k.data, 0.0)
         data[self.diagonal[fixed]] = 1.0
         masked = sp.csr_matrix((data, k.indices, k.indptr), shape=k.shape)
-        name = "the stiffness matrix with its supports and active contact normals fixed"
-        self.factor = factorize(masked, self.backend, check=False, name=name)
+        name = self.factorizer.name
+        self.factor = None  # a CHOLMOD refactorisation overwrites the previous factor
+        self.factor = self.factorizer.factorize(masked, check=False)
         self.factorizations += 1
         rhs = self.load - k @ self.values
         rhs[fixed] = self.values[fixed]
         # The singularity probe's solve rides along with the first solve of the factor.
         probe = probe_vector(len(rhs), self.free)
+        started = time.perf_counter()
         both = np.asarray(self.factor.solve(np.column_stack([rhs, probe]))).reshape(len(rhs), 2)
+        if self.column_seconds is None:
+            self.column_seconds = (time.perf_counter() - started) / 2
         self.base = np.ascontiguousarray(both[:, 0])
         # ‖K00‖∞ over its equations: the masked rows keep only their free columns.
         norm = float((self.absolute @ self.free.astype(float))[self.free].max(initial=0.0))
@@ -642,7 +690,9 @@ class ActiveSetSolver:
                     rhs[~self.free, k] = 0.0
                 else:
                     rhs[dof, k] = 1.0
+            started = time.perf_counter()
             solved = np.asarray(self.factor.solve(rhs)).reshape(n, len(missing))
+            self.column_seconds = (time.perf_counter() - started) / len(missing)
             self.column_solves += len(missing)
             for k, j in enumerate(missing):
                 self.columns[j] = solved[:, k]

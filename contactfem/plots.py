@@ -1,13 +1,21 @@
-"""PNG figures of the studies (matplotlib, off-screen), each written atomically."""
+"""PNG figures of the contact profiles and of the studies (matplotlib, off-screen), each written atomically.
+
+Every profile is drawn against the position along the obstacle (the coordinate along its
+tangent t = (−n_y, n_x)): the abscissa of report.json's contact_zone intervals, of
+``/contact/abscissa`` in solution.h5, of contact.csv and of compare.json's profiles. The
+contact zone is shaded over exactly those intervals.
+"""
 
 from __future__ import annotations
 
+import itertools
+import json
 from pathlib import Path
 
 import numpy as np
 
 from contactfem.io.atomic import atomic_path
-from contactfem.io.registry import CONVERGENCE_PNGS
+from contactfem.io.registry import COMPARE_JSON, CONVERGENCE_PNGS
 from contactfem.norms import NORM_NAMES
 
 _LABELS = {
@@ -18,6 +26,8 @@ _LABELS = {
     "multiplier_l2": "‖λ − λ_ref‖ L²(ΓC)",
     "multiplier_h_minus_half": "‖λ − λ_ref‖ H^-1/2(ΓC)",
 }
+_SYMBOLS = {"positive": "λh (positive, method 4)", "standard": "θh (standard, method 5)"}
+_ALONG = "position along the obstacle"
 
 
 def _pyplot():
@@ -29,107 +39,114 @@ def _pyplot():
     return plt
 
 
-def _save(figure, path: Path) -> Path:
+def _save(figure, path: Path, dpi: int = 110) -> Path:
     with atomic_path(path) as temporary:
-        figure.savefig(temporary, format="png", dpi=110)
+        figure.savefig(temporary, format="png", dpi=dpi)
     return path
 
 
-def plot_contact_profiles(path: Path, outcomes: dict, title: str = "") -> Path:
-    """λh, θh and the gap g0 − u_n along ΓC, against the abscissa along the obstacle."""
-    plt = _pyplot()
-    positive = outcomes["positive"]
-    contact = positive.problem.contact
-    s = contact.abscissa
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    top.plot(s, positive.solution.contact.multiplier, "-o", ms=3, label="λh (positive, method 4)")
-    if "standard" in outcomes:
-        top.plot(s, outcomes["standard"].solution.contact.multiplier, "-s", ms=3,
-                 label="θh (standard, method 5)")
-    top.axhline(0.0, color="k", lw=0.8)
-    top.set_ylabel("contact pressure")
-    top.legend()
-    top.set_title(title)
-    gap = contact.gap - positive.solution.contact.normal_displacement
-    bottom.plot(s, gap, "-", color="tab:green")
-    bottom.axhline(0.0, color="k", lw=0.8)
-    bottom.set_ylabel("gap g0 − u_n")
-    bottom.set_xlabel("position along the obstacle")
-    figure.tight_layout()
-    try:
-        return _save(figure, path)
-    finally:
-        plt.close(figure)
+def _with_unit(label: str, unit: str | None) -> str:
+    return f"{label} ({unit})" if unit else label
 
 
-def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0) -> list[Path]:
-    """Error against h (log-log, with the h^rate slope of Theorem 3.7) and against seconds."""
-    plt = _pyplot()
-    written = []
-    methods = sorted({row["method"] for row in study["rows"]})
-    for x_key, name, x_label in zip(("h", "total_seconds"), CONVERGENCE_PNGS,
-                                    ("h (largest triangle diameter)", "seconds (mesh + assembly + solve)")):
-        figure, axes = plt.subplots(2, 3, figsize=(13, 7.5))
-        for axis, norm in zip(axes.ravel(), NORM_NAMES):
-            for method in methods:
-                rows = [r for r in study["rows"] if r["method"] == method]
-                x = np.array([r[x_key] for r in rows])
-                y = np.array([r[norm] for r in rows])
-                keep = y > 0
-                axis.loglog(x[keep], y[keep], "-o", ms=4, label=method)
-            if x_key == "h" and len(rows) > 1 and np.any(y > 0):
-                x0, y0 = x[keep][0], y[keep][0]
-                axis.loglog(x, y0 * (x / x0) ** theoretical_rate, "k--", lw=0.8,
-                            label=f"h^{theoretical_rate:g}")
-            axis.xaxis.set_minor_formatter(plt.NullFormatter())
-            axis.set_title(_LABELS[norm], fontsize=10)
-            axis.set_xlabel(x_label, fontsize=8)
-            axis.legend(fontsize=7)
-        figure.suptitle(f"{study['case']['title']} — reference: {study['reference']}")
-        figure.tight_layout()
-        try:
-            written.append(_save(figure, Path(directory) / name))
-        finally:
-            plt.close(figure)
-    return written
+def zone_intervals(abscissa: np.ndarray, active: np.ndarray, edges: np.ndarray | None = None,
+                   nodes: np.ndarray | None = None) -> list[tuple[float, float]]:
+    """The contact zone's intervals [from, to] along the obstacle, as report.json's contact_zone.
+
+    Active nodes joined by ΓC edges whose both ends are active form one interval (its
+    smallest and largest abscissa). Without ``edges``/``nodes`` (mesh indices of ΓC's
+    edges and of the contact nodes), consecutive active nodes in abscissa order are joined.
+    """
+    s = np.asarray(abscissa, dtype=float)
+    active = np.asarray(active, dtype=bool)
+    m = len(s)
+    parent = np.arange(m)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    if edges is not None and nodes is not None:
+        index = {int(n): i for i, n in enumerate(np.asarray(nodes, dtype=np.int64))}
+        pairs = [(index.get(int(a), -1), index.get(int(b), -1)) for a, b in np.asarray(edges).reshape(-1, 2)]
+    else:
+        order = np.argsort(s, kind="stable")
+        pairs = list(itertools.pairwise(order))
+    for a, b in pairs:
+        if a >= 0 and b >= 0 and active[a] and active[b]:
+            parent[root(a)] = root(b)
+    groups: dict[int, list[int]] = {}
+    for i in np.flatnonzero(active):
+        groups.setdefault(root(int(i)), []).append(int(i))
+    return sorted((float(s[g].min()), float(s[g].max())) for g in groups.values())
+
+
+def _shade(axis, intervals, label: str | None = None) -> None:
+    for k, (low, high) in enumerate(intervals):
+        if high > low:
+            axis.axvspan(low, high, color="tab:red", alpha=0.12, lw=0, label=label if k == 0 else None)
+        else:
+            axis.axvline(low, color="tab:red", alpha=0.4, lw=1.5, label=label if k == 0 else None)
+
+
+def _zone_text(intervals, unit: str) -> str:
+    shown = ", ".join(f"[{low:.4g}, {high:.4g}]" for low, high in intervals) or "none"
+    return f"contact zone along the obstacle: {shown}" + (f" {unit}" if unit and intervals else "")
+
+
+# --------------------------------------------------------------------------- one result
 
 
 def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 900), title: str = "") -> Path:
     """Contact pressure and gap g0 − u_n along ΓC of one result (``read_hdf5``'s dict).
 
-    The abscissa is the arc length along ΓC from its first contact node (the nodes are
-    stored sorted along ΓC); the active nodes are marked and the contact zone shaded.
-    The PNG is exactly ``size`` pixels.
+    The abscissa is the position along the obstacle (``/contact/abscissa``); the active
+    nodes are marked, the contact zone shaded over report.json's intervals, and the exact
+    pressure overlaid when the file has one (``/contact/exact_pressure``). The PNG is
+    exactly ``size`` pixels.
     """
     plt = _pyplot()
-    points = np.asarray(data["mesh"]["points"], dtype=float)
+    attrs = data.get("attrs", {})
+    length, stress = str(attrs.get("length_unit", "")), str(attrs.get("stress_unit", ""))
     contact = data["contact"]
     nodes = np.asarray(contact["nodes"], dtype=np.int64)
     active = np.asarray(contact["active"], dtype=bool)
-    xy = points[nodes]
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]) if len(xy) else xy[:, 0]
+    if "abscissa" in contact:
+        s = np.asarray(contact["abscissa"], dtype=float)
+    else:  # files older than schema 2: arc length from the first contact node
+        xy = np.asarray(data["mesh"]["points"], dtype=float)[nodes]
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]) if len(xy) else xy[:, 0]
+    order = np.argsort(s, kind="stable")
     multiplier = np.asarray(contact["multiplier"], dtype=float)
     gap = np.asarray(contact["gap"], dtype=float) - np.asarray(contact["normal_displacement"], dtype=float)
-    method = data["attrs"].get("method", "")
-    symbol = {"positive": "λh (positive, method 4)", "standard": "θh (standard, method 5)"}.get(method, "multiplier")
+    intervals = zone_intervals(s, active, contact.get("edges"), nodes)
+    method = attrs.get("method", "")
+    symbol = _SYMBOLS.get(method, "multiplier")
     dpi = 100
     figure, (top, bottom) = plt.subplots(2, 1, figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi, sharex=True)
-    for axis in (top, bottom):
-        for start, stop in _runs(active):
-            axis.axvspan(s[start], s[stop], color="tab:red", alpha=0.12, lw=0)
-        axis.axhline(0.0, color="k", lw=0.8)
-    top.plot(s, multiplier, "-o", ms=3, color="tab:blue", label=symbol)
-    top.plot(s[active], multiplier[active], "o", ms=5, color="tab:red", label="active nodes (in contact)")
-    top.set_ylabel("contact pressure")
-    top.legend(fontsize=9)
-    top.set_title(title or "contact boundary ΓC")
-    bottom.plot(s, gap, "-", color="tab:green", label="gap g0 − u_n")
-    bottom.plot(s[active], gap[active], "o", ms=5, color="tab:red")
-    bottom.set_ylabel("gap g0 − u_n (length)")
-    bottom.set_xlabel("arc length along ΓC")
-    bottom.legend(fontsize=9)
-    figure.tight_layout()
     try:
+        for axis in (top, bottom):
+            _shade(axis, intervals)
+            axis.axhline(0.0, color="k", lw=0.8)
+            axis.grid(True, alpha=0.3)
+        top.plot(s[order], multiplier[order], "-o", ms=3, color="tab:blue", label=symbol)
+        top.plot(s[active], multiplier[active], "o", ms=5, color="tab:red", label="active nodes (in contact)")
+        if "exact_pressure" in contact:
+            exact = np.asarray(contact["exact_pressure"], dtype=float)
+            finite = np.isfinite(exact[order])
+            top.plot(s[order][finite], exact[order][finite], "--", color="black", lw=1.2,
+                     label="exact pressure −σnn(u_exact)")
+        top.set_ylabel(_with_unit("contact pressure", stress))
+        top.legend(fontsize=9)
+        top.set_title((title or "contact boundary ΓC") + "\n" + _zone_text(intervals, length), fontsize=11)
+        bottom.plot(s[order], gap[order], "-", color="tab:green", label="gap g0 − u_n")
+        bottom.plot(s[active], gap[active], "o", ms=5, color="tab:red")
+        bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
+        bottom.set_xlabel(_with_unit(_ALONG, length) + "  (report.json's contact_zone abscissa)")
+        bottom.legend(fontsize=9)
+        figure.tight_layout()
         with atomic_path(path) as temporary:
             figure.savefig(temporary, format="png", dpi=dpi)
         return path
@@ -137,15 +154,196 @@ def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 9
         plt.close(figure)
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Index ranges [start, stop] of consecutive True entries (a single node gives start = stop)."""
-    runs, start = [], None
-    for i, value in enumerate(np.asarray(mask, dtype=bool)):
-        if value and start is None:
-            start = i
-        if not value and start is not None:
-            runs.append((start, i - 1))
-            start = None
-    if start is not None:
-        runs.append((start, len(mask) - 1))
-    return runs
+# --------------------------------------------------------------------------- compare
+
+
+def compare_profiles(outcomes: dict) -> dict:
+    """compare.json's ``profiles`` and ``units``-less figures from the two solves (as :func:`plot_compare` reads)."""
+    positive = outcomes["positive"]
+    contact = positive.problem.contact
+    points = positive.problem.mesh.points[contact.nodes]
+    profiles = {
+        "abscissa": contact.abscissa.tolist(), "x": points[:, 0].tolist(), "y": points[:, 1].tolist(),
+        "lambda": positive.solution.contact.multiplier.tolist(),
+        "gap": (contact.gap - positive.solution.contact.normal_displacement).tolist(),
+        "active": {name: o.solution.contact.active.astype(bool).tolist() for name, o in outcomes.items()},
+    }
+    if "standard" in outcomes:
+        profiles["theta"] = outcomes["standard"].solution.contact.multiplier.tolist()
+    intervals = [list(i) for i in zone_intervals(contact.abscissa, positive.solution.contact.active,
+                                                 contact.edges, contact.nodes)]
+    return {"profiles": profiles,
+            "methods": {"positive": {"contact_zone": {"intervals": [{"abscissa": i} for i in intervals]}}}}
+
+
+def plot_contact_profiles(path: Path, outcomes: dict, title: str = "") -> Path:
+    """compare.png of the two solves: drawn from the compare.json beside ``path`` when it is
+    there (the file a later ``contactfem plot`` redraws from), from ``outcomes`` otherwise."""
+    beside = Path(path).parent / COMPARE_JSON
+    figures = None
+    if beside.is_file():
+        try:
+            figures = json.loads(beside.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            figures = None
+    if not figures or "profiles" not in figures:
+        figures = {**compare_profiles(outcomes), "case": {"title": title}}
+    return plot_compare(path, figures, title=title)
+
+
+def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
+    """λh, θh and the gap along ΓC from compare.json's content.
+
+    Three panels: both multipliers over ΓC; the lift-off zone alone (the nodes where the
+    positive method has no contact), where θh's oscillation below zero shows at its own
+    scale; the gap g0 − u_n. The contact zone is shaded over the positive method's intervals.
+    """
+    plt = _pyplot()
+    profiles = figures["profiles"]
+    units = figures.get("units", {})
+    length, stress = units.get("length", ""), units.get("stress", "")
+    s = np.asarray(profiles["abscissa"], dtype=float)
+    lam = np.asarray(profiles["lambda"], dtype=float)
+    theta = np.asarray(profiles["theta"], dtype=float) if "theta" in profiles else None
+    gap = np.asarray(profiles["gap"], dtype=float)
+    active = np.asarray(profiles["active"]["positive"], dtype=bool)
+    order = np.argsort(s, kind="stable")
+    zone = figures.get("methods", {}).get("positive", {}).get("contact_zone", {}).get("intervals", [])
+    intervals = [tuple(i["abscissa"]) for i in zone]
+    figure, (top, middle, bottom) = plt.subplots(3, 1, figsize=(9, 9.5), gridspec_kw={"height_ratios": [3, 2.2, 2]})
+    try:
+        for axis in (top, bottom):
+            _shade(axis, intervals, label="contact zone")
+            axis.axhline(0.0, color="k", lw=0.8)
+            axis.grid(True, alpha=0.3)
+        top.plot(s[order], lam[order], "-o", ms=3, label=_SYMBOLS["positive"])
+        if theta is not None:
+            top.plot(s[order], theta[order], "-s", ms=3, label=_SYMBOLS["standard"])
+        top.set_ylabel(_with_unit("contact pressure", stress))
+        top.set_title((title or figures.get("case", {}).get("title", "")) + "\n" + _zone_text(intervals, length),
+                      fontsize=11)
+        top.legend(fontsize=9)
+
+        lift = ~active
+        middle.axhline(0.0, color="k", lw=0.8)
+        middle.grid(True, alpha=0.3)
+        if lift.any():
+            # The lift-off nodes and one node on each side, at the scale of their own values.
+            near = lift.copy()
+            near[1:] |= lift[:-1]
+            near[:-1] |= lift[1:]
+            pick = order[near[order]]
+            middle.plot(s[pick], lam[pick], "-o", ms=3, label="λh")
+            values = [lam[lift]]
+            if theta is not None:
+                middle.plot(s[pick], theta[pick], "-s", ms=3, color="tab:orange", label="θh")
+                # θh's dips below zero, at the lift-off nodes and at the contact zone's edge.
+                values += [theta[lift], np.minimum(theta[pick], 0.0)]
+                low = pick[int(np.argmin(theta[pick]))]
+                middle.text(0.01, 0.04, f"min θh = {theta[low]:.3g} {stress} at {s[low]:.4g} {length} "
+                            f"(λh there: {lam[low]:.3g})", transform=middle.transAxes, fontsize=8, color="tab:orange")
+            spread = np.concatenate(values)
+            low_value, high_value = float(spread.min()), float(spread.max())
+            pad = 0.15 * max(high_value - low_value, abs(low_value), abs(high_value), np.finfo(float).tiny)
+            middle.set_ylim(min(low_value, 0.0) - pad, max(high_value, 0.0) + pad)
+            shown = s[pick]
+            if theta is not None:
+                # Frame the nodes where θh is not zero (its oscillation sits next to the zone's
+                # edge), with a few nodes of margin, rather than the whole lift-off zone.
+                moving = np.flatnonzero(np.abs(theta[pick]) > 1e-3 * np.abs(theta[pick]).max())
+                if moving.size:
+                    shown = shown[max(moving[0] - 4, 0):moving[-1] + 5]
+            middle.set_xlim(float(shown.min()), float(shown.max()))
+            middle.legend(fontsize=8)
+            middle.set_title("where the body lifts off (no contact for λh) next to the contact zone, at the scale "
+                             "of the values there", fontsize=9)
+        else:
+            middle.text(0.5, 0.5, "no lift-off: every contact node is in contact", transform=middle.transAxes,
+                        ha="center", va="center")
+        middle.set_ylabel(_with_unit("contact pressure", stress))
+        bottom.plot(s[order], gap[order], "-", color="tab:green", label="gap g0 − u_n (positive)")
+        bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
+        bottom.set_xlabel(_with_unit(_ALONG, length))
+        bottom.sharex(top)
+        bottom.legend(fontsize=8)
+        figure.tight_layout()
+        return _save(figure, Path(path))
+    finally:
+        plt.close(figure)
+
+
+# --------------------------------------------------------------------------- convergence
+
+
+def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0) -> list[Path]:
+    """Error against h (log-log, each segment labelled with its observed rate, the h^rate slope
+    of Theorem 3.7 for reference) and against seconds, from convergence.json's content.
+
+    Rates the study flags as biased (a nested reference only one refinement finer) are
+    marked with an asterisk and explained under the figure.
+    """
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+
+    plt = _pyplot()
+    written = []
+    rows_all = study["rows"]
+    methods = sorted({row["method"] for row in rows_all})
+    length = study.get("units", {}).get("length", "")
+    biased = bool(study.get("warnings")) and study.get("reference_extra") == 1
+    for x_key, name, x_label in zip(("h", "total_seconds"), CONVERGENCE_PNGS,
+                                    (_with_unit("h (largest triangle diameter)", length),
+                                     "seconds (mesh + assembly + solve)")):
+        figure, axes = plt.subplots(2, 3, figsize=(14, 8.5))
+        for axis, norm in zip(axes.ravel(), NORM_NAMES):
+            every_x = []
+            for method in methods:
+                rows = [r for r in rows_all if r["method"] == method]
+                x = np.array([r[x_key] for r in rows], dtype=float)
+                y = np.array([r[norm] if r[norm] is not None else np.nan for r in rows], dtype=float)
+                keep = np.isfinite(y) & (y > 0) & (x > 0)
+                if not keep.any():
+                    continue
+                line, = axis.loglog(x[keep], y[keep], "-o", ms=4, label=method)
+                every_x.extend(x[keep])
+                if x_key == "h":
+                    rates = study.get("rates", {}).get(method, {}).get(norm, [])
+                    for i in range(len(x) - 1):
+                        if i < len(rates) and rates[i] is not None and keep[i] and keep[i + 1]:
+                            mark = "*" if biased and i == len(x) - 2 else ""
+                            axis.annotate(f"{rates[i]:.2f}{mark}", (np.sqrt(x[i] * x[i + 1]), np.sqrt(y[i] * y[i + 1])),
+                                          textcoords="offset points", xytext=(4, 4 if method == methods[0] else -12),
+                                          fontsize=7, color=line.get_color())
+            if x_key == "h" and every_x:
+                mine = [r for r in rows_all if r["method"] == methods[0] and r[norm] is not None and r[norm] > 0]
+                if len(mine) > 1:
+                    x0, y0 = mine[0]["h"], mine[0][norm]
+                    xs = np.array([r["h"] for r in mine])
+                    axis.loglog(xs, y0 * (xs / x0) ** theoretical_rate, "k--", lw=0.8,
+                                label=f"slope {theoretical_rate:g} (h^{theoretical_rate:g})")
+                axis.xaxis.set_major_locator(FixedLocator(sorted(set(every_x))))
+                axis.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+                axis.xaxis.set_minor_formatter(NullFormatter())
+            axis.set_title(_LABELS[norm], fontsize=10)
+            axis.set_xlabel(x_label, fontsize=8)
+            if not every_x:
+                axis.text(0.5, 0.5, "no positive error on any level", transform=axis.transAxes, ha="center")
+                continue
+            axis.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+            axis.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.0e}" if v > 0 else ""))
+            axis.yaxis.set_minor_formatter(NullFormatter())
+            axis.tick_params(labelsize=7)
+            axis.grid(True, which="both", alpha=0.25)
+            axis.legend(fontsize=7)
+        heading = f"{study['case']['title']} — reference: {study['reference']}"
+        if x_key == "h":
+            heading += "\nnumbers on the segments: observed rates between consecutive levels"
+        figure.suptitle(heading, fontsize=11)
+        if biased:
+            figure.text(0.01, 0.005, "* " + study["warnings"][0], fontsize=8, color="darkred")
+        figure.tight_layout(rect=(0, 0.025 if biased else 0, 1, 1))
+        try:
+            written.append(_save(figure, Path(directory) / name))
+        finally:
+            plt.close(figure)
+    return written
+

@@ -53,6 +53,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
                    "multiplier": method.multiplier_symbol, "summary": method.summary},
         "material": {"E": material.young, "nu": material.poisson, "lambda": material.lame_lambda,
                      "mu": material.lame_mu, "plane": material.plane},
+        "units": case.units.to_dict(),
         "mesh": {
             "nodes": mesh.n_points,
             "triangles": mesh.n_triangles,
@@ -91,6 +92,8 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
         },
         "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force),
+        "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
+                                           {part.name: part.label for part in case.parts}),
         "errors": exact_errors(problem, solution),
         "warnings": material_warnings(case.material),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
@@ -236,6 +239,79 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
         "relative_force_residual": float(np.hypot(total[0], total[1]) / force_scale),
         "relative_moment_residual": float(abs(total[2]) / (force_scale * length)),
     }
+
+
+def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
+                    labels: Mapping[str, str]) -> dict:
+    """Force and moment of every boundary part on the body, and of the body force.
+
+    Applied surface forces on the natural parts, reactions on the supports (clamped,
+    prescribed, symmetry lines: K u − F − f_c on their held unknowns) and the obstacle's
+    push on the contact parts (−n Λ). Moments are about ``equilibrium``'s point (the nodes' centroid).
+    The entries sum to zero up to the solve's residual: ``total`` is that sum.
+    """
+    mesh = problem.mesh
+    points = mesh.points
+    n_dof = 2 * mesh.n_points
+    u = displacement.ravel()
+    contact = problem.contact
+    push = np.zeros(n_dof)
+    push[2 * contact.nodes] = -contact.normal[0] * nodal_force
+    push[2 * contact.nodes + 1] = -contact.normal[1] * nodal_force
+    held = np.concatenate([problem.dirichlet_dofs, 2 * problem.symmetry_nodes, 2 * problem.symmetry_nodes + 1])
+    reaction = np.zeros(n_dof)
+    reaction[held] = (problem.stiffness @ u)[held] - problem.load[held] - push[held]
+    natural = problem.loads.natural
+    centre = points.mean(axis=0)
+
+    def resultant(force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
+        f = force.reshape(-1, 2)
+        if nodes is not None:
+            f, where = f[nodes], points[nodes]
+        else:
+            where = points
+        arm = where - centre
+        return {"force": [float(f[:, 0].sum()), float(f[:, 1].sum())],
+                "moment": float(np.sum(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))}
+
+    # Reactions belong to the support parts holding the node, the obstacle's push to the
+    # contact parts: a node shared by two such parts counts for the first in the mesh's order.
+    kinds = {name: labels.get(name, "free").split(" ")[0] for name in mesh.part_names}
+
+    def owners(selected: set[str]) -> np.ndarray:
+        owner = np.full(mesh.n_points, -1)
+        for index in reversed(range(len(mesh.part_names))):
+            if kinds[mesh.part_names[index]] in selected:
+                owner[np.unique(mesh.boundary_edges[mesh.edge_parts == index])] = index
+        return owner
+
+    support_owner = owners({"clamped", "displacement", "symmetry"})
+    contact_owner = owners({"contact"})
+    entries: dict[str, dict] = {}
+    for index, name in enumerate(mesh.part_names):
+        pieces = [resultant(_natural_part_load(natural, natural.parts == index, mesh.n_points)),
+                  resultant(reaction, np.flatnonzero(support_owner == index)),
+                  resultant(push, np.flatnonzero(contact_owner == index))]
+        entries[name] = {"condition": labels.get(name, "free"),
+                         "force": [sum(p["force"][k] for p in pieces) for k in range(2)],
+                         "moment": sum(p["moment"] for p in pieces)}
+    body = problem.load - natural.load_vector(mesh.n_points)
+    entries["body force"] = {"condition": "volume", **resultant(body)}
+    force = np.sum([entry["force"] for entry in entries.values()], axis=0)
+    moment = float(sum(entry["moment"] for entry in entries.values()))
+    scale = max(sum(float(np.hypot(*entry["force"])) for entry in entries.values()), np.finfo(float).tiny)
+    length = float(np.ptp(points, axis=0).max())
+    return {"moment_about": centre.tolist(), "parts": entries,
+            "total": {"force": force.tolist(), "moment": moment,
+                      "relative_force_residual": float(np.hypot(*force) / scale),
+                      "relative_moment_residual": float(abs(moment) / (scale * length))}}
+
+
+def _natural_part_load(natural, selected: np.ndarray, n_points: int) -> np.ndarray:
+    from contactfem.assembly import edge_load_vector
+
+    return edge_load_vector(natural.edges[selected], natural.length[selected], natural.traction[:, selected],
+                            n_points)
 
 
 def _ratio(value: float, scale: float) -> float:

@@ -1,12 +1,17 @@
-"""Mesh sequencing, as two pure steps: the same case on a coarser mesh, and the active set it predicts.
+"""Mesh sequencing, as pure steps: the same case on a coarser mesh, whether solving it first pays, and the active set it predicts.
 
 The coarse solution (h four times larger) is read along ΓC as functions of the abscissa
 on the obstacle: its pressure λ and its normal displacement u_n. At each fine contact
 node the indicator of the active set iteration, λ ω + c (u_n − g), is evaluated with those
 interpolated values and the fine gap; the nodes where it is positive start active. Only
-nodes near the ends of the contact zone can be mispredicted, so the fine iteration starts
-a node or two from its answer. The recursion (solve the coarse case, itself predicted from
-a coarser one) lives in :mod:`contactfem.solve`.
+nodes near the ends of contact patches can be mispredicted, so the fine iteration starts
+a node or so per patch end from its answer. The recursion (solve the coarse case, itself
+predicted from a coarser one) lives in :mod:`contactfem.solve`.
+
+A polygon whose boundary is finer than the coarse mesh (a rough profile of thousands of
+short edges) would force the coarse mesh to keep every vertex, and cost nearly as much as
+the fine one: its runs of short straight edges are decimated with the mesh, keeping every
+``factor``-th vertex, as long as the polygon stays simple and counter-clockwise.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
+from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
 
 # Below this many unknowns a cold start is cheaper than solving a coarser case first.
@@ -25,6 +31,17 @@ SEQUENCING_THRESHOLD = 5_000
 # against 1/4 for halving, and mispredicts only nodes next to the ends of the zone, which
 # the kernel's cached Schur columns absorb (measured on the square: 1024 from 256).
 COARSENING = 4
+#: What a coarse level's contact solve costs, in linear solves of its own size, once
+#: predicted from the level below: 1.3–3 measured on the square and the rough profiles.
+COARSE_LEVEL_SOLVES = 3.0
+#: What a prediction saves on the fine level, in its linear solves: a cold start took 3–8
+#: factorisations (square, punch, rough profiles), a predicted one 1–2.
+EXPECTED_SAVING_SOLVES = 2.0
+#: Sparse factorisation time grows like unknowns ** GROWTH on these 2D meshes.
+GROWTH = 1.1
+#: Candidate edge pairs the simplicity check of a decimated polygon may test; beyond it the
+#: polygon is kept as it is (an outline with many long, overlapping edges).
+MAX_EDGE_PAIRS = 5_000_000
 
 
 def worth_sequencing(n_unknowns: int) -> bool:
@@ -32,9 +49,31 @@ def worth_sequencing(n_unknowns: int) -> bool:
     return n_unknowns >= SEQUENCING_THRESHOLD
 
 
+def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int) -> bool:
+    """Whether solving ``coarse_unknowns`` first is expected to cost less than it saves.
+
+    Cost model, in linear solves of the fine problem: a linear solve of the coarse level
+    costs q = (coarse / fine) ** :data:`GROWTH` of a fine one; the coarse level costs
+    :data:`COARSE_LEVEL_SOLVES` of its own and the levels below it as much again in
+    proportion (q + q² + … = q / (1 − q) in all, the same ratio assumed down the chain);
+    the prediction saves :data:`EXPECTED_SAVING_SOLVES`. A square coarsened by four in h
+    (a sixteenth of the unknowns) or a decimated rough base (a seventh) pays; a polygon
+    whose boundary cannot be coarsened (about half the unknowns per level) does not.
+    """
+    if coarse_unknowns <= 0 or coarse_unknowns >= fine_unknowns:
+        return False
+    q = (coarse_unknowns / fine_unknowns) ** GROWTH
+    return COARSE_LEVEL_SOLVES * q / (1.0 - q) < EXPECTED_SAVING_SOLVES
+
+
 def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Case, int] | None:
     """The same case on a mesh ``factor`` times coarser (or twice, if that is all the
-    mesh allows), with its refinement count; None if it cannot be coarsened."""
+    mesh allows), with its refinement count; None if it cannot be coarsened.
+
+    A polygon's mesh sizes grow by ``factor``, and its runs of straight edges shorter than
+    the coarse mesh's edge length are decimated by the same factor (see
+    :func:`decimated_loop`); a loop whose decimation would not be simple keeps its vertices.
+    """
     levels = factor.bit_length() - 1
     if refinements >= 1:
         return case, max(refinements - levels, 0)
@@ -47,9 +86,131 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
         return None
     if isinstance(case.geometry, PolygonGeometry):
         contact_size = None if settings.contact_size is None else factor * settings.contact_size
-        return replace(case, mesh=replace(settings, size=factor * settings.size, contact_size=contact_size)), 0
+        mesh = replace(settings, size=factor * settings.size, contact_size=contact_size)
+        coarse_edge = {name: mesh.size for name in _part_names(case.geometry)}
+        if contact_size is not None:
+            coarse_edge.update({name: contact_size for name in case.contact_parts})
+        outer = decimated_loop(case.geometry.outer, factor, coarse_edge)
+        holes = tuple(decimated_loop(hole, factor, coarse_edge) for hole in case.geometry.holes)
+        if outer is not None and _signed_area(outer.vertices) <= 0.0:
+            outer = None  # the case's outer loop is counter-clockwise; so must its decimation be
+        geometry = PolygonGeometry(
+            outer if outer is not None else case.geometry.outer,
+            tuple(new if new is not None else old for new, old in zip(holes, case.geometry.holes)),
+        )
+        return replace(case, geometry=geometry, mesh=mesh), 0
     assert isinstance(case.geometry, MeshFileGeometry)
     return None
+
+
+def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Loop | None:
+    """``loop`` with every run of consecutive straight edges of one part, each shorter than
+    that part's coarse edge length (``coarse_edge``), reduced to every ``factor``-th vertex
+    (the run's ends kept); None when nothing is decimated or the result is not a simple
+    polygon (checked by :func:`simple_polygon`, with the original orientation)."""
+    vertices = loop.vertices
+    k = len(vertices)
+    lengths = np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)
+    short = np.array([loop.edge_arcs[i] is None and lengths[i] < coarse_edge.get(loop.edge_names[i], np.inf)
+                      for i in range(k)])
+    if short.sum() < 2:
+        return None
+    keep = np.ones(k, dtype=bool)
+    # A run starts at an edge that is short while the previous edge is not short or belongs
+    # to another part; a loop that is one single run starts at vertex 0.
+    same = np.array([loop.edge_names[i] == loop.edge_names[i - 1] for i in range(k)])
+    starts = np.flatnonzero(short & ~(np.roll(short, 1) & same))
+    if len(starts) == 0:
+        starts = np.array([0])
+    for start in starts:
+        run = [start]
+        while len(run) < k:
+            nxt = (run[-1] + 1) % k
+            if not short[nxt] or loop.edge_names[nxt] != loop.edge_names[start] or nxt == start:
+                break
+            run.append(nxt)
+        # Vertices strictly inside the run: run[1:], its last edge's end vertex is kept.
+        inner = np.asarray(run[1:], dtype=np.int64)
+        drop = np.ones(len(inner), dtype=bool)
+        drop[factor - 1::factor] = False
+        keep[inner[drop]] = False
+    if keep.all() or keep.sum() < 3:
+        return None
+    new = vertices[keep]
+    if not simple_polygon(new):
+        return None
+    if np.sign(_signed_area(new)) != np.sign(_signed_area(vertices)):
+        return None
+    index = np.flatnonzero(keep)
+    return Loop(vertices=new, edge_names=tuple(loop.edge_names[i] for i in index),
+                edge_arcs=tuple(loop.edge_arcs[i] for i in index))
+
+
+def simple_polygon(vertices: np.ndarray) -> bool:
+    """Whether the closed polygon through ``vertices`` (k, 2) is simple: distinct vertices,
+    no two edges meeting except adjacent ones at their common vertex (touching counts as
+    meeting), nonzero area. Edge pairs are found by sweeping along x, so a rough profile of
+    thousands of short edges costs a few milliseconds; False also when there are more than
+    :data:`MAX_EDGE_PAIRS` candidate pairs."""
+    v = np.asarray(vertices, dtype=float)
+    k = len(v)
+    if k < 3 or len(np.unique(v, axis=0)) != k or _signed_area(v) == 0.0:
+        return False
+    a, b = v, np.roll(v, -1, axis=0)
+    after = np.roll(v, -2, axis=0)
+    folded = (_orientation(a, b, after) == 0) & (np.einsum("ij,ij->i", b - a, after - b) < 0)
+    if folded.any():
+        return False
+    low_x, high_x = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
+    order = np.argsort(low_x, kind="stable")
+    ends = np.searchsorted(low_x[order], high_x[order], side="right")
+    counts = np.maximum(ends - np.arange(k) - 1, 0)
+    total = int(counts.sum())
+    if total > MAX_EDGE_PAIRS:
+        return False
+    if total == 0:
+        return True
+    first = np.repeat(np.arange(k), counts)
+    offset = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+    i, j = order[first], order[first + 1 + offset]
+    adjacent = (np.abs(i - j) == 1) | (np.abs(i - j) == k - 1)
+    low_y, high_y = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+    near = ~adjacent & (low_y[i] <= high_y[j]) & (low_y[j] <= high_y[i])
+    i, j = i[near], j[near]
+    return not _segments_meet(a[i], b[i], a[j], b[j]).any()
+
+
+def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Sign of the turn p → q → r (+1 left, −1 right, 0 collinear), row by row."""
+    cross = (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+    return np.sign(cross)
+
+
+def _segments_meet(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Whether segment p1p2 meets q1q2 (touching included), row by row."""
+    d1, d2 = _orientation(q1, q2, p1), _orientation(q1, q2, p2)
+    d3, d4 = _orientation(p1, p2, q1), _orientation(p1, p2, q2)
+    proper = (d1 * d2 < 0) & (d3 * d4 < 0)
+
+    def on(p, q, r):  # r on segment pq, given collinear
+        return ((np.minimum(p[:, 0], q[:, 0]) <= r[:, 0]) & (r[:, 0] <= np.maximum(p[:, 0], q[:, 0]))
+                & (np.minimum(p[:, 1], q[:, 1]) <= r[:, 1]) & (r[:, 1] <= np.maximum(p[:, 1], q[:, 1])))
+
+    touching = (((d1 == 0) & on(q1, q2, p1)) | ((d2 == 0) & on(q1, q2, p2))
+                | ((d3 == 0) & on(p1, p2, q1)) | ((d4 == 0) & on(p1, p2, q2)))
+    return proper | touching
+
+
+def _signed_area(vertices: np.ndarray) -> float:
+    following = np.roll(vertices, -1, axis=0)
+    return 0.5 * float(np.sum(vertices[:, 0] * following[:, 1] - vertices[:, 1] * following[:, 0]))
+
+
+def _part_names(geometry: PolygonGeometry) -> set[str]:
+    names = set(geometry.outer.edge_names)
+    for hole in geometry.holes:
+        names.update(hole.edge_names)
+    return names
 
 
 def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:

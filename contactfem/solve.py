@@ -17,12 +17,17 @@ import numpy as np
 from contactfem.assembly import stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
-from contactfem.errors import SolverError
+from contactfem.errors import ContactFemError, SolverError
 from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact
 from contactfem.linalg import resolve_backend
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
-from contactfem.sequencing import coarser, predict_active_set, worth_sequencing
+from contactfem.sequencing import (
+    coarse_level_pays,
+    coarser,
+    predict_active_set,
+    worth_sequencing,
+)
 
 Progress = Callable[[str], None]
 
@@ -156,8 +161,10 @@ def solve_case(
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively), and its cost.
 
-    (None, {}) when the problem is small, no coarser mesh exists, or the coarse solve fails:
-    a prediction is only a starting point, and without one the kernel starts cold.
+    (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
+    expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
+    from its unknowns once it is meshed), or meshing or solving it fails: a prediction is
+    only a starting point, and without one the kernel starts cold.
     """
     if not worth_sequencing(problem.n_unknowns):
         return None, {}
@@ -166,8 +173,11 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: P
     if coarse is None:
         return None, {}
     coarse_case, coarse_refine = coarse
-    coarse_problem = prepare(coarse_case, refine=coarse_refine)
-    if coarse_problem.n_unknowns >= problem.n_unknowns:
+    try:
+        coarse_problem = prepare(coarse_case, refine=coarse_refine)
+    except ContactFemError:
+        return None, {}  # a decimated boundary the mesher or the contact checks refuse
+    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
         return None, {}
     try:
         coarse_result = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem)
@@ -178,6 +188,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: P
     return active, {
         "coarse_unknowns": coarse_problem.n_unknowns,
         "coarse_iterations": coarse_result.kernel.iterations,
+        "coarse_factorizations": coarse_result.kernel.factorizations,
         "predicted_active": int(active.sum()),
         "levels": 1 + coarse_result.sequencing.get("levels", 0),
         "seconds": time.perf_counter() - started,

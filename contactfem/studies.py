@@ -21,6 +21,11 @@ from contactfem.norms import (
 from contactfem.report import contact_zone, sign_conditions
 from contactfem.solve import Progress, SolveResult, prepare, solve_case
 
+#: Version of compare.json's layout (contactfem/schemas/compare.schema.json).
+COMPARE_SCHEMA_VERSION = 1
+#: Version of convergence.json's layout (contactfem/schemas/convergence.schema.json).
+CONVERGENCE_SCHEMA_VERSION = 1
+
 
 def compare_methods(case: Case, *, refine: int | None = None,
                     progress: Progress | None = None) -> tuple[dict, dict[str, SolveResult]]:
@@ -41,8 +46,11 @@ def compare_methods(case: Case, *, refine: int | None = None,
     negative = theta < 0
     scale_u = max(np.abs(u).max(), np.finfo(float).tiny)
     scale_p = max(np.abs(lam).max(), np.finfo(float).tiny)
+    gap = contact.gap - positive.solution.contact.normal_displacement
     figures = {
+        "schema_version": COMPARE_SCHEMA_VERSION,
         "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "units": case.units.to_dict(),
         "mesh": {"nodes": problem.mesh.n_points, "triangles": problem.mesh.n_triangles,
                  "unknowns": problem.n_unknowns, "contact_nodes": int(len(contact.nodes))},
         "setup_seconds": timings,
@@ -58,6 +66,16 @@ def compare_methods(case: Case, *, refine: int | None = None,
         "theta_total_variation_in_lift_off": _total_variation(theta, lift_off),
         "lambda_total_variation_in_lift_off": _total_variation(lam, lift_off),
         "methods": {name: _method_figures(o) for name, o in outcomes.items()},
+        # Per contact node, sorted along ΓC: what compare.png draws (and `contactfem plot` redraws).
+        "profiles": {
+            "abscissa": contact.abscissa.tolist(),
+            "x": problem.mesh.points[contact.nodes, 0].tolist(),
+            "y": problem.mesh.points[contact.nodes, 1].tolist(),
+            "lambda": lam.tolist(),
+            "theta": theta.tolist(),
+            "gap": gap.tolist(),
+            "active": {name: o.solution.contact.active.astype(bool).tolist() for name, o in outcomes.items()},
+        },
     }
     return figures, outcomes
 
@@ -97,14 +115,18 @@ def convergence_study(
     iterations and every error norm; ``rates`` holds the observed rate between levels.
     """
     say = progress or (lambda message: None)
+
+    def detail(message: str) -> None:
+        say("  " + message.strip())
+
     base_refine = case.mesh.refine
     reference = None
     if case.exact is None:  # no exact solution: the reference is a finer nested solve
         finest = base_refine + levels - 1 + extra
         say(f"reference: {extra} refinement(s) beyond the last level")
-        reference_problem = prepare(case, refine=finest)
+        reference_problem = prepare(case, refine=finest, progress=detail)
         reference = {
-            name: solve_case(case, method=name, problem=reference_problem) for name in methods
+            name: solve_case(case, method=name, problem=reference_problem, progress=detail) for name in methods
         }
         reference_lambda = nodal_multiplier(
             (reference.get("positive") or solve_case(case, method="positive", problem=reference_problem)).solution
@@ -113,10 +135,11 @@ def convergence_study(
     for level in range(levels):
         timings: dict[str, float] = {}
         started = time.perf_counter()
-        problem = prepare(case, refine=base_refine + level, timings=timings)
+        say(f"level {level} of {levels - 1}")
+        problem = prepare(case, refine=base_refine + level, timings=timings, progress=detail)
         setup = time.perf_counter() - started
         for name in methods:
-            outcome = solve_case(case, method=name, problem=problem)
+            outcome = solve_case(case, method=name, problem=problem, progress=detail)
             if on_outcome is not None:  # on_outcome(level, method, outcome), e.g. to keep the fields
                 on_outcome(level, name, outcome)
             if problem.exact is not None:
@@ -140,8 +163,8 @@ def convergence_study(
                 **errors,
             }
             rows.append(row)
-            say(f"level {level} {name}: h = {row['h']:.4g}, {row['unknowns']} unknowns, "
-                f"H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
+            detail(f"level {level} {name}: h = {row['h']:.4g}, {row['unknowns']} unknowns, "
+                   f"H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
     rates = {}
     for name in methods:
         mine = [r for r in rows if r["method"] == name]
@@ -152,10 +175,21 @@ def convergence_study(
             norm: [float(v) if np.isfinite(v) else None for v in observed_rates(h, [r[norm] for r in mine])]
             for norm in NORM_NAMES
         }
+    warnings = []
+    if case.exact is None and extra == 1 and levels > 1:
+        # The reference's own error is then about 2^-p times the last level's: the last
+        # level's error is underestimated and the rate ending there comes out too high.
+        warnings.append("the reference is only one refinement finer than the last level, so the last level's "
+                        "errors are underestimated and the last observed rates are biased high; rerun with "
+                        "--extra 2 (or more) to check them")
     return {
+        "schema_version": CONVERGENCE_SCHEMA_VERSION,
         "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "units": case.units.to_dict(),
         "reference": "exact" if case.exact is not None else f"nested, {extra} refinement(s) finer",
+        "reference_extra": None if case.exact is not None else extra,
         "levels": levels,
         "rows": rows,
         "rates": rates,
+        "warnings": warnings,
     }

@@ -260,3 +260,122 @@ def test_converged_results_carry_a_passed_certificate():
     assert result.certificate is not None and result.certificate.passed
     assert set(result.certificate.checks) == {
         "finite", "force_resolution", "equilibrium", "force_sign", "penetration", "complementarity"}
+
+
+# --- fragmented active sets and the cost of the linear algebra -------------------------------
+
+def alternating_chain(n: int, k0: float = 1.0, k1: float = 4.0, f: float = 1.0, gap: float = 10.0):
+    """n = 2p + 1 nodes, each on a ground spring k0 and tied to its neighbours by springs k1,
+    all pushed by f towards obstacles at u = 0 (even nodes) and u = ``gap`` (odd nodes).
+
+    Hand solution: every even node touches (u = 0) and every odd node floats at
+    u = f / (k0 + 2 k1) < gap, between two fixed neighbours; an even node's contact force
+    is f + k1 (u_left + u_right) > 0. So p + 1 patches of one node each, 2p transitions.
+    """
+    k = (k0 + 2 * k1) * np.eye(n) - k1 * (np.eye(n, k=1) + np.eye(n, k=-1))
+    k[0, 0] -= k1
+    k[-1, -1] -= k1
+    load = np.full(n, f)
+    gaps = np.where(np.arange(n) % 2 == 0, 0.0, gap)
+    u = np.where(np.arange(n) % 2 == 0, 0.0, f / (k0 + 2 * k1))
+    force = np.where(np.arange(n) % 2 == 0, load - k @ u, 0.0)
+    return k, load, gaps, u, force
+
+
+def tridiagonal_mass(n: int) -> np.ndarray:
+    """The consistent boundary mass of n nodes spaced 1 apart (the standard method's B)."""
+    m = (np.eye(n, k=1) + np.eye(n, k=-1)) / 6 + 2 * np.eye(n) / 3
+    m[0, 0] = m[-1, -1] = 1 / 3
+    return m
+
+
+@pytest.mark.parametrize("backend", available_backends())
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_hundreds_of_patches_are_solved_exactly_in_a_few_factorisations(backend, mass):
+    """801 nodes, 401 one-node patches: from the cold start the unconstrained solve pushes
+    every even node in (the odd ones stay below their gap), the next set is the answer and
+    the third step confirms it; at most two factorisations whatever the method's mass."""
+    n = 801
+    k, f, g, u, force = alternating_chain(n)
+    b = np.eye(n) if mass == "lumped" else tridiagonal_mass(n)
+    result = solve_contact(system(k, f, g, b=b), backend=backend)
+    assert result.status is Status.CONVERGED, result.message
+    assert int(result.active[1:].astype(int) @ (~result.active[:-1]).astype(int)) + 1 == 401
+    np.testing.assert_allclose(result.displacement, u, atol=1e-12)
+    np.testing.assert_allclose(result.nodal_force, force, atol=1e-12)
+    assert result.iterations <= 3
+    assert result.factorizations <= 2
+    assert result.certificate.passed
+
+
+def test_a_start_a_few_nodes_off_costs_columns_not_factorisations():
+    """Started from the answer with 3 nodes flipped (6 transitions moved), the kernel solves
+    the 3 changes through the Schur complement of its first factorisation (one column each)
+    when the measured costs say columns are cheaper."""
+    from contactfem.kernel import ActiveSetSolver
+
+    n = 401
+    k, f, g, u, _ = alternating_chain(n)
+    linear = ActiveSetSolver(system(k, f, g), "superlu")
+    start = np.arange(n) % 2 == 0
+    start[[10, 200, 301]] = ~start[[10, 200, 301]]
+    linear.solve(start)
+    assert linear.factorizations == 1
+    # Pretend a factorisation costs 10 columns: 3 changes go through the Schur complement...
+    linear.column_seconds, linear.factorizer.seconds[-1] = 1.0, 10.0
+    answer = np.arange(n) % 2 == 0
+    displacement, _ = linear.solve(answer)
+    assert (linear.factorizations, linear.column_solves) == (1, 3)
+    np.testing.assert_allclose(displacement, u, atol=1e-12)
+    # ...and 20 changes from the reference are refactorised.
+    other = answer.copy()
+    other[1:40:2] = True
+    linear.column_seconds, linear.factorizer.seconds[-1] = 1.0, 10.0
+    linear.solve(other)
+    assert linear.factorizations == 2
+
+
+def test_a_fixed_change_budget_still_bounds_the_schur_updates():
+    """``max_changes`` replaces the cost model: more changed nodes than it refactorise."""
+    from contactfem.kernel import ActiveSetSolver
+
+    n = 101
+    k, f, g, _, _ = alternating_chain(n)
+    linear = ActiveSetSolver(system(k, f, g), "superlu", max_changes=4)
+    answer = np.arange(n) % 2 == 0
+    linear.solve(answer)
+    few = answer.copy()
+    few[[1, 3, 5]] = True
+    linear.solve(few)
+    assert linear.factorizations == 1
+    many = answer.copy()
+    many[1:12:2] = True
+    linear.solve(many)
+    assert linear.factorizations == 2
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_refactorisations_with_one_pattern_reuse_the_analysis_and_stay_exact(backend):
+    """A Factorizer factorises differently masked matrices of one pattern (the kernel's
+    case); each factorisation solves its own matrix, whatever the backend reuses."""
+    from contactfem.linalg import Factorizer
+
+    n = 60
+    k, _, _, _, _ = alternating_chain(n)
+    factorizer = Factorizer(backend)
+    rhs = np.linspace(1.0, 2.0, n)
+    for scale in (1.0, 3.0, 0.5):
+        matrix = sp.csr_matrix(scale * k)
+        x = factorizer.factorize(matrix).solve(rhs)
+        np.testing.assert_allclose(matrix @ x, rhs, rtol=0, atol=1e-12)
+    assert len(factorizer.seconds) == 3
+
+
+def test_the_safeguard_holds_oscillating_nodes_and_says_how_it_resolved_the_cycle():
+    """The cycling problem: the set repeats, the kernel holds the nodes that flipped back and
+    forth (or falls back to single least-index changes) and names what it did."""
+    result = solve_contact(system(CYCLING_K, CYCLING_F, CYCLING_G), initial_active=CYCLING_START,
+                           max_iterations=100)
+    assert result.status is Status.CONVERGED
+    assert result.cycle_detected_at is not None
+    assert "resolved by" in result.message and "least-index" in result.message

@@ -23,7 +23,7 @@ CORE_MAY_IMPORT = CORE + ("contactfem.errors", "contactfem.mesh.topology")
 PIPELINE = ("contactfem.case", "contactfem.discretize", "contactfem.solve", "contactfem.sequencing",
             "contactfem.result", "contactfem.report", "contactfem.estimator", "contactfem.norms",
             "contactfem.studies", "contactfem.adaptive", "contactfem.exact", "contactfem.expressions",
-            "contactfem.mesh")
+            "contactfem.mesh", "contactfem.sweep")
 #: Writers, pictures and the terminal: only the command line calls them.
 WRITERS = ("contactfem.io", "contactfem.render", "contactfem.plots", "contactfem.cli", "contactfem.progress")
 #: The case reader takes the output formats' names (and what each needs beside it) from the registry.

@@ -56,7 +56,10 @@ def _values(info) -> np.ndarray:
     return np.reshape(info["values"], (-1, info["components"]))
 
 
-def _check_body(block, data, stress_layout):
+def _check_body(block, data, source="vtu", displacement_components=3):
+    """The body as ParaView reads it from ``source`` (vtu: solution.vtu, with the scalar stress
+    components; xdmf: solution.xdmf over solution.h5). The stress has one layout everywhere:
+    6 components in VTK's order xx yy zz xy yz xz, as solution.h5 stores it."""
     points, triangles = data["mesh"]["points"], data["mesh"]["triangles"]
     fields = data["fields"]
     assert block["points"] == len(points) and block["cells"] == len(triangles)
@@ -64,21 +67,30 @@ def _check_body(block, data, stress_layout):
     xyz = np.asarray(block["coordinates"])
     assert np.allclose(xyz[:, :2], points) and np.all(xyz[:, 2] == 0)
     assert set(block["point_data"]) == {"displacement"}
-    assert set(block["cell_data"]) == {"stress", "stress_xx", "stress_yy", "stress_xy", "stress_zz", "von_mises"}
+    scalars = {"stress_xx", "stress_yy", "stress_xy", "stress_zz"} if source == "vtu" else set()
+    assert set(block["cell_data"]) == {"stress", "von_mises"} | scalars
     for kind in ("point_data", "cell_data"):
         assert all(info["type"] == "double" for info in block[kind].values())
     u = _values(block["point_data"]["displacement"])
-    assert u.shape == (len(points), 3)
-    assert np.allclose(u[:, :2], fields["displacement"], rtol=1e-12, atol=0) and np.all(u[:, 2] == 0)
-    xx, yy, xy, zz = fields["stress"].T
-    zero = np.zeros_like(xx)
-    expected = {"vtk6": [xx, yy, zz, xy, zero, zero],  # VTK symmetric order
-                "full9": [xx, xy, zero, xy, yy, zero, zero, zero, zz]}[stress_layout]
-    assert np.allclose(_values(block["cell_data"]["stress"]), np.column_stack(expected), rtol=1e-12, atol=0)
-    for name, column in (("stress_xx", xx), ("stress_yy", yy), ("stress_xy", xy), ("stress_zz", zz),
-                         ("von_mises", fields["von_mises"])):
+    assert u.shape == (len(points), displacement_components)
+    assert np.allclose(u[:, :2], fields["displacement"], rtol=1e-12, atol=0) and np.all(u[:, 2:] == 0)
+    stored = fields["stress"]
+    assert stored.shape == (len(triangles), 6) and fields["stress"].dtype == np.float64
+    assert block["cell_data"]["stress"]["components"] == 6
+    assert np.allclose(_values(block["cell_data"]["stress"]), stored, rtol=1e-12, atol=0)
+    xx, yy, zz, xy = stored[:, 0], stored[:, 1], stored[:, 2], stored[:, 3]
+    assert np.all(stored[:, 4:] == 0)
+    columns = {"stress_xx": xx, "stress_yy": yy, "stress_xy": xy, "stress_zz": zz}
+    for name, column in [*((n, columns[n]) for n in sorted(scalars)), ("von_mises", fields["von_mises"])]:
         assert block["cell_data"][name]["components"] == 1
         assert np.allclose(_values(block["cell_data"][name])[:, 0], column, rtol=1e-12, atol=0)
+
+
+def test_vtu_metadata_names_the_units(probed):
+    report, _ = probed
+    (body,) = report["solve/solution.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
+    found = _metadata(body)
+    assert (found["length_unit"], found["force_unit"], found["stress_unit"]) == ("m", "N", "Pa")
 
 
 def _metadata(block) -> dict[str, str]:
@@ -115,7 +127,7 @@ def test_vtu_files_as_paraview_reads_them(probed):
     report, tmp = probed
     data = read_hdf5(tmp / "solve" / "solution.h5")
     (body,) = report["solve/solution.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
-    _check_body(body, data, "vtk6")
+    _check_body(body, data)
     _metadata(body)
     (contact,) = report["solve/contact.vtu"]["XMLUnstructuredGridReader"]["steps"]["none"]
     _check_contact(contact, data)
@@ -127,17 +139,20 @@ def test_pvd_groups_body_and_contact(probed):
     found = report["solve/solution.pvd"]["PVDReader"]
     assert found["times"] == [0.0]
     body, contact = found["steps"]["0.0"]
-    _check_body(body, data, "vtk6")
+    _check_body(body, data)
     _metadata(body)
     _check_contact(contact, data)
 
 
-@pytest.mark.parametrize("reader", ["Xdmf3ReaderS", "XDMFReader"])
-def test_xdmf_reads_the_hdf5_archive(probed, reader):
+@pytest.mark.parametrize("reader, components", [("Xdmf3ReaderS", 2), ("XDMFReader", 3)])
+def test_xdmf_reads_the_hdf5_archive(probed, reader, components):
+    """solution.xdmf reads everything from solution.h5 (no companion file): the XDMF 3 reader
+    keeps the stored 2-component displacement, the XDMF 2 reader pads it with z = 0."""
     report, tmp = probed
     data = read_hdf5(tmp / "solve" / "solution.h5")
+    assert sorted(p.name for p in (tmp / "solve").glob("*.h5")) == ["solution.h5"]
     (body,) = report["solve/solution.xdmf"][reader]["steps"]["none"]
-    _check_body(body, data, "full9")
+    _check_body(body, data, source="xdmf", displacement_components=components)
 
 
 def test_compare_series_has_one_time_step_per_method(probed):

@@ -589,7 +589,7 @@ def test_hdf5_round_trip(tmp_path: Path) -> None:
 
     assert data["attrs"] == {
         "format": "contactfem-solution",
-        "schema_version": 2,
+        "schema_version": 3,
         "method": "positive",
         "case_hash": "sha256:abc123",
         "version": "0.1.0",
@@ -612,11 +612,13 @@ def test_hdf5_round_trip(tmp_path: Path) -> None:
 
     np.testing.assert_array_equal(data["fields"]["displacement"], solution.displacement)
     assert data["fields"]["displacement"].shape == (9, 2)
-    np.testing.assert_array_equal(data["fields"]["stress"], solution.stress)
-    assert data["fields"]["stress"].shape == (8, 4)
+    # VTK's symmetric tensor order, as in solution.vtu: xx yy zz xy yz xz.
+    xx, yy, xy, zz = solution.stress.T
+    np.testing.assert_array_equal(data["fields"]["stress"], np.column_stack([xx, yy, zz, xy, 0 * xx, 0 * xx]))
+    assert data["fields"]["stress"].shape == (8, 6)
     assert data["fields"]["attrs"] == {}
     with h5py.File(path, "r") as f:
-        assert f["fields/stress"].attrs["components"] == "xx yy xy zz"
+        assert f["fields/stress"].attrs["components"] == "xx yy zz xy yz xz"
     np.testing.assert_array_equal(data["fields"]["von_mises"], solution.von_mises)
 
     c = solution.contact
@@ -742,3 +744,85 @@ def test_atomic_write_text_and_bytes(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match=r"cannot write .*missing.*t\.txt"):
         atomic_write_text(tmp_path / "missing" / "t.txt", "x")
     assert _temporaries(tmp_path) == []
+
+
+def test_forces_of_every_boundary_part_balance_and_name_their_condition(tmp_path):
+    """report.json's boundary_forces: the traction part carries exactly ∫ g (the square's top:
+    (1e4, −2500)), the contact part exactly the contact force, and all parts with the body
+    force balance to round-off."""
+    import json
+
+    from click.testing import CliRunner
+
+    from contactfem.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    for name in ("square", "hertz_quarter", "hole", "flat_punch", "manufactured"):
+        out = tmp_path / name
+        result = CliRunner().invoke(main, ["solve", str(root / "cases" / f"{name}.yaml"), "--out", str(out), "--quiet"])
+        assert result.exit_code == 0, result.output
+        report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+        forces = report["boundary_forces"]
+        assert forces["total"]["relative_force_residual"] < 1e-10, (name, forces["total"])
+        assert forces["total"]["relative_moment_residual"] < 1e-10, (name, forces["total"])
+        contact = [entry for entry in forces["parts"].values() if entry["condition"] == "contact"]
+        pushed = np.sum([entry["force"] for entry in contact], axis=0)
+        np.testing.assert_allclose(pushed, report["contact_force"]["vector"], rtol=1e-12, atol=1e-12 * abs(pushed).max())
+        if name == "square":
+            np.testing.assert_allclose(forces["parts"]["top"]["force"], [1.0e4, -2500.0], rtol=1e-13)
+        table = (out / "contact.csv").read_text(encoding="utf-8").splitlines()
+        assert table[0] == "abscissa,x,y,pressure,nodal_force,gap,normal_displacement,active"
+        assert len(table) - 1 == report["mesh"]["contact_nodes"]
+
+
+def test_hdf5_stores_the_exact_pressure_only_when_given(tmp_path: Path) -> None:
+    solution = _solution()
+    assert "exact_pressure" not in read_hdf5(_write_h5(solution, tmp_path / "plain.h5"))["contact"]
+    path = write_hdf5(solution, tmp_path / "exact.h5", case_text="", case_hash="h", attributes={},
+                      exact_pressure=np.array([2.0, np.nan]))
+    stored = read_hdf5(path)["contact"]["exact_pressure"]
+    assert stored[0] == 2.0 and np.isnan(stored[1])
+
+
+def test_xdmf_points_into_the_archive_only(tmp_path: Path) -> None:
+    """solution.xdmf stores nothing itself: every DataItem names a dataset of solution.h5
+    that exists with the declared shape (no companion file)."""
+    from contactfem.io.xdmf import COMPANION_H5, write_xdmf
+
+    solution = _solution()
+    _write_h5(solution, tmp_path / "solution.h5")
+    assert write_xdmf(solution, tmp_path) == [tmp_path / "solution.xdmf"]
+    assert not (tmp_path / COMPANION_H5).exists()
+    root = ET.parse(tmp_path / "solution.xdmf").getroot()
+    items = list(root.iter("DataItem"))
+    assert len(items) == 5
+    with h5py.File(tmp_path / "solution.h5", "r") as f:
+        for item in items:
+            file_name, dataset = item.text.strip().split(":")
+            assert file_name == "solution.h5"
+            shape = tuple(int(v) for v in item.get("Dimensions").split())
+            assert f[dataset].shape == shape, dataset
+    kinds = {a.get("Name"): (a.get("AttributeType"), a.get("Center")) for a in root.iter("Attribute")}
+    assert kinds == {"displacement": ("Vector", "Node"), "stress": ("Matrix", "Cell"), "von_mises": ("Scalar", "Cell")}
+
+
+def test_result_data_carries_units_and_the_exact_pressure() -> None:
+    """The writers' input: units in every file's metadata, the exact pressure at the contact
+    nodes when the case has an exact solution (the manufactured case: 3a(λ+μ)√(−x) for x < 0)."""
+    from conftest import shipped_case
+
+    from contactfem.io.registry import result_data
+    from contactfem.solve import solve_case
+
+    case = shipped_case("manufactured")
+    result = solve_case(case)
+    data = result_data(case, result, {})
+    assert {k: data.attributes[k] for k in ("length_unit", "force_unit", "stress_unit")} == {
+        "length_unit": "m", "force_unit": "N", "stress_unit": "Pa"}
+    x = result.solution.mesh.points[result.solution.contact.nodes, 0]
+    law = result.problem.law
+    expected = np.where(x < 0, 3e-3 * (law.lam + law.mu) * np.sqrt(np.abs(x)), 0.0)
+    finite = np.isfinite(data.exact_pressure)
+    assert finite.sum() >= len(x) - 1
+    np.testing.assert_allclose(data.exact_pressure[finite], expected[finite], rtol=1e-9, atol=1e-12)
+

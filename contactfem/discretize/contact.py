@@ -7,9 +7,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from contactfem.assembly import boundary_mass, edge_geometry
-from contactfem.case import Case
+from contactfem.case import Case, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
+from contactfem.mesh.polygon import arc_sweep, loop_signed_area
 from contactfem.methods import ContactBoundaryMasses
 
 
@@ -103,16 +104,11 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
         part_edges = mesh.edges_of(name)
         if len(part_edges) == 0:
             raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
-        _, outward = edge_geometry(mesh.points, part_edges)
-        facing = outward @ normal
-        if (facing <= 1e-9).any():
-            bad = part_edges[np.argmin(facing)]
-            a, b = mesh.points[bad[0]], mesh.points[bad[1]]
-            raise CaseError(
-                f"{case.source.name}: boundary.{name} = contact: the edge from ({a[0]:g}, {a[1]:g}) to "
-                f"({b[0]:g}, {b[1]:g}) faces away from the obstacle (outward normal · obstacle normal = "
-                f"{facing.min():.3g}); a contact part must face the obstacle"
-            )
+        problem = facing_problem(case, name, mesh, part_edges, normal)
+        if problem is not None:
+            raise CaseError(f"{case.source.name}: boundary.{name} = contact: {problem}; a contact part must "
+                            f"face the obstacle (outward normal · obstacle normal ≥ −{FACING_TOLERANCE:g} all "
+                            f"along each edge and > {FACING_TOLERANCE:g} somewhere on it)")
     # A node whose normal motion a support fixes carries no multiplier: both components
     # prescribed, or one prescribed while the obstacle's normal is not along the other.
     prescribed = np.zeros((mesh.n_points, 2), dtype=bool)
@@ -145,3 +141,75 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
         nodes=nodes, edges=edges, gap=obstacle.gap(mesh.points[nodes]), abscissa=abscissa, obstacle=obstacle,
         masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent), beyond=beyond,
     )
+
+
+#: Whether a contact part faces the obstacle is decided on the geometry, not on the mesh: its
+#: outward normal m must satisfy m·n ≥ −FACING_TOLERANCE at every point of each of its edges
+#: (an arc's ends may be tangent to the obstacle, as a disk's sides are) and m·n >
+#: FACING_TOLERANCE somewhere on each edge. Only a mesh file, which has no geometry, is judged
+#: on its mesh edges.
+FACING_TOLERANCE = 1e-9
+
+
+def facing_problem(case: Case, name: str, mesh: Mesh, part_edges: np.ndarray, normal: np.ndarray) -> str | None:
+    """Why contact part ``name`` does not face the obstacle of unit normal ``normal``, or None."""
+    for start, end, arc, body_on_left in _geometry_edges(case, name):
+        if arc is None:
+            d = end - start
+            outward = np.array([d[1], -d[0]]) / np.hypot(*d) * (1.0 if body_on_left else -1.0)
+            low = high = float(outward @ normal)
+        else:
+            low, high = _arc_facing(start, end, arc, body_on_left, normal)
+        if low < -FACING_TOLERANCE or high <= FACING_TOLERANCE:
+            what = ("edge" if arc is None else
+                    f"arc around ({arc.center[0]:g}, {arc.center[1]:g})")
+            shown = f"{low:.3g}" if low == high else f"between {low:.3g} and {high:.3g}"
+            return (f"the {what} from ({start[0]:g}, {start[1]:g}) to ({end[0]:g}, {end[1]:g}) faces away "
+                    f"from the obstacle (outward normal · obstacle normal {shown})")
+    if isinstance(case.geometry, (RectangleGeometry, PolygonGeometry)):
+        return None
+    _, outward = edge_geometry(mesh.points, part_edges)
+    facing = outward @ normal
+    if (facing <= FACING_TOLERANCE).any():
+        bad = part_edges[np.argmin(facing)]
+        a, b = mesh.points[bad[0]], mesh.points[bad[1]]
+        return (f"the mesh edge from ({a[0]:g}, {a[1]:g}) to ({b[0]:g}, {b[1]:g}) faces away from the obstacle "
+                f"(outward normal · obstacle normal = {facing.min():.3g})")
+    return None
+
+
+def _geometry_edges(case: Case, name: str):
+    """(start, end, arc or None, body on the left) of every edge of the case's geometry on part ``name``."""
+    geometry = case.geometry
+    if isinstance(geometry, RectangleGeometry):
+        (x0, y0), (x1, y1) = geometry.lower, geometry.upper
+        corners = {"bottom": ((x0, y0), (x1, y0)), "right": ((x1, y0), (x1, y1)),
+                   "top": ((x1, y1), (x0, y1)), "left": ((x0, y1), (x0, y0))}
+        for side, part in geometry.side_names.items():
+            if part == name:
+                start, end = corners[side]
+                yield np.array(start, dtype=float), np.array(end, dtype=float), None, True
+    elif isinstance(geometry, PolygonGeometry):
+        for index, loop in enumerate((geometry.outer, *geometry.holes)):
+            area = loop_signed_area(loop)
+            body_on_left = area > 0 if index == 0 else area < 0
+            k = len(loop.vertices)
+            for i, part in enumerate(loop.edge_names):
+                if part == name:
+                    yield loop.vertices[i], loop.vertices[(i + 1) % k], loop.edge_arcs[i], body_on_left
+
+
+def _arc_facing(start: np.ndarray, end: np.ndarray, arc, body_on_left: bool, normal: np.ndarray) -> tuple[float, float]:
+    """Least and greatest outward normal · ``normal`` over the arc (its normals sweep an angle interval)."""
+    theta0, sweep = arc_sweep(start, end, arc)
+    # The normal to the right of the direction of travel is the radial direction on a
+    # counter-clockwise arc; the body's outward normal is that one when the body is on the left.
+    flip = (sweep > 0) != body_on_left
+    phi0 = theta0 + (np.pi if flip else 0.0)
+    low_angle = phi0 if sweep > 0 else phi0 + sweep
+    width = abs(sweep)
+    psi = float(np.arctan2(normal[1], normal[0]))
+    ends = (np.cos(low_angle - psi), np.cos(low_angle + width - psi))
+    least = -1.0 if (psi + np.pi - low_angle) % (2 * np.pi) <= width else float(min(ends))
+    greatest = 1.0 if (psi - low_angle) % (2 * np.pi) <= width else float(max(ends))
+    return least, greatest

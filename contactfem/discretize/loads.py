@@ -46,6 +46,8 @@ class NaturalBoundary:
         Projector onto the directions the supports leave free, in which σν = g must hold:
         the identity on free, traction and pressure parts; the free axis of a roller; the
         line's tangent t tᵀ on a symmetry line, whose normal reaction is not a residual.
+    parts : (k,) int64
+        Index into the mesh's ``part_names`` of the part of each edge.
     """
 
     edges: np.ndarray
@@ -53,6 +55,7 @@ class NaturalBoundary:
     normal: np.ndarray
     traction: np.ndarray
     free: np.ndarray
+    parts: np.ndarray = None  # type: ignore[assignment]
 
     def load_vector(self, n_points: int) -> np.ndarray:
         """∫ g·v over the natural boundary (2 n_points,)."""
@@ -150,11 +153,12 @@ def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:
         elif kind == "symmetry":
             tangent = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
             free = np.einsum("ka,kb->kab", tangent, tangent)
-        pieces.append((edges, length, normal, traction, free))
+        pieces.append((edges, length, normal, traction, free, np.full(len(edges), index, dtype=np.int64)))
     if not pieces:
         return NaturalBoundary(edges=np.zeros((0, 2), dtype=np.int64), length=np.zeros(0), normal=np.zeros((0, 2)),
-                               traction=np.zeros((len(EDGE_RULE_POINTS), 0, 2)), free=np.zeros((0, 2, 2)))
-    edges, length, normal, traction, free = zip(*pieces)
+                               traction=np.zeros((len(EDGE_RULE_POINTS), 0, 2)), free=np.zeros((0, 2, 2)),
+                               parts=np.zeros(0, dtype=np.int64))
+    edges, length, normal, traction, free, indices = zip(*pieces)
     return NaturalBoundary(edges=np.concatenate(edges), length=np.concatenate(length),
                            normal=np.concatenate(normal), traction=np.concatenate(traction, axis=1),
-                           free=np.concatenate(free))
+                           free=np.concatenate(free), parts=np.concatenate(indices))

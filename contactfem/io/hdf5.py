@@ -1,11 +1,14 @@
 """The HDF5 archive of a solved case; the docstring of this module is the reference layout.
 
-Layout, schema version 2 (version 1 lacked ``/contact/abscissa`` and the obstacle)::
+Layout, schema version 3 (version 2 stored the stress as (n_tri, 4) in the order
+xx yy xy zz and had no exact pressure; version 1 lacked ``/contact/abscissa`` and the
+obstacle)::
 
-    /                      attrs: format = "contactfem-solution", schema_version = 1 (int),
+    /                      attrs: format = "contactfem-solution", schema_version = 3 (int),
                                   method ("positive" | "standard"), case_hash,
-                                  plus the caller's ``attributes`` (e.g. version, plane,
-                                  backend)
+                                  plus the caller's ``attributes`` (contactfem writes
+                                  contactfem_version, title, case_file, plane, backend and
+                                  the case's units: length_unit, force_unit, stress_unit)
     /case                  scalar UTF-8 string: the case file text
     /mesh/points           (n, 2) float64
     /mesh/triangles        (n_tri, 3) int64, counter-clockwise
@@ -15,7 +18,9 @@ Layout, schema version 2 (version 1 lacked ``/contact/abscissa`` and the obstacl
     /mesh/curves           (n_curves, 3) float64: center x, center y, radius
     /mesh                  attrs: part_names (list of str)
     /fields/displacement   (n, 2) float64
-    /fields/stress         (n_tri, 4) float64, attrs: components = "xx yy xy zz"
+    /fields/stress         (n_tri, 6) float64, attrs: components = "xx yy zz xy yz xz"
+                           (VTK's symmetric tensor order, as in solution.vtu and
+                           solution.xdmf; yz = xz = 0, zz = 0 in plane stress)
     /fields/von_mises      (n_tri,) float64
     /contact/nodes         (m,) int64 mesh node indices, sorted along ΓC
     /contact/edges         (k, 2) int64 mesh node indices
@@ -25,6 +30,10 @@ Layout, schema version 2 (version 1 lacked ``/contact/abscissa`` and the obstacl
     /contact/gap           (m,) float64
     /contact/active        (m,) uint8, 0/1
     /contact/abscissa      (m,) float64, position of each node along the obstacle
+                           (coordinate along the tangent t = (−n_y, n_x))
+    /contact/exact_pressure (m,) float64, only when the case has an exact solution: its
+                           contact pressure −σ_nn at the contact nodes (NaN where the
+                           exact stress is not finite)
     /contact               attrs: obstacle_point (2,), obstacle_normal (2,) float64: the
                                   flat obstacle {p : (p − point)·normal ≥ 0}; and
                                   obstacle_ends (2, 2) float64 for a finite obstacle (a
@@ -48,12 +57,14 @@ from contactfem.errors import OutputError
 from contactfem.io.atomic import atomic_path, ensure_directory
 from contactfem.result import Solution
 
-__all__ = ["write_hdf5", "read_hdf5", "FORMAT", "SCHEMA_VERSION", "SOLUTION_H5"]
+__all__ = ["FORMAT", "SCHEMA_VERSION", "SOLUTION_H5", "STRESS_COMPONENTS", "read_hdf5", "vtk_stress", "write_hdf5"]
 
 #: The archive's file name in a result directory.
 SOLUTION_H5 = "solution.h5"
 FORMAT = "contactfem-solution"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
+#: The stress columns as stored (VTK's symmetric tensor order).
+STRESS_COMPONENTS = ("xx", "yy", "zz", "xy", "yz", "xz")
 _RESERVED_ATTRS = ("format", "schema_version", "method", "case_hash")
 _ATTR_TYPES = (str, int, float, np.integer, np.floating, np.bool_)
 
@@ -62,6 +73,14 @@ def _dataset(group: Any, name: str, data: np.ndarray, dtype: Any) -> Any:
     # No copy when the array already has the dtype and C layout (the usual case).
     array = np.ascontiguousarray(data, dtype=dtype)
     return group.create_dataset(name, data=array)
+
+
+def vtk_stress(stress: np.ndarray) -> np.ndarray:
+    """A solution's stress (n_tri, 4), columns xx yy xy zz -> (n_tri, 6) in the order
+    :data:`STRESS_COMPONENTS` (xx yy zz xy yz xz, yz = xz = 0)."""
+    xx, yy, xy, zz = np.asarray(stress, dtype=np.float64).T
+    zero = np.zeros(len(xx))
+    return np.column_stack([xx, yy, zz, xy, zero, zero])
 
 
 def _check_attributes(attributes: dict[str, str | int | float]) -> None:
@@ -81,6 +100,7 @@ def write_hdf5(
     case_text: str,
     case_hash: str,
     attributes: dict[str, str | int | float],
+    exact_pressure: np.ndarray | None = None,
 ) -> Path:
     """Write the whole solution and its case file to one HDF5 file, atomically.
 
@@ -98,7 +118,10 @@ def write_hdf5(
     case_hash : str
         Hash of the case (as computed by the caller), stored as a root attribute.
     attributes : dict of str to str, int or float
-        Further root attributes (package version, plane, backend...).
+        Further root attributes (package version, plane, backend, units...).
+    exact_pressure : (m,) ndarray, optional
+        The exact contact pressure at the contact nodes, when the case has an exact
+        solution: stored as ``/contact/exact_pressure``.
 
     Returns
     -------
@@ -155,8 +178,8 @@ def write_hdf5(
 
             g = f.create_group("fields")
             _dataset(g, "displacement", solution.displacement, np.float64)
-            _dataset(g, "stress", solution.stress, np.float64).attrs["components"] = (
-                "xx yy xy zz"
+            _dataset(g, "stress", vtk_stress(solution.stress), np.float64).attrs["components"] = (
+                " ".join(STRESS_COMPONENTS)
             )
             _dataset(g, "von_mises", solution.von_mises, np.float64)
 
@@ -169,6 +192,8 @@ def write_hdf5(
             _dataset(g, "gap", contact.gap, np.float64)
             _dataset(g, "active", np.asarray(contact.active, dtype=bool), np.uint8)
             _dataset(g, "abscissa", contact.abscissa, np.float64)
+            if exact_pressure is not None:
+                _dataset(g, "exact_pressure", exact_pressure, np.float64)
             g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
             g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
             if contact.obstacle_ends is not None:

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.hdf5 import SOLUTION_H5, write_hdf5
 from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, SOLUTION_VTU, write_vtu
@@ -23,6 +25,8 @@ from contactfem.result import Solution
 
 #: The report, a solve's only JSON file.
 REPORT_JSON = "report.json"
+#: The contact fields along ΓC as a table (position along the obstacle, x, y, pressure, ...).
+CONTACT_CSV = "contact.csv"
 #: The pictures of a result directory (``contactfem plot``, ``solve --plot``).
 DEFORMED_PNG = "deformed.png"
 PROFILE_PNG = "contact_profile.png"
@@ -34,6 +38,14 @@ CONVERGENCE_JSON = "convergence.json"
 CONVERGENCE_CSV = "convergence.csv"
 CONVERGENCE_PNGS = ("convergence_h.png", "convergence_time.png")
 ADAPT_JSON = "adapt.json"
+#: The JSON Schema of each JSON file the commands write, shipped in contactfem/schemas/.
+JSON_SCHEMAS = {REPORT_JSON: "report.schema.json", COMPARE_JSON: "compare.schema.json",
+                CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json"}
+
+
+def schema_path(file_name: str) -> Path:
+    """The JSON Schema (a file inside the installed package) of ``file_name``, e.g. ``report.json``."""
+    return Path(__file__).resolve().parents[1] / "schemas" / JSON_SCHEMAS[file_name]
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,14 +53,16 @@ class ResultData:
     """What the writers of one result are given.
 
     ``attributes`` are the metadata every file that can carry them stores (package
-    version, case title and hash, method, plane, backend); ``case_text`` the case file
-    as read.
+    version, case title and hash, method, plane, backend, units); ``case_text`` the case
+    file as read; ``exact_pressure`` (m,) the exact contact pressure at the contact nodes
+    when the case has an exact solution (None otherwise).
     """
 
     solution: Solution
     report: dict
     case_text: str
     attributes: dict[str, str] = field(default_factory=dict)
+    exact_pressure: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -64,13 +78,23 @@ class OutputFormat:
 
 def result_data(case, result, report: dict) -> ResultData:
     """The writers' input for ``result`` of ``case`` (a :class:`contactfem.solve.SolveResult`)
-    with its ``report``: the metadata every file that can carry it stores."""
+    with its ``report``: the metadata every file that can carry it stores, and the exact
+    contact pressure at the contact nodes when the problem has an exact solution."""
     from contactfem import __version__
 
+    units = case.units
     attributes = {"contactfem_version": __version__, "title": case.title, "case_file": str(case.source),
                   "case_hash": case.digest, "method": result.method, "plane": case.material.plane,
-                  "backend": result.backend}
-    return ResultData(solution=result.solution, report=report, case_text=case.text, attributes=attributes)
+                  "backend": result.backend, "length_unit": units.length, "force_unit": units.force,
+                  "stress_unit": units.stress}
+    exact_pressure = None
+    exact = result.problem.exact
+    if exact is not None:
+        where = result.solution.mesh.points[result.solution.contact.nodes]
+        with np.errstate(all="ignore"):  # a singular point (a crack tip) gives NaN, stored as such
+            exact_pressure = np.asarray(exact.pressure(where[:, 0], where[:, 1]), dtype=float).reshape(-1)
+    return ResultData(solution=result.solution, report=report, case_text=case.text, attributes=attributes,
+                      exact_pressure=exact_pressure)
 
 
 def to_json(data: dict) -> str:
@@ -85,11 +109,31 @@ def _write_vtu(data: ResultData, directory: Path) -> list[Path]:
 def _write_h5(data: ResultData, directory: Path) -> list[Path]:
     attributes = {k: v for k, v in data.attributes.items() if k not in ("method", "case_hash")}
     return [write_hdf5(data.solution, directory / SOLUTION_H5, case_text=data.case_text,
-                       case_hash=data.attributes.get("case_hash", ""), attributes=attributes)]
+                       case_hash=data.attributes.get("case_hash", ""), attributes=attributes,
+                       exact_pressure=data.exact_pressure)]
 
 
 def _write_xdmf(data: ResultData, directory: Path) -> list[Path]:
     return write_xdmf(data.solution, directory)
+
+
+def contact_table(solution: Solution) -> str:
+    """contact.csv: one row per contact node along ΓC, sorted by its position along the obstacle."""
+    contact = solution.contact
+    points = solution.mesh.points[contact.nodes]
+    columns = {
+        "abscissa": contact.abscissa, "x": points[:, 0], "y": points[:, 1],
+        "pressure": contact.multiplier, "nodal_force": contact.nodal_force, "gap": contact.gap,
+        "normal_displacement": contact.normal_displacement, "active": contact.active.astype(int),
+    }
+    rows = [",".join(columns)]
+    rows += [",".join(repr(float(v)) if name != "active" else str(int(v)) for name, v in zip(columns, values))
+             for values in zip(*columns.values())]
+    return "\n".join(rows) + "\n"
+
+
+def _write_csv(data: ResultData, directory: Path) -> list[Path]:
+    return [atomic_write_text(directory / CONTACT_CSV, contact_table(data.solution))]
 
 
 def _write_json(data: ResultData, directory: Path) -> list[Path]:
@@ -103,16 +147,20 @@ FORMATS: dict[str, OutputFormat] = {
                      description="ParaView: the body with its fields, ΓC with the contact fields, and a PVD of both"),
         OutputFormat("h5", (SOLUTION_H5,), _write_h5,
                      description="the whole result and the case text in one HDF5 archive (read by plot)"),
-        OutputFormat("xdmf", (XDMF_FILE, COMPANION_H5), _write_xdmf, needs=("h5",),
+        OutputFormat("xdmf", (XDMF_FILE,), _write_xdmf, needs=("h5",),
                      description="an XDMF view of solution.h5 for ParaView and VisIt"),
+        OutputFormat("csv", (CONTACT_CSV,), _write_csv,
+                     description="the contact fields along ΓC: position along the obstacle, x, y, pressure, "
+                                 "nodal force, gap, normal displacement, active"),
         OutputFormat("json", (REPORT_JSON,), _write_json, description="the report"),
     )
 }
 FORMAT_NAMES = tuple(FORMATS)
 #: Written unless the case lists its own; xdmf is an extra a case asks for.
-DEFAULT_FORMATS = ("vtu", "h5", "json")
-#: Every file a solve can leave in its directory (formats and pictures).
-RESULT_FILES = tuple(name for format in FORMATS.values() for name in format.files) + PICTURES
+DEFAULT_FORMATS = ("vtu", "h5", "csv", "json")
+#: Every file a solve can leave in its directory (formats and pictures), and the XDMF companion
+#: earlier versions wrote, so that replacing such a result removes it.
+RESULT_FILES = tuple(name for format in FORMATS.values() for name in format.files) + PICTURES + (COMPANION_H5,)
 #: Files whose presence marks a directory as holding a finished result.
 RESULT_MARKERS = (REPORT_JSON, SOLUTION_H5)
 

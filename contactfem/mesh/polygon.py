@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Callable
@@ -14,11 +15,12 @@ from contactfem.errors import MeshError
 from contactfem.mesh.core import Circle, Mesh
 from contactfem.mesh.refine import _undirected_keys, boundary_edges
 
-__all__ = ["Arc", "Loop", "circle_loop", "polygon_problems", "triangulate_domain"]
+__all__ = ["Arc", "Loop", "arc_sweep", "circle_loop", "first_crossing", "loop_outline", "loop_signed_area",
+           "polygon_problems", "triangulate_domain"]
 
 #: Relative tolerance on the radius of an arc's end vertex.
 RADIUS_TOLERANCE = 1e-9
-#: Edge pairs tested at once by :func:`polygon_problems` (about 100 MB of temporaries).
+#: Edge pairs tested at once by :func:`first_crossing` (about 100 MB of temporaries).
 _PAIRS_PER_BLOCK = 250_000
 #: Largest minimum angle for which Triangle's refinement is known to terminate.
 MAX_MIN_ANGLE = 34.0
@@ -104,11 +106,17 @@ class Loop:
         for i, name in enumerate(names):
             if not isinstance(name, str) or not name:
                 raise MeshError(f"name of loop edge {i} must be a non-empty string, got {name!r}")
-        for i, arc in enumerate(arcs):
+        # Edge by edge in order, but only the edges that can fail: arcs, and the first
+        # degenerate straight edge (a profile has 10^5 edges).
+        same = np.all(vertices == np.roll(vertices, -1, axis=0), axis=1)
+        suspects = {i for i, arc in enumerate(arcs) if arc is not None}
+        suspects.update(np.flatnonzero(same)[:1].tolist())
+        for i in sorted(suspects):
+            arc = arcs[i]
             if arc is not None and not isinstance(arc, Arc):
                 raise MeshError(f"edge_arcs[{i}] must be an Arc or None, got {arc!r}")
             start, end = vertices[i], vertices[(i + 1) % k]
-            if np.array_equal(start, end):
+            if same[i]:
                 raise MeshError(f"loop edge {i} starts and ends at the same point {start.tolist()}")
             if arc is not None:
                 center = np.asarray(arc.center)
@@ -158,6 +166,105 @@ def circle_loop(center: tuple[float, float], radius: float, name: str) -> Loop:
     vertices = np.array([[cx + r, cy], [cx, cy + r], [cx - r, cy], [cx, cy - r]])
     arc = Arc((cx, cy), ccw=True)
     return Loop(vertices, (name,) * 4, (arc,) * 4)
+
+
+def arc_sweep(start: np.ndarray, end: np.ndarray, arc: Arc) -> tuple[float, float]:
+    """(θ0, sweep) of an arc edge: the angle of ``start`` seen from the centre and the signed
+    angle swept to ``end`` (positive counter-clockwise, in (−2π, 2π))."""
+    center = np.asarray(arc.center, dtype=float)
+    theta0 = math.atan2(start[1] - center[1], start[0] - center[0])
+    theta1 = math.atan2(end[1] - center[1], end[0] - center[0])
+    sweep = (theta1 - theta0) % (2 * math.pi) if arc.ccw else -((theta0 - theta1) % (2 * math.pi))
+    return theta0, sweep
+
+
+#: Largest angle one chord spans in :func:`loop_outline`; a chord then lies within
+#: r (1 − cos(ε/2)) ≈ 4e-5 r of its arc.
+OUTLINE_CHORD_ANGLE = math.pi / 180
+
+
+def loop_outline(loop: Loop, max_angle: float = OUTLINE_CHORD_ANGLE) -> np.ndarray:
+    """The closed curve of ``loop`` as a polygon (k, 2): its vertices, and along each arc
+    points at most ``max_angle`` apart (the last point is not repeated)."""
+    k = len(loop.vertices)
+    chunks = []
+    for i in range(k):
+        start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
+        arc = loop.edge_arcs[i]
+        if arc is None:
+            chunks.append(start[None, :])
+            continue
+        theta0, sweep = arc_sweep(start, end, arc)
+        n = max(1, math.ceil(abs(sweep) / max_angle))
+        theta = theta0 + sweep * np.arange(1, n) / n
+        radius = float(np.linalg.norm(start - np.asarray(arc.center)))
+        inner = np.asarray(arc.center) + radius * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        chunks.append(np.concatenate([start[None, :], inner]))
+    return np.concatenate(chunks)
+
+
+def loop_signed_area(loop: Loop) -> float:
+    """Signed area enclosed by ``loop``, arcs included (positive when counter-clockwise)."""
+    vertices = loop.vertices
+    following = np.roll(vertices, -1, axis=0)
+    area = 0.5 * float(np.sum(vertices[:, 0] * following[:, 1] - vertices[:, 1] * following[:, 0]))
+    for i, arc in enumerate(loop.edge_arcs):
+        if arc is not None:
+            _, sweep = arc_sweep(vertices[i], following[i], arc)
+            radius = float(np.linalg.norm(vertices[i] - np.asarray(arc.center)))
+            # The circular segment between the chord and the arc, on the arc's side.
+            area += 0.5 * radius**2 * (sweep - math.sin(sweep))
+    return area
+
+
+def first_crossing(first: np.ndarray, second: np.ndarray) -> np.ndarray | None:
+    """A point where the closed polygons ``first`` (k, 2) and ``second`` (l, 2) meet
+    (touching counts), or None: a vertex both share, or the start of an edge of ``second``
+    that meets one of ``first``. One sweep over both (:func:`_sweep`), O((k + l) log(k + l));
+    a polygon that is not simple itself falls back to testing the pairs whose bounding
+    boxes overlap."""
+    first, second = np.asarray(first, dtype=float), np.asarray(second, dtype=float)
+    if len(first) < 3 or len(second) < 3:
+        return _first_crossing_by_pairs(first, second)
+    both = np.concatenate([first, second])
+    order, _ = _lexicographic_ranks(both)
+    ordered = both[order]
+    equal = np.flatnonzero(np.all(ordered[1:] == ordered[:-1], axis=1))
+    if equal.size:
+        in_second = order >= len(first)
+        shared = equal[in_second[equal] != in_second[equal + 1]]
+        if shared.size:
+            return ordered[shared[0]].copy()
+        return _first_crossing_by_pairs(first, second)
+    if _folds(first) is not None or _folds(second) is not None:
+        return _first_crossing_by_pairs(first, second)
+    crossing = _sweep([first, second])
+    if crossing is None:
+        return None
+    g, h = crossing
+    if g < len(first) <= h:
+        return second[h - len(first)].copy()
+    return _first_crossing_by_pairs(first, second)
+
+
+def _first_crossing_by_pairs(first: np.ndarray, second: np.ndarray) -> np.ndarray | None:
+    """:func:`first_crossing` over the edge pairs whose bounding boxes overlap, in blocks."""
+    a, b = first, np.roll(first, -1, axis=0)
+    c, d = second, np.roll(second, -1, axis=0)
+    low, high = np.minimum(c, d).min(axis=0), np.maximum(c, d).max(axis=0)
+    near = np.flatnonzero(np.all((np.maximum(a, b) >= low) & (np.minimum(a, b) <= high), axis=1))
+    block = max(1, _PAIRS_PER_BLOCK // max(len(c), 1))
+    for begin in range(0, len(near), block):
+        rows = near[begin:begin + block]
+        i = np.repeat(rows, len(c))
+        j = np.tile(np.arange(len(c)), len(rows))
+        boxes = np.all((np.maximum(a[i], b[i]) >= np.minimum(c[j], d[j]))
+                       & (np.minimum(a[i], b[i]) <= np.maximum(c[j], d[j])), axis=1)
+        i, j = i[boxes], j[boxes]
+        hit = np.flatnonzero(_segments_intersect(a[i], b[i], c[j], d[j]))
+        if hit.size:
+            return c[j[hit[0]]].copy()
+    return None
 
 
 # --------------------------------------------------------------------------------------
@@ -225,12 +332,252 @@ def _segments_intersect(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarr
     return proper | touching
 
 
+def _orient(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> int:
+    """Scalar :func:`_orientation`: the sign of the turn a -> b -> c, exact for float input."""
+    left = (bx - ax) * (cy - ay)
+    right = (by - ay) * (cx - ax)
+    det = left - right
+    bound = _ORIENT_ERROR_BOUND * (abs(left) + abs(right))
+    if det > bound:
+        return 1
+    if det < -bound:
+        return -1
+    if bound == 0.0 and (bx == ax or cy == ay) and (by == ay or cx == ax):
+        return 0  # both products have an exactly zero factor
+    exact = ((Fraction(bx) - Fraction(ax)) * (Fraction(cy) - Fraction(ay))
+             - (Fraction(by) - Fraction(ay)) * (Fraction(cx) - Fraction(ax)))
+    return (exact > 0) - (exact < 0)
+
+
+def _lexicographic_ranks(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Order of ``points`` by (x, y), and the rank of each point in it."""
+    order = np.lexsort((points[:, 1], points[:, 0]))
+    rank = np.empty(len(points), dtype=np.int64)
+    rank[order] = np.arange(len(points), dtype=np.int64)
+    return order, rank
+
+
+def _repeats(points: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """Indices of the points equal to a point of smaller index (``order``: the stable (x, y) sort)."""
+    ordered = points[order]
+    same = np.all(ordered[1:] == ordered[:-1], axis=1)
+    later = np.flatnonzero(same) + 1
+    # A group of equal points keeps index order (the sort is stable): all but its first repeat.
+    return np.sort(order[later])
+
+
+#: Adjacency windows tested at once by :func:`_sweep`.
+_WINDOWS_PER_BATCH = 4096
+
+
+def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
+    """Shamos–Hoey over the loops' x-monotone chains, in O(k log k) time and O(k) memory.
+
+    Each loop (at least 3 vertices, no vertex shared with any loop or repeated, no edge
+    folding back onto the previous one) is cut into chains whose
+    vertices increase in (x, y) order. A sweep in that order keeps the chains crossing the
+    sweep line sorted from bottom to top (a Python list, searched with exact orientation
+    tests): it stops only at the chains' ends, a few per loop for smooth or graph-like
+    outlines. Two chains that become neighbours are tested against each other, edge by
+    edge with the vectorised exact test, over the stretch where they stay neighbours,
+    once that stretch ends; the windows are tested in batches. The leftmost point shared
+    by two edges lies in such a stretch of the two chains it belongs to (the classical
+    argument of Shamos and Hoey), so every crossing or touching of non-adjacent edges is
+    found; each vertex enters O(1) tests, so the work is O(k log k) over k edges.
+
+    Returns the smallest pair (g, h), g < h, of edges found to share a point (edges
+    numbered through the loops in order: edge g runs from vertex g to the next vertex of
+    its loop), or None.
+    """
+    sizes = np.array([len(loop) for loop in loops], dtype=np.int64)
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    points = np.concatenate(loops) if loops else np.zeros((0, 2))
+    k = len(points)
+    loop_of = np.repeat(np.arange(len(loops)), sizes)
+    local = np.arange(k) - first[loop_of]
+    nxt = first[loop_of] + (local + 1) % sizes[loop_of]
+    prv = first[loop_of] + (local - 1) % sizes[loop_of]
+    _, rank = _lexicographic_ranks(points)
+
+    # Edge g runs from vertex g to vertex nxt[g]; chains are maximal runs of edges going
+    # the same way in rank, cut where the way changes (at least twice per loop).
+    up = rank[nxt] > rank
+    cut = up != up[prv]
+    per_loop = np.add.reduceat(cut.astype(np.int64), first) if k else np.zeros(0, dtype=np.int64)
+    label = np.cumsum(cut) - np.concatenate([[0], np.cumsum(per_loop)[:-1]])[loop_of]
+    label[label == 0] = per_loop[loop_of][label == 0]  # edges before the first cut close the loop
+    chain_first = np.concatenate([[0], np.cumsum(per_loop)[:-1]])
+    chain = chain_first[loop_of] + label - 1
+    n_chains = int(per_loop.sum())
+    # Path order along the loop starting at its first cut: edges before it come last.
+    cut_index = np.flatnonzero(cut)
+    first_cut = local[cut_index][np.searchsorted(loop_of[cut_index], np.arange(len(loops)))]
+    position = np.where(local < first_cut[loop_of], local + sizes[loop_of], local)
+    # Within a chain, edges in increasing rank: path order, reversed for downward chains.
+    edges = np.lexsort((np.where(up, position, -position), chain))
+    chain_of_edge = chain[edges]
+    edge_start = np.searchsorted(chain_of_edge, np.arange(n_chains + 1))
+    lower = np.where(up, np.arange(k), nxt)
+    upper = np.where(up, nxt, np.arange(k))
+    # Chain c's vertices, in increasing rank, are cv[vstart[c]:vstart[c + 1]].
+    vstart = edge_start + np.arange(n_chains + 1)
+    cv = np.empty(k + n_chains, dtype=np.int64)
+    heads = vstart[:-1]
+    cv[heads] = lower[edges[edge_start[:-1]]]
+    body = np.ones(k + n_chains, dtype=bool)
+    body[heads] = False
+    cv[body] = upper[edges]
+    chain_of_vertex = np.repeat(np.arange(n_chains), np.diff(vstart))
+    cr = rank[cv]
+    span = np.int64(k + 1)
+    key = chain_of_vertex * span + cr  # increasing over the whole array
+    # The edge starting at chain vertex position m (not a chain's last vertex).
+    edge_at = np.full(k + n_chains, -1, dtype=np.int64)
+    edge_at[body] = edges
+    edge_at = np.roll(edge_at, -1)
+
+    found: list[tuple[int, int]] = []
+    windows: list[tuple[int, int, int, int]] = []
+
+    def test_windows() -> None:
+        if not windows:
+            return
+        low, high, since, until = (np.array(column, dtype=np.int64) for column in zip(*windows))
+        windows.clear()
+        pairs_a, pairs_b = _window_pairs(low, high, since, until, vstart, cr, key, span)
+        g, h = edge_at[pairs_a], edge_at[pairs_b]
+        adjacent = (nxt[g] == h) | (nxt[h] == g)
+        g, h = g[~adjacent], h[~adjacent]
+        if g.size:
+            hit = _segments_intersect(points[g], points[nxt[g]], points[h], points[nxt[h]])
+            if hit.any():
+                a, b = np.minimum(g[hit], h[hit]), np.maximum(g[hit], h[hit])
+                best = np.lexsort((b, a))[0]
+                found.append((int(a[best]), int(b[best])))
+
+    px, py = points[:, 0].tolist(), points[:, 1].tolist()
+    cv_list, cr_list = cv.tolist(), cr.tolist()
+    vstart_list = vstart.tolist()
+    edge_at_list = edge_at.tolist()
+
+    def side(c: int, r: int, x: float, y: float) -> tuple[int, int]:
+        """Where (x, y), at rank r strictly inside chain c's range, lies: +1 above, -1 below,
+        0 on it; and the edge of c spanning r."""
+        j = bisect_right(cr_list, r, vstart_list[c], vstart_list[c + 1])
+        a, b = cv_list[j - 1], cv_list[j]
+        return _orient(px[a], py[a], px[b], py[b], x, y), edge_at_list[j - 1]
+
+    status: list[int] = []
+    since: dict[tuple[int, int], int] = {}
+
+    def locate(r: int, x: float, y: float, skip: tuple[int, ...] = ()) -> tuple[int, int | None]:
+        """How many chains lie below the point, or (-1, edge) if it lies on one."""
+        lo, hi = 0, len(status)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            c = status[mid]
+            if c in skip:
+                return mid, None
+            turn, edge = side(c, r, x, y)
+            if turn == 0:
+                return -1, edge
+            if turn > 0:
+                lo = mid + 1
+            else:
+                hi = mid
+        return lo, None
+
+    def close(low: int, high: int, r: int) -> None:
+        windows.append((low, high, since.pop((low, high)), r))
+
+    def remove(index: int, r: int) -> None:
+        c = status[index]
+        below = status[index - 1] if index > 0 else None
+        above = status[index + 1] if index + 1 < len(status) else None
+        if below is not None:
+            close(below, c, r)
+        if above is not None:
+            close(c, above, r)
+        del status[index]
+        if below is not None and above is not None:
+            since[(below, above)] = r
+
+    chain_start = cr[vstart[:-1]]
+    chain_end = cr[vstart[1:] - 1]
+    starts: dict[int, list[int]] = {}
+    for c, r in enumerate(chain_start.tolist()):
+        starts.setdefault(r, []).append(c)
+    ends: dict[int, list[int]] = {}
+    for c, r in enumerate(chain_end.tolist()):
+        ends.setdefault(r, []).append(c)
+    for r in sorted({*starts, *ends}):
+        if r in ends:
+            a, b = ends[r]
+            v = cv_list[vstart_list[a + 1] - 1]
+            count, edge = locate(r, px[v], py[v], skip=(a, b))
+            if count < 0:
+                last = [edge_at_list[vstart_list[c + 1] - 2] for c in (a, b)]
+                found.append(min((min(edge, e), max(edge, e)) for e in last))
+                break
+            if count >= len(status) or status[count] not in (a, b):
+                count = status.index(a)  # only after a crossing not yet tested
+            other = b if status[count] == a else a
+            remove(count, r)
+            remove(status.index(other), r)
+        else:
+            a, b = starts[r]
+            v = cv_list[vstart_list[a]]
+            count, edge = locate(r, px[v], py[v])
+            if count < 0:
+                first_edges = [edge_at_list[vstart_list[c]] for c in (a, b)]
+                found.append(min((min(edge, e), max(edge, e)) for e in first_edges))
+                break
+            wa, wb = cv_list[vstart_list[a] + 1], cv_list[vstart_list[b] + 1]
+            if _orient(px[v], py[v], px[wa], py[wa], px[wb], py[wb]) < 0:
+                a, b = b, a
+            below = status[count - 1] if count > 0 else None
+            above = status[count] if count < len(status) else None
+            if below is not None and above is not None:
+                close(below, above, r)
+            status[count:count] = [a, b]
+            for pair in ((below, a), (a, b), (b, above)):
+                if None not in pair:
+                    since[pair] = r
+        if len(windows) >= _WINDOWS_PER_BATCH:
+            test_windows()
+            if found:
+                break
+    test_windows()
+    return min(found) if found else None
+
+
+def _window_pairs(low: np.ndarray, high: np.ndarray, since: np.ndarray, until: np.ndarray, vstart: np.ndarray,
+                  cr: np.ndarray, key: np.ndarray, span: np.int64) -> tuple[np.ndarray, np.ndarray]:
+    """Chain vertex positions (edge starts) of the edge pairs of chains ``low[i]`` and
+    ``high[i]`` whose rank ranges overlap within [since[i], until[i]]: at most as many
+    pairs as the two chains have edges there, plus two."""
+    def edges_within(chain: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.maximum(np.searchsorted(key, chain * span + a, side="left") - 1, vstart[chain])
+        hi = np.minimum(np.searchsorted(key, chain * span + b, side="right") - 1, vstart[chain + 1] - 2)
+        count = np.maximum(hi - lo + 1, 0)
+        owner = np.repeat(np.arange(len(chain)), count)
+        offset = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+        return owner, lo[owner] + offset
+
+    owner, m = edges_within(low, since, until)
+    a = np.maximum(cr[m], since[owner])
+    b = np.minimum(cr[m + 1], until[owner])
+    which, n = edges_within(high[owner], a, b)
+    return m[which], n
+
+
 def polygon_problems(vertices: np.ndarray) -> str | None:
     """Why the straight polygon through ``vertices`` is not a valid counter-clockwise boundary.
 
     Indices in the messages are 0-based; edge ``i`` runs from vertex ``i`` to vertex
     ``(i + 1) % k``. Intersection tests use exact orientation predicates, so touching
-    counts as intersecting; adjacent edges may share only their common vertex.
+    counts as intersecting; adjacent edges may share only their common vertex. The
+    simplicity test is a sweep (:func:`_sweep`): O(k log k) time and O(k) memory.
 
     Parameters
     ----------
@@ -257,8 +604,8 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     k = len(v)
     if k < 3:
         return "fewer than 3 vertices"
-    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
-    repeats = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(k))
+    order, _ = _lexicographic_ranks(v)
+    repeats = _repeats(v, order)
     if repeats.size:
         return f"repeated vertex {repeats[0]}"
 
@@ -267,6 +614,25 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     if np.all(line == 0):
         return "zero area"
 
+    folded = _folds(v)
+    if folded is not None:
+        return f"edges {folded[0]} and {folded[1]} intersect"
+    crossing = _sweep([v])
+    if crossing is not None:
+        return f"edges {crossing[0]} and {crossing[1]} intersect"
+
+    nxt = np.roll(v, -1, axis=0)
+    area2 = float(np.sum(v[:, 0] * nxt[:, 1] - v[:, 1] * nxt[:, 0]))
+    if area2 == 0.0:
+        return "zero area"
+    if area2 < 0.0:
+        return "vertices are clockwise; list them counter-clockwise"
+    return None
+
+
+def _folds(v: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of adjacent edges (i, i + 1) that overlap beyond their common vertex."""
+    k = len(v)
     nxt = np.roll(v, -1, axis=0)
     # Adjacent edges i and i+1 meet at vertex i+1; they overlap elsewhere only if they
     # are collinear and the second doubles back along the first.
@@ -277,27 +643,7 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     if folded.size:
         i = int(folded[0])
         j = (i + 1) % k
-        return f"edges {min(i, j)} and {max(i, j)} intersect"
-
-    # Every pair of non-adjacent edges, a block of first edges at a time: the pairs of one
-    # block stay near _PAIRS_PER_BLOCK, so memory does not grow with k².
-    block = max(1, _PAIRS_PER_BLOCK // k)
-    for first in range(0, k, block):
-        rows = np.arange(first, min(first + block, k))
-        i = np.repeat(rows, k)
-        j = np.tile(np.arange(k), len(rows))
-        keep = (j >= i + 2) & ~((i == 0) & (j == k - 1))  # edges 0 and k-1 are adjacent too
-        i, j = i[keep], j[keep]
-        if i.size:
-            hit = np.flatnonzero(_segments_intersect(v[i], nxt[i], v[j], nxt[j]))
-            if hit.size:
-                return f"edges {i[hit[0]]} and {j[hit[0]]} intersect"
-
-    area2 = float(np.sum(v[:, 0] * nxt[:, 1] - v[:, 1] * nxt[:, 0]))
-    if area2 == 0.0:
-        return "zero area"
-    if area2 < 0.0:
-        return "vertices are clockwise; list them counter-clockwise"
+        return min(i, j), max(i, j)
     return None
 
 
@@ -391,38 +737,101 @@ def _graded_parameters(curve: Callable[[np.ndarray], np.ndarray], length: float,
 
 def _line_points(start: np.ndarray, end: np.ndarray, max_edge: float, size: SizeField | None = None) -> np.ndarray:
     """Points along a straight edge, start included and end excluded, spaced <= max_edge."""
-    length = float(np.linalg.norm(end - start))
-    if size is not None:
-        t = _graded_parameters(lambda t: start + t[:, None] * (end - start), length, size)
-        return start + t[:, None] * (end - start)
-    # The factor keeps lengths that are exact multiples of max_edge from gaining a
-    # segment through rounding.
-    n = max(1, math.ceil(length / max_edge * (1 - 1e-12)))
-    t = np.arange(n)[:, None] / n
-    return start + t * (end - start)
+    points, _ = _lines_points(start[None, :], end[None, :], max_edge, size)
+    return points
+
+
+#: Most samples of the size field along one straight edge when grading its points.
+_MAX_EDGE_SAMPLES = 2049
+#: Samples of the size field per local target length along a straight edge.
+_SAMPLES_PER_SIZE = 16
+
+
+def _lines_points(starts: np.ndarray, ends: np.ndarray, max_edge: float,
+                  size: SizeField | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Points along many straight edges at once: for edge e, its start and the points
+    after it up to its end (excluded), spaced <= max_edge, or by the size field as
+    :func:`_graded_parameters` spaces them. Returns the points (n, 2), edge after edge,
+    and how many each edge has (e,).
+
+    With a size field, edge e is sampled at about 16 points per local target length
+    (its smallest at the ends and the middle; 2 to 2049 samples), so an outline of k
+    short edges costs O(k) evaluations, not 2049 per edge.
+    """
+    starts = np.asarray(starts, dtype=float).reshape(-1, 2)
+    ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+    delta = ends - starts
+    length = np.hypot(delta[:, 0], delta[:, 1])
+    if size is None:
+        # The factor keeps lengths that are exact multiples of max_edge from gaining a
+        # segment through rounding.
+        counts = np.maximum(1, np.ceil(length / max_edge * (1 - 1e-12))).astype(np.int64)
+        edge, t = _ragged(counts)
+        return starts[edge] + (t / counts[edge])[:, None] * delta[edge], counts
+    e = len(starts)
+    probe = np.maximum(size(np.concatenate([starts, ends, starts + 0.5 * delta])), 1e-300).reshape(3, e).min(axis=0)
+    samples = np.clip(np.ceil(_SAMPLES_PER_SIZE * length / probe) + 1, 2, _MAX_EDGE_SAMPLES).astype(np.int64)
+    edge, j = _ragged(samples)
+    t = j / (samples[edge] - 1)
+    density = length[edge] / np.maximum(size(starts[edge] + t[:, None] * delta[edge]), 1e-300)
+    first = np.cumsum(samples) - samples  # each edge's first sample
+    piece = np.zeros_like(density)
+    piece[1:] = 0.5 * (density[1:] + density[:-1]) * np.diff(t)
+    piece[first] = 0.0
+    total_before = np.cumsum(piece)  # ∫ ds / h from the first edge's start, edge after edge
+    total = total_before[first + samples - 1] - total_before[first]
+    counts = np.maximum(1, np.ceil(total * (1 - 1e-12))).astype(np.int64)
+    owner, i = _ragged(counts)
+    target = total_before[first[owner]] + i / counts[owner] * total[owner]
+    # The sample interval of each target, inside its own edge; then linear interpolation.
+    slot = np.searchsorted(total_before, target, side="right") - 1
+    slot = np.clip(slot, first[owner], first[owner] + samples[owner] - 2)
+    step = total_before[slot + 1] - total_before[slot]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fraction = np.where(step > 0, (target - total_before[slot]) / step, 0.0)
+    tt = t[slot] + np.clip(fraction, 0.0, 1.0) * (t[slot + 1] - t[slot])
+    return starts[owner] + tt[:, None] * delta[owner], counts
+
+
+def _ragged(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For counts (e,): the owner e and the index 0..counts[e]-1 of each of sum(counts) items."""
+    counts = np.asarray(counts, dtype=np.int64)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    index = np.arange(len(owner), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+    return owner, index
 
 
 def _discretise(loops: list[Loop], max_edge: float, size: SizeField | None = None) -> _Boundary:
-    """Split every edge of every loop into segments of length <= max_edge."""
+    """Split every edge of every loop into segments of length <= max_edge (or graded by
+    ``size``): straight edges all at once, arcs one by one."""
     boundary = _Boundary()
     for loop in loops:
         k = len(loop.vertices)
-        chunks, parts, curves = [], [], []
-        for i in range(k):
-            start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
-            arc = loop.edge_arcs[i]
-            if arc is None:
-                pts = _line_points(start, end, max_edge, size)
-                curve = -1
-            else:
-                pts, radius = _arc_points(start, end, arc, max_edge, size)
-                curve = boundary.curve(arc.center, radius)
-            chunks.append(pts)
-            parts.append(np.full(len(pts), boundary.part(loop.edge_names[i]), dtype=np.int64))
-            curves.append(np.full(len(pts), curve, dtype=np.int64))
-        boundary.points.append(np.concatenate(chunks))
-        boundary.segment_part.append(np.concatenate(parts))
-        boundary.segment_curve.append(np.concatenate(curves))
+        starts = loop.vertices
+        ends = np.roll(loop.vertices, -1, axis=0)
+        index = {name: boundary.part(name) for name in dict.fromkeys(loop.edge_names)}
+        part = np.fromiter((index[name] for name in loop.edge_names), dtype=np.int64, count=k)
+        arcs = [i for i, arc in enumerate(loop.edge_arcs) if arc is not None]
+        straight = np.ones(k, dtype=bool)
+        straight[arcs] = False
+        curve = np.full(k, -1, dtype=np.int64)
+        counts = np.zeros(k, dtype=np.int64)
+        line_points, counts[straight] = _lines_points(starts[straight], ends[straight], max_edge, size)
+        arc_points = {}
+        for i in arcs:
+            pts, radius = _arc_points(starts[i], ends[i], loop.edge_arcs[i], max_edge, size)
+            arc_points[i] = pts
+            counts[i] = len(pts)
+            curve[i] = boundary.curve(loop.edge_arcs[i].center, radius)
+        offsets = np.cumsum(counts) - counts
+        points = np.empty((int(counts.sum()), 2))
+        owner, local = _ragged(counts[straight])
+        points[offsets[straight][owner] + local] = line_points
+        for i, pts in arc_points.items():
+            points[offsets[i]:offsets[i] + counts[i]] = pts
+        boundary.points.append(points)
+        boundary.segment_part.append(np.repeat(part, counts))
+        boundary.segment_curve.append(np.repeat(curve, counts))
     return boundary
 
 

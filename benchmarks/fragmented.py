@@ -1,0 +1,268 @@
+"""Contact solves whose active set is fragmented, against one linear solve of the same mesh.
+
+Usage:
+    python benchmarks/fragmented.py                  # every scene at its default sizes (minutes)
+    python benchmarks/fragmented.py --quick          # the small sizes only (about a minute)
+    python benchmarks/fragmented.py --scenes rough --sizes 4000 --methods positive
+    python benchmarks/fragmented.py --scenes square --sizes 256 1024
+
+Scenes (``--sizes`` means segments for rough, wavenumbers for wavy, divisions for square,
+refinements for shipped):
+
+- ``rough``: a 1 x 0.5 block whose base is a self-affine profile y = h(x) (Hurst 0.8,
+  rms 2e-4, a seeded random-phase spectrum over 1 … segments/2 waves, one polygon vertex
+  per segment), pushed down by 9e-4 at its top (u = (0, -9e-4)) onto the plane
+  y <= min(h); sides free. Mesh size 28/segments (Triangle, min angle 30°), so the mesh
+  grows with the profile. The polygon is built in Python: a case file holds at most
+  2 000 vertices.
+- ``wavy``: a 1 x (1/k) strip clamped on its left, resting on y <= 0, under the top traction
+  (0, -1e4 (0.1 + sin(k x))): a contact patch per period, k/2π of them; 16 cells per
+  period along x, 4 across.
+- ``square``: cases/square.yaml at N x N (one contact zone, for comparison).
+- ``shipped``: every case of cases/ refined the given number of times.
+
+Per scene, size and method, with mesh sequencing on (the pipeline's ``solve_case``) and
+off (the same reduction and kernel from a cold start): unknowns, active nodes, patches
+(runs of consecutive active nodes along ΓC), Newton steps, factorisations, column solves,
+contact-solve seconds (reduction, sequencing and kernel), one linear solve (factorise the
+kernel's stiffness without contact, with the same backend, and solve once) and their
+ratio; the fastest of ``--repeat`` runs. Writes benchmarks/results/fragmented.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from performance import linear_system, machine_info
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
+DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "wavy": [200, 2000], "square": [256, 1024], "shipped": [3]}
+QUICK_SIZES = {"rough": [1000, 4000], "wavy": [200], "square": [256], "shipped": [2]}
+SEED = 20050101
+
+
+# --------------------------------------------------------------------------- scenes
+
+
+def rough_profile(segments: int, hurst: float = 0.8, rms: float = 2e-4, seed: int = SEED) -> tuple[np.ndarray, np.ndarray]:
+    """x (segments + 1,) in [0, 1] and a self-affine height h(x) of standard deviation ``rms``:
+    random phases, amplitude k^-(1/2 + H) for the k-th harmonic, k = 1 … segments/2."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(1, segments // 2 + 1)
+    phase = rng.uniform(0.0, 2 * np.pi, len(k))
+    x = np.arange(segments + 1) / segments
+    spectrum = np.zeros(segments, dtype=complex)
+    spectrum[k] = k ** -(0.5 + hurst) * np.exp(1j * phase)
+    h = np.fft.ifft(spectrum).real * segments
+    h = np.append(h, h[0])
+    h -= h.mean()
+    return x, h * rms / h.std()
+
+
+def rough_case(segments: int, seed: int = SEED):
+    from contactfem.case import PolygonGeometry, parse_case
+    from contactfem.mesh.polygon import Loop
+
+    x, h = rough_profile(segments, seed=seed)
+    data = {
+        "title": f"rough base, {segments} segments",
+        "geometry": {"polygon": {"vertices": [[0, 0], [1, 0], [1, 0.5], [0, 0.5]],
+                                 "edges": ["base", "side", "top", "side"]}},
+        "mesh": {"size": 28.0 / segments},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"top": {"displacement": [0, -9e-4]}, "side": "free", "base": "contact"},
+        "obstacle": {"point": [0, float(h.min())], "normal": [0, -1]},
+    }
+    case = parse_case(yaml.safe_dump(data), source=ROOT / "benchmarks" / f"rough-{segments}.yaml")
+    vertices = np.vstack([np.column_stack([x, h]), [[1.0, 0.5], [0.0, 0.5]]])
+    names = ("base",) * segments + ("side", "top", "side")
+    return replace(case, geometry=PolygonGeometry(Loop(vertices, names), ()))
+
+
+def wavy_case(wavenumber: int):
+    from contactfem.case import parse_case
+
+    nx = int(16 * wavenumber // (2 * np.pi)) // 4 * 4 + 4
+    data = {
+        "title": f"strip under a traction of wavenumber {wavenumber}",
+        "geometry": {"rectangle": {"lower": [0, 0], "upper": [1, 1.0 / wavenumber]}},
+        "mesh": {"divisions": [nx, 4]},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"left": "clamped", "right": "free", "bottom": "contact",
+                     "top": {"traction": [0, f"-1e4*(0.1 + sin({wavenumber}*x))"]}},
+        "obstacle": {"point": [0, 0], "normal": [0, -1]},
+    }
+    return parse_case(yaml.safe_dump(data), source=ROOT / "benchmarks" / f"wavy-{wavenumber}.yaml")
+
+
+def square_case(divisions: int):
+    from contactfem.case import parse_case
+
+    data = yaml.safe_load((ROOT / "cases" / "square.yaml").read_text())
+    data["mesh"]["divisions"] = divisions
+    return parse_case(yaml.safe_dump(data), source=ROOT / "cases" / "square.yaml")
+
+
+def scenes(name: str, size: int) -> list[tuple[str, object, int | None]]:
+    """(label, case, refine) of one scene at one size."""
+    if name == "rough":
+        return [(f"rough-{size}", rough_case(size), None)]
+    if name == "wavy":
+        return [(f"wavy-{size}", wavy_case(size), None)]
+    if name == "square":
+        return [(f"square-{size}", square_case(size), None)]
+    from contactfem.case import load_case
+
+    return [(f"{path.stem}-refine{size}", load_case(path), size) for path in sorted((ROOT / "cases").glob("*.yaml"))]
+
+
+# --------------------------------------------------------------------------- measuring
+
+
+def patches(active: np.ndarray) -> int:
+    """Runs of consecutive active nodes (the contact nodes are sorted along ΓC)."""
+    a = np.asarray(active, dtype=bool)
+    return int(a[0]) + int(np.count_nonzero(a[1:] & ~a[:-1])) if len(a) else 0
+
+
+def contact_solve(case, problem, method: str, sequencing: bool) -> tuple[float, object, dict]:
+    """Seconds of the contact solve, the kernel's result and the sequencing record."""
+    from contactfem.kernel import default_c, solve_contact
+    from contactfem.linalg import resolve_backend
+    from contactfem.methods import get_method
+    from contactfem.solve import solve_case
+
+    if sequencing:
+        outcome = solve_case(case, method=method, problem=problem)
+        return outcome.timings["solve"], outcome.kernel, dict(outcome.sequencing)
+    started = time.perf_counter()
+    reduced = problem.contact_system(get_method(method))
+    c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
+    kernel = solve_contact(reduced.system, c=c, tolerance=case.solver.tolerance,
+                           max_iterations=case.solver.max_iterations, backend=resolve_backend(case.solver.backend))
+    return time.perf_counter() - started, kernel, {}
+
+
+def one_linear_solve(problem, backend: str) -> float:
+    from contactfem.linalg import factorize
+    from contactfem.methods import get_method
+
+    matrix, rhs = linear_system(problem.contact_system(get_method("positive")).system)
+    started = time.perf_counter()
+    factorize(matrix, backend).solve(rhs)
+    return time.perf_counter() - started
+
+
+def measure(label: str, case, refine: int | None, method: str, repeat: int) -> list[dict]:
+    from contactfem.kernel import Status
+    from contactfem.linalg import resolve_backend
+    from contactfem.solve import prepare
+
+    backend = resolve_backend(case.solver.backend)
+    problem = prepare(case, refine=refine)
+    baseline = min(one_linear_solve(problem, backend) for _ in range(repeat))
+    records = []
+    for sequencing in (False, True):
+        runs = [contact_solve(case, problem, method, sequencing) for _ in range(repeat)]
+        seconds = min(r[0] for r in runs)
+        _, kernel, record = runs[-1]
+        records.append({
+            "scene": label,
+            "method": method,
+            "sequencing": sequencing,
+            "backend": backend,
+            "unknowns": problem.n_unknowns,
+            "contact_nodes": len(problem.contact.nodes),
+            "status": kernel.status.value,
+            "certified": bool(kernel.status is Status.CONVERGED),
+            "active_nodes": int(kernel.active.sum()),
+            "patches": patches(kernel.active),
+            "newton_steps": kernel.iterations,
+            "factorizations": kernel.factorizations,
+            "column_solves": kernel.column_solves,
+            "active_per_step": [r.active for r in kernel.history],
+            "changes_per_step": [r.added + r.removed for r in kernel.history],
+            "contact_solve_s": seconds,
+            "contact_solve_samples_s": [r[0] for r in runs],
+            "linear_solve_s": baseline,
+            "ratio": seconds / baseline,
+            "sequencing_record": record,
+        })
+    return records
+
+
+def warm_up() -> None:
+    """Imports and a first factorisation, untimed."""
+    from contactfem.solve import prepare
+
+    case = square_case(16)
+    contact_solve(case, prepare(case), "positive", True)
+
+
+# --------------------------------------------------------------------------- output
+
+
+def table(records: list[dict]) -> str:
+    lines = ["| scene | method | seq | unknowns | active | patches | Newton | fact. | columns | solve s | linear s | ratio |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in records:
+        lines.append(
+            f"| {r['scene']} | {r['method']} | {'on' if r['sequencing'] else 'off'} | {r['unknowns']} | "
+            f"{r['active_nodes']} | {r['patches']} | {r['newton_steps']} | {r['factorizations']} | "
+            f"{r['column_solves']} | {r['contact_solve_s']:.3f} | {r['linear_solve_s']:.3f} | {r['ratio']:.2f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", nargs="+", choices=list(DEFAULT_SIZES), default=["rough", "wavy", "square", "shipped"])
+    parser.add_argument("--sizes", nargs="+", type=int, help="sizes for every scene chosen (default: per scene)")
+    parser.add_argument("--quick", action="store_true", help="the small sizes only")
+    parser.add_argument("--methods", nargs="+", choices=["positive", "standard"], default=["positive", "standard"])
+    parser.add_argument("--repeat", type=int, default=2, help="runs per measurement, the fastest kept (default 2)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args()
+
+    result = {
+        "benchmark": "fragmented contact: rough profiles, wavy tractions, the square, the shipped cases",
+        "started": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "repeat": args.repeat,
+        "machine": machine_info(),
+        "records": [],
+    }
+    warm_up()
+    for name in args.scenes:
+        sizes = args.sizes or (QUICK_SIZES if args.quick else DEFAULT_SIZES)[name]
+        for size in sizes:
+            for label, case, refine in scenes(name, size):
+                for method in args.methods:
+                    for record in measure(label, case, refine, method, args.repeat):
+                        result["records"].append(record)
+                        print(f"{label:24s} {method:9s} seq {'on ' if record['sequencing'] else 'off'} "
+                              f"unknowns {record['unknowns']:8d} active {record['active_nodes']:6d} "
+                              f"patches {record['patches']:5d} Newton {record['newton_steps']:3d} "
+                              f"fact {record['factorizations']:2d} columns {record['column_solves']:4d} "
+                              f"solve {record['contact_solve_s']:7.3f} s linear {record['linear_solve_s']:7.3f} s "
+                              f"ratio {record['ratio']:5.2f}", flush=True)
+                    args.out.parent.mkdir(parents=True, exist_ok=True)
+                    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    result["finished"] = time.strftime("%Y-%m-%d %H:%M:%S %Z")
+    result["table"] = table(result["records"])
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(result["table"])
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,283 @@
+"""Rough contact surfaces: cases/rough.yaml with its profile at 1 000 to 100 000 points.
+
+Usage:
+    python benchmarks/rough.py                          # 1k ... 100k points (about 10 minutes on 2 cores)
+    python benchmarks/rough.py --sizes 1000 4000 16000  # choose the sizes
+    python benchmarks/rough.py --single 4000            # one size in this process: a JSON record on stdout
+    python benchmarks/rough.py --write-surface          # rewrite cases/rough_surface.csv (4 001 points)
+
+The body is the case's 1 x 0.5 block whose base is a seeded self-affine profile
+(:func:`self_affine_profile`, Hurst exponent 0.8, 1e-3 from lowest to highest point),
+pushed onto the flat obstacle by the displacement of its top. Every size draws the same
+random phases, so the coarse shape is the same and finer sizes add shorter wavelengths.
+Each size runs in a fresh subprocess (``--single N``), so its peak RSS is its own. A run:
+
+  1. warms up on a 200-point profile (imports, Triangle, the first factorisation) and
+     records the peak RSS it leaves (the interpreter and libraries, about 0.1 GB): the
+     peaks after each stage less this one are what the stages added;
+  2. writes the profile to a CSV in a temporary directory and times, separately:
+     validation (``load_case``: reading the CSV, building the outline, the O(k log k)
+     simplicity sweep, ``polygon_problems`` alone recorded too), meshing (Triangle and the
+     boundary bookkeeping), assembly, and the contact solve (``solve_case``: the coarse
+     levels of mesh sequencing and every Newton step), with the peak RSS after each;
+  3. times the baseline: one linear elasticity solve of the same mesh with the same
+     backend (factorise the kernel's stiffness without contact, ``check=False``, and
+     solve once; see benchmarks/performance.py ``linear_system``).
+
+The sweep writes benchmarks/results/rough.json (rewritten after every size, so an
+interrupted sweep keeps what it measured) with each size's record and the fitted growth
+exponents p of stage time (and peak memory) ~ points^p, by least squares on the logs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+CASE_FILE = ROOT / "cases" / "rough.yaml"
+SURFACE_FILE = ROOT / "cases" / "rough_surface.csv"
+DEFAULT_SIZES = [1000, 2000, 4000, 8000, 16000, 32000, 64000, 100000]
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "rough.json"
+RECORD_PREFIX = "ROUGH-RECORD "
+#: The shipped surface: its seed, Hurst exponent, height and number of points.
+SEED = 20240611
+HURST = 0.8
+HEIGHT = 1.0e-3
+SHIPPED_POINTS = 4001
+
+
+def self_affine_profile(points: int, *, hurst: float = HURST, height: float = HEIGHT, length: float = 1.0,
+                        seed: int = SEED) -> tuple[np.ndarray, np.ndarray]:
+    """A seeded self-affine profile h(x) on [0, length] at ``points`` equally spaced x.
+
+    Spectral synthesis: Fourier modes of wavenumber q = 1 ... (points - 1) / 2 with
+    amplitude q^-(1/2 + H) (a one-dimensional power spectrum ∝ q^-(1 + 2H)) and phases
+    drawn from ``seed`` in order of q, so that every size shares its long wavelengths.
+    Scaled to ``height`` from lowest to highest point and shifted so that min h = 0. The
+    profile is periodic (h at both ends nearly equal), which keeps the block's corners
+    out of the picture.
+    """
+    if points < 3:
+        raise ValueError("a profile needs at least 3 points")
+    modes = (points - 1) // 2
+    phases = np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi, modes)
+    q = np.arange(1, modes + 1)
+    spectrum = np.zeros(points - 1, dtype=complex)
+    spectrum[1:modes + 1] = q ** -(0.5 + hurst) * np.exp(1j * phases)
+    h = np.fft.ifft(spectrum).real * (points - 1)
+    h = np.append(h, h[0])
+    h = (h - h.min()) * (height / np.ptp(h))
+    return np.linspace(0.0, length, points), h
+
+
+def write_surface(path: Path, points: int, seed: int = SEED) -> None:
+    x, h = self_affine_profile(points, seed=seed)
+    header = (f"# self-affine profile: Hurst exponent {HURST}, {points} points on [0, 1], height {HEIGHT:g} "
+              f"(lowest to highest), seed {seed}\n"
+              f"# written by: python benchmarks/rough.py --write-surface\n"
+              "x,h\n")
+    body = "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(x, h))
+    path.write_text(header + body + "\n", encoding="utf-8")
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def peak_rss_gb() -> float:
+    # Linux reports ru_maxrss in KiB.
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def case_text(csv: Path) -> str:
+    data = yaml.safe_load(CASE_FILE.read_text(encoding="utf-8"))
+    data["geometry"]["profile"]["file"] = str(csv)
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def measure(points: int, directory: Path, method: str) -> dict:
+    from performance import linear_system
+
+    from contactfem.case import load_case
+    from contactfem.linalg import factorize
+    from contactfem.mesh.polygon import polygon_problems
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare, solve_case
+
+    csv = directory / f"surface-{points}.csv"
+    write_surface(csv, points)
+    case_path = directory / f"rough-{points}.yaml"
+    case_path.write_text(case_text(csv), encoding="utf-8")
+
+    record: dict = {"points": points, "method": method, "csv_bytes": csv.stat().st_size}
+    clock = time.perf_counter()
+    case = load_case(case_path)
+    record["validation_s"] = time.perf_counter() - clock
+    record["peak_rss_gb_validation"] = peak_rss_gb()
+    outline = case.geometry.outer.vertices
+    record["boundary_vertices"] = len(outline)
+    clock = time.perf_counter()
+    assert polygon_problems(outline) is None
+    record["simplicity_check_s"] = time.perf_counter() - clock
+
+    timings: dict[str, float] = {}
+    problem = prepare(case, timings=timings)
+    record["mesh_s"] = timings["mesh"]
+    record["assemble_s"] = timings["assemble"]
+    record["peak_rss_gb_mesh"] = peak_rss_gb()
+    record["mesh_memory_gb"] = record["peak_rss_gb_mesh"] - record["peak_rss_gb_validation"]
+    mesh = problem.mesh
+    record.update(nodes=int(mesh.n_points), triangles=int(mesh.n_triangles), unknowns=int(problem.n_unknowns),
+                  contact_nodes=len(problem.contact.nodes))
+
+    outcome = solve_case(case, method=method, problem=problem)
+    kernel = outcome.kernel
+    record["solve_s"] = outcome.timings["solve"]
+    record["backend"] = outcome.backend
+    record["newton_steps"] = int(kernel.iterations)
+    record["factorizations"] = int(kernel.factorizations)
+    record["sequencing"] = dict(outcome.sequencing)
+    record["coarse_factorizations"] = int(outcome.sequencing.get("coarse_factorizations", 0))
+    record["active_per_step"] = [int(step.active) for step in kernel.history]
+    contact = outcome.solution.contact
+    active = np.asarray(contact.active, dtype=bool)
+    record["active_nodes"] = int(active.sum())
+    # Separate contact patches along ΓC: runs of active nodes.
+    record["contact_patches"] = int(np.sum(active[1:] & ~active[:-1]) + (1 if active.size and active[0] else 0))
+    record["contact_force"] = float(np.sum(contact.nodal_force)) if hasattr(contact, "nodal_force") else None
+    record["peak_rss_gb_solve"] = peak_rss_gb()
+    del outcome, kernel
+
+    reduced = problem.contact_system(get_method(method))
+    matrix, rhs = linear_system(reduced.system)
+    started = time.perf_counter()
+    factor = factorize(matrix, record["backend"], check=False)
+    factor.solve(rhs)
+    record["baseline_s"] = time.perf_counter() - started
+    record["solve_over_baseline"] = record["solve_s"] / record["baseline_s"]
+    record["peak_rss_gb"] = peak_rss_gb()
+    return record
+
+
+def single(points: int, method: str) -> None:
+    with tempfile.TemporaryDirectory(prefix="contactfem-rough-") as tmp:
+        measure(200, Path(tmp), method)  # warm-up, untimed
+        warm = peak_rss_gb()
+        record = measure(points, Path(tmp), method)
+        record["peak_rss_gb_warm"] = warm
+    sys.stdout.write(RECORD_PREFIX + json.dumps(record) + "\n")
+    sys.stdout.flush()
+
+
+# --------------------------------------------------------------------------- sweep
+
+
+def run_subprocess(points: int, method: str, timeout: float) -> dict:
+    command = [sys.executable, str(Path(__file__).resolve()), "--single", str(points), "--method", method]
+    started = time.perf_counter()
+    try:
+        done = subprocess.run(command, check=False, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    except subprocess.TimeoutExpired:
+        return {"points": points, "method": method, "error": f"timed out after {timeout:.0f} s"}
+    for line in done.stdout.splitlines():
+        if line.startswith(RECORD_PREFIX):
+            record = json.loads(line[len(RECORD_PREFIX):])
+            record["subprocess_s"] = time.perf_counter() - started
+            return record
+    tail = (done.stderr or done.stdout).strip().splitlines()[-15:]
+    return {"points": points, "method": method, "error": f"exit code {done.returncode}", "stderr_tail": tail}
+
+
+STAGES = ("validation_s", "simplicity_check_s", "mesh_s", "assemble_s", "solve_s", "baseline_s", "peak_rss_gb",
+          "mesh_memory_gb", "triangles", "unknowns")
+
+
+def fit_exponent(sizes: list[float], values: list[float]) -> float | None:
+    pairs = [(s, v) for s, v in zip(sizes, values) if s and v and v > 0]
+    if len({s for s, _ in pairs}) < 2:
+        return None
+    s, v = np.array(pairs, dtype=float).T
+    return float(np.polyfit(np.log(s), np.log(v), 1)[0])
+
+
+def scaling(records: list[dict]) -> dict:
+    good = sorted((r for r in records if "error" not in r), key=lambda r: r["points"])
+    sizes = [r["points"] for r in good]
+    return {stage: fit_exponent(sizes, [r.get(stage) for r in good]) for stage in STAGES}
+
+
+def table(records: list[dict]) -> str:
+    lines = [("| points | triangles | unknowns | validation s | check s | mesh s | assembly s | solve s | Newton "
+              "| factorisations (+ coarse) | baseline s | solve/baseline | peak GB (warm, valid., mesh, all) |"),
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in records:
+        if "error" in r:
+            lines.append(f"| {r['points']} | failed: {r['error']} |" + " |" * 11)
+            continue
+        lines.append(
+            f"| {r['points']} | {r['triangles']} | {r['unknowns']} | {r['validation_s']:.3f} | "
+            f"{r['simplicity_check_s']:.3f} | {r['mesh_s']:.3f} | {r['assemble_s']:.3f} | {r['solve_s']:.2f} | "
+            f"{r['newton_steps']} | {r['factorizations']} (+{r['coarse_factorizations']}) | {r['baseline_s']:.2f} | "
+            f"{r['solve_over_baseline']:.1f} | {r['peak_rss_gb_warm']:.3f}, {r['peak_rss_gb_validation']:.3f}, "
+            f"{r['peak_rss_gb_mesh']:.3f}, "
+            f"{r['peak_rss_gb']:.3f} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", nargs="+", type=int, default=DEFAULT_SIZES, help="profile points per run")
+    parser.add_argument("--method", default="positive", choices=("positive", "standard"))
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per size")
+    parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
+    parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
+    parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
+    args = parser.parse_args()
+    if args.write_surface:
+        write_surface(SURFACE_FILE, SHIPPED_POINTS)
+        print(f"wrote {SURFACE_FILE}")
+        return
+    if args.single is not None:
+        single(args.single, args.method)
+        return
+    if args.table:
+        print(table(json.loads(args.out.read_text())["records"]))
+        return
+
+    from performance import machine_info
+
+    result = {"benchmark": "cases/rough.yaml with a self-affine profile of N points", "started":
+              time.strftime("%Y-%m-%d %H:%M:%S %Z"), "command": " ".join([Path(sys.executable).name, *sys.argv]),
+              "hurst": HURST, "height": HEIGHT, "seed": SEED, "sizes": args.sizes, "method": args.method,
+              "machine": machine_info(), "records": []}
+    for points in args.sizes:
+        record = run_subprocess(points, args.method, args.timeout)
+        result["records"].append(record)
+        result["growth_exponents"] = scaling(result["records"])
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+        if "error" in record:
+            print(f"{points:7d} points: FAILED: {record['error']}", flush=True)
+        else:
+            print(f"{points:7d} points: validation {record['validation_s']:.3f} s, mesh {record['mesh_s']:.3f} s "
+                  f"({record['triangles']} triangles), assembly {record['assemble_s']:.3f} s, solve "
+                  f"{record['solve_s']:.2f} s ({record['newton_steps']} Newton, {record['factorizations']} "
+                  f"factorisations), baseline {record['baseline_s']:.2f} s, peak {record['peak_rss_gb']:.2f} GB",
+                  flush=True)
+    print(table(result["records"]))
+    print("growth exponents (time ~ points^p):", json.dumps(result["growth_exponents"]))
+
+
+if __name__ == "__main__":
+    main()
