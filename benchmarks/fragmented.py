@@ -17,7 +17,8 @@ refinements for shipped):
   2 000 vertices.
 - ``wavy``: a 1 x (1/k) strip clamped on its left, resting on y <= 0, under the top traction
   (0, -1e4 (0.1 + sin(k x))): a contact patch per period, k/2π of them; 16 cells per
-  period along x, 4 across.
+  period along x, 4 across (k = 2000 makes a strip of aspect 2000, too slender for double
+  precision: the probe refuses its stiffness).
 - ``square``: cases/square.yaml at N x N (one contact zone, for comparison).
 - ``shipped``: every case of cases/ refined the given number of times.
 
@@ -46,7 +47,7 @@ from performance import linear_system, machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
-DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "wavy": [200, 2000], "square": [256, 1024], "shipped": [3]}
+DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "wavy": [200], "square": [256, 1024], "shipped": [3]}
 QUICK_SIZES = {"rough": [1000, 4000], "wavy": [200], "square": [256], "shipped": [2]}
 SEED = 20050101
 
