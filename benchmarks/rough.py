@@ -175,6 +175,9 @@ def single(points: int, method: str) -> None:
         warm = peak_rss_gb()
         record = measure(points, Path(tmp), method)
         record["peak_rss_gb_warm"] = warm
+        # What each stage added above the interpreter and libraries.
+        record["validation_memory_gb"] = record["peak_rss_gb_validation"] - warm
+        record["net_peak_gb"] = record["peak_rss_gb"] - warm
     sys.stdout.write(RECORD_PREFIX + json.dumps(record) + "\n")
     sys.stdout.flush()
 
@@ -199,7 +202,7 @@ def run_subprocess(points: int, method: str, timeout: float) -> dict:
 
 
 STAGES = ("validation_s", "simplicity_check_s", "mesh_s", "assemble_s", "solve_s", "baseline_s", "peak_rss_gb",
-          "mesh_memory_gb", "triangles", "unknowns")
+          "net_peak_gb", "validation_memory_gb", "mesh_memory_gb", "triangles", "unknowns")
 
 
 def fit_exponent(sizes: list[float], values: list[float]) -> float | None:

@@ -1020,7 +1020,7 @@ def _parse_columns(r: _Reader, fkey: str, text: str, lines: list[str], limit: in
     def content(line: str) -> str:
         return line.split("#", 1)[0].strip()
 
-    data_lines = [i for i, line in enumerate(lines) if content(line)]
+    data_lines = [i for i, line in enumerate(lines) if (start := line.lstrip()) and start[0] != "#"]
     if not data_lines:
         raise r.fail(fkey, text, "the file holds no numbers; expected lines x, h (or h with spacing)")
     first = content(lines[data_lines[0]])

@@ -374,8 +374,8 @@ def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
     """Shamos–Hoey over the loops' x-monotone chains, in O(k log k) time and O(k) memory.
 
     Each loop (at least 3 vertices, no vertex shared with any loop or repeated, no edge
-    folding back onto the previous one) is cut into chains whose
-    vertices increase in (x, y) order. A sweep in that order keeps the chains crossing the
+    folding back onto the previous one) is cut into chains whose vertices increase in
+    (x, y) order. A sweep in that order keeps the chains crossing the
     sweep line sorted from bottom to top (a Python list, searched with exact orientation
     tests): it stops only at the chains' ends, a few per loop for smooth or graph-like
     outlines. Two chains that become neighbours are tested against each other, edge by
