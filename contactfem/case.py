@@ -816,16 +816,21 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
     problem = path_problem(path)
     if problem is not None:
         raise r.fail(key, spec, f"the path {'' if path == Path(spec) else f'{shortened(str(path))} '}{problem}")
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise r.fail(key, spec, f"no such file ({shortened(str(path))})") from None
-    except (OSError, ValueError) as error:
-        raise r.fail(key, spec, f"cannot read {shortened(str(path))} ({_reason(error)})") from None
+    mode = _file_mode(r, key, spec, path)
     if not stat.S_ISREG(mode):
         kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
         raise r.fail(key, spec, f"{shortened(str(path))} is {kind}; expected a gmsh .msh file")
     return MeshFileGeometry(path), None
+
+
+def _file_mode(r: _Reader, key: str, spec: Any, path: Path) -> int:
+    """``os.stat(path).st_mode`` of a file a case names, or a one-line refusal naming ``key``."""
+    try:
+        return os.stat(path).st_mode
+    except FileNotFoundError:
+        raise r.fail(key, spec, f"no such file ({shortened(str(path))})") from None
+    except (OSError, ValueError) as error:
+        raise r.fail(key, spec, f"cannot read {shortened(str(path))} ({_reason(error)})") from None
 
 
 PROFILE_SOURCES = ("file", "heights", "expression")
@@ -980,12 +985,7 @@ def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) ->
 def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
     """At most MAX_PROFILE_BYTES of a regular file, reading no more than one byte past it."""
     shown = shortened(str(path))
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise r.fail(fkey, text, f"no such file ({shown})") from None
-    except (OSError, ValueError) as error:
-        raise r.fail(fkey, text, f"cannot read {shown} ({_reason(error)})") from None
+    mode = _file_mode(r, fkey, text, path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
     chunks, size = [], 0
     fd = None
