@@ -385,3 +385,26 @@ def test_failed_run_leaves_existing_results_untouched(tmp_path, modify, code):
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and CASE_NAME in lines[0]
     assert _snapshot(out) == before
+
+
+def test_a_free_rigid_motion_is_named(tmp_path):
+    """A roller on the left (u_x = 0) and nothing else holds the body against x motion and
+    rotation but not against a vertical translation: the refusal says which motion is free."""
+    def modify(data):
+        data["boundary"]["left"] = {"displacement": [0, None]}
+
+    result = run("solve", write_case(tmp_path, modify), "--out", tmp_path / "out")
+    assert_refused(result, tmp_path / "out", CASE_NAME, "leave a rigid motion of the body free",
+                   "a translation along (0, ")
+
+
+def test_free_motions_in_words():
+    import numpy as np
+
+    from contactfem.discretize.supports import _motion_text
+
+    assert _motion_text(np.array([0.0, 2.0, 0.0]), np.array([0.5, 0.5]), 1.0) == "a translation along (0, 1)"
+    # A pure rotation about the centre, and one about the point the translation part moves.
+    assert _motion_text(np.array([0.0, 0.0, 1.0]), np.array([0.5, 0.5]), 1.0) == "a rotation about (0.5, 0.5)"
+    # u = (a, b) + c (−(y − yc), x − xc)/size vanishes at (xc − b size/c, yc + a size/c).
+    assert _motion_text(np.array([1.0, 0.0, 1.0]), np.array([0.5, 0.5]), 2.0) == "a rotation about (0.5, 2.5)"

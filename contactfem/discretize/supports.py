@@ -132,20 +132,32 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
                       -arm[:, 1] * directions[:, 0] + arm[:, 0] * directions[:, 1]], axis=1)
     gram = np.zeros((n_pieces, 3, 3))
     np.add.at(gram, piece, modes[:, :, None] * modes[:, None, :])
-    eigenvalues = np.linalg.eigvalsh(gram)
+    eigenvalues, eigenvectors = np.linalg.eigh(gram)
     free = (eigenvalues[:, 0] <= RIGID_MOTION_TOLERANCE * np.maximum(eigenvalues[:, 2], 1.0)) & (count > 0)
     if not free.any():
         return
     names = ", ".join(case.dirichlet_parts) or "none"
+    loose = int(np.flatnonzero(free)[0])
+    motion = _motion_text(eigenvectors[loose, :, 0], centre[loose], size[loose])
     if n_pieces - int((count == 0).sum()) == 1:
         raise CaseError(
-            f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body "
-            "free, so the problem is ill-posed; prescribe both components on a part of positive length"
+            f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body free "
+            f"({motion}), so the problem is ill-posed; prescribe both components on a part of positive length"
         )
-    loose = int(np.flatnonzero(free)[0])
     where = mesh.points[np.flatnonzero(piece_of == loose)[0]]
     raise CaseError(
         f"{case.source.name}: boundary: the mesh has {int((count > 0).sum())} separate pieces (no edge joins "
         f"them) and the one through ({where[0]:g}, {where[1]:g}) is not held: the supports ({names}) leave "
-        "a rigid motion of it free; join the pieces in the mesh or support each one"
+        f"a rigid motion of it free ({motion}); join the pieces in the mesh or support each one"
     )
+
+
+def _motion_text(mode: np.ndarray, centre: np.ndarray, size: float) -> str:
+    """A free rigid motion (a, b, c): u = (a, b) + c (−(y − yc), x − xc)/size, in words."""
+    a, b, c = mode / np.abs(mode).max()
+    if abs(c) < 1e-6:
+        return f"a translation along ({a / np.hypot(a, b):.3g}, {b / np.hypot(a, b):.3g})"
+    # The rotation's fixed point: (a, b) + c/size · (−(y − yc), x − xc) = 0.
+    x = centre[0] - b * size / c
+    y = centre[1] + a * size / c
+    return f"a rotation about ({x:.4g}, {y:.4g})"
