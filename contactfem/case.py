@@ -245,7 +245,7 @@ class Units:
 
 @dataclass(frozen=True)
 class Case:
-    """A validated case. ``text`` is the file as read, ``digest`` its SHA-256.
+    """A validated case. ``text`` is the file as read, ``digest`` the SHA-256 of it and of the data files it reads.
 
     ``exact`` is the manufactured solution of an ``exact:`` block (None without one); the
     body force is then derived from it and ``body_force`` is None.
@@ -299,6 +299,8 @@ class _Reader:
 
     def __init__(self, filename: str) -> None:
         self.filename = filename
+        #: The bytes of the data files the case reads (a profile's CSV), hashed with its text.
+        self.inputs: list[bytes] = []
 
     def fail(self, key: str, value: Any, expected: str) -> CaseError:
         shown = _show(value)
@@ -557,7 +559,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     return Case(
         source=source,
         text=text,
-        digest=hashlib.sha256(encoded).hexdigest(),
+        digest=_digest(encoded, r.inputs),
         title=title,
         geometry=geometry,
         mesh=mesh,
@@ -958,6 +960,7 @@ def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) ->
     if problem is not None:
         raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
     data = _read_profile_bytes(r, fkey, text, path)
+    r.inputs.append(data)
     try:
         content = data.decode("utf-8-sig")
     except UnicodeDecodeError as error:
@@ -980,6 +983,15 @@ def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) ->
         h = table[:, 0]
         s = _equally_spaced(r, spec, key, len(h), "a one-column file")
     return s, h
+
+
+def _digest(text: bytes, inputs: list[bytes]) -> str:
+    """SHA-256 of the case text, and of each data file it reads (so that a changed profile
+    changes the case's hash); the text alone when it reads none."""
+    digest = hashlib.sha256(text)
+    for data in inputs:
+        digest.update(hashlib.sha256(data).digest())
+    return digest.hexdigest()
 
 
 def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:

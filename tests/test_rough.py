@@ -364,3 +364,22 @@ def test_meshing_a_rough_profile_is_triangle_bound():
     seconds = time.perf_counter() - started
     assert len(mesh.nodes_of("base")) == 16_000
     assert seconds < 0.15 * mesh.n_triangles / 1e4 + 0.5, (seconds, mesh.n_triangles)  # measured 0.1 s for 89k
+
+
+def test_the_case_hash_covers_the_profile_file(tmp_path):
+    """report.json's case.sha256 identifies the data solved: a changed CSV changes it, the
+    same CSV gives the same hash."""
+    from contactfem.case import load_case
+
+    case_text = (
+        "geometry:\n  profile: {file: surface.csv, depth: 0.5}\n"
+        "material: {E: 1.0e6, nu: 0.3}\n"
+        "boundary: {top: {displacement: [0, -1.0e-4]}, base: contact}\n"
+        "obstacle: {point: [0, -1.0e-3], normal: [0, -1]}\n"
+    )
+    (tmp_path / "case.yaml").write_text(case_text, encoding="utf-8")
+    (tmp_path / "surface.csv").write_text("0,0\n0.5,1e-4\n1,0\n", encoding="utf-8")
+    first = load_case(tmp_path / "case.yaml").digest
+    assert load_case(tmp_path / "case.yaml").digest == first
+    (tmp_path / "surface.csv").write_text("0,0\n0.5,2e-4\n1,0\n", encoding="utf-8")
+    assert load_case(tmp_path / "case.yaml").digest != first
