@@ -638,7 +638,12 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
       contactfem plot results/square-convergence      # the convergence PNGs
     """
     from contactfem.io.atomic import claimed_directory
-    from contactfem.render import check_directory, draw_directory, parse_scale, parse_size
+    from contactfem.render import (
+        check_directory,
+        draw_directory,
+        parse_scale,
+        parse_size,
+    )
 
     try:
         pixels = parse_size(size)

@@ -104,6 +104,9 @@ class ContactSystem:
         Unknowns prescribed by supports, kept in the system (no slicing of K).
     fixed_values : (k,), optional
         Their values.
+    free_modes : (n, j), optional
+        Rigid motions the supports leave free and only contact holds (K r = 0); None when
+        the supports hold the body. Every active set the kernel solves then holds them.
     """
 
     stiffness: sp.spmatrix
@@ -113,6 +116,7 @@ class ContactSystem:
     multiplier_mass: sp.spmatrix
     fixed_dofs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     fixed_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    free_modes: np.ndarray | None = None
 
 
 @dataclass
@@ -301,6 +305,9 @@ def solve_contact(
     # bodies pressed flat but makes bending-dominated ones (a slender beam lifting off)
     # release one node per step.
     active = (gap < 0.0) if initial_active is None else np.asarray(initial_active, dtype=bool).copy()
+    holder = _ModeHolder(system) if system.free_modes is not None and m else None
+    if holder is not None:
+        active = holder.hold(active, holder.first_touch())
     linear = ActiveSetSolver(system, backend, tolerance=tolerance)
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
@@ -334,6 +341,9 @@ def solve_contact(
         force_band = max(tolerance, scales.roundoff) * scales.force
         gap_band = max(tolerance, gap_floor) * scales.displacement
         new_active = np.where(active, reaction_at_contact >= -force_band, slack > gap_band)
+        if holder is not None:
+            indicator = np.where(active, reaction_at_contact, c * slack)
+            new_active = holder.hold(new_active, indicator)
         finite = bool(np.isfinite(displacement).all() and np.isfinite(nodal_force).all())
 
         with np.errstate(invalid="ignore", over="ignore"):
@@ -411,6 +421,8 @@ def solve_contact(
                     "even under the least-index safeguard"
                 )
                 break
+        if holder is not None:
+            new_active = holder.hold(new_active, np.where(active, reaction_at_contact, c * slack))
         flips += new_active != active
         active = new_active
 
@@ -732,6 +744,55 @@ class ActiveSetSolver:
         u = z0 - z_r @ u_r - z_d @ mu
         u[dofs_r] = u_r
         return u
+
+
+class _ModeHolder:
+    """Completes an active set so that it holds the free rigid motions: K with the active
+    normals fixed is singular unless the motions' normal components at the active nodes
+    have full rank. Added nodes are the kernel's own candidates (largest indicator); one
+    that should not be active fails the certificate instead of changing the answer."""
+
+    def __init__(self, system: ContactSystem) -> None:
+        modes = np.asarray(system.free_modes, dtype=float)
+        self.normal = modes[np.asarray(system.normal_dofs, dtype=np.int64)]  # (m, j)
+        self.gap = np.asarray(system.gap, dtype=float)
+        self.rank = int(self.normal.shape[1])
+        load = np.asarray(system.load, dtype=float) @ modes
+        # Each motion oriented the way the load pushes it.
+        self.pushed = self.normal * np.where(load < 0, -1.0, 1.0)
+        self.scale = float(np.abs(self.normal).max(initial=0.0))
+
+    def rank_of(self, active: np.ndarray) -> int:
+        if not active.any():
+            return 0
+        values = np.linalg.svd(self.normal[active], compute_uv=False)
+        return int((values > 1e-10 * self.scale).sum())
+
+    def holds(self, active: np.ndarray) -> bool:
+        return self.rank_of(active) >= self.rank
+
+    def first_touch(self) -> np.ndarray:
+        """Priority of each node by how soon the pushed motions close its gap (larger: sooner)."""
+        along = self.pushed.sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(along > 1e-10 * self.scale, -self.gap / along, -np.inf)
+
+    def hold(self, active: np.ndarray, priority: np.ndarray) -> np.ndarray:
+        if self.holds(active):
+            return active
+        held = active.copy()
+        candidates = np.flatnonzero(~active)
+        # Nodes that never close come last, in order of gap.
+        order = np.lexsort((self.gap[candidates], -priority[candidates]))
+        rank = self.rank_of(held)
+        for node in candidates[order]:
+            trial = held.copy()
+            trial[node] = True
+            if self.rank_of(trial) > rank:
+                held, rank = trial, rank + 1
+                if rank >= self.rank:
+                    break
+        return held
 
 
 def _mass_solver(mass: sp.csc_matrix) -> Callable[[np.ndarray], np.ndarray]:

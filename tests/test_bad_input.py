@@ -217,9 +217,15 @@ def test_contact_part_facing_away(tmp_path):
     solve_variant(tmp_path, modify, "boundary.top", "faces away")
 
 
+def roller_lifted(data: dict) -> None:
+    """A roller on the left (u_x = 0) leaves the vertical translation to the contact, and
+    the top traction reversed lifts the body off: nothing holds it."""
+    data["boundary"]["left"] = {"displacement": [0, None]}
+    data["boundary"]["top"] = {"traction": [1.0e4, "1e4*(1-1.5*x)"]}
+
+
 def test_supports_leave_rigid_motion(tmp_path):
-    solve_variant(tmp_path, lambda d: d["boundary"].update(left={"displacement": [0, None]}),
-                  "boundary", "left", "rigid motion")
+    solve_variant(tmp_path, roller_lifted, "boundary", "left", "rigid motion")
 
 
 def test_conflicting_displacements(tmp_path):
@@ -365,7 +371,7 @@ def _snapshot(directory: Path) -> dict[str, bytes]:
     [
         (lambda d: d["material"].update(nu=0.5), 2),  # schema
         (lambda d: d["boundary"].update(top="contact", bottom="free"), 2),  # contact part facing away
-        (lambda d: d["boundary"].update(left={"displacement": [0, None]}), 2),  # rigid motion
+        (lambda d: roller_lifted(d), 2),  # rigid motion
         (lambda d: d["boundary"]["top"]["traction"].__setitem__(1, "1/(x-x)"), 2),  # assembly
         (lambda d: d["solver"].update(max_iterations=1), 1),  # no convergence: a solve failure
     ],
@@ -389,11 +395,9 @@ def test_failed_run_leaves_existing_results_untouched(tmp_path, modify, code):
 
 def test_a_free_rigid_motion_is_named(tmp_path):
     """A roller on the left (u_x = 0) and nothing else holds the body against x motion and
-    rotation but not against a vertical translation: the refusal says which motion is free."""
-    def modify(data):
-        data["boundary"]["left"] = {"displacement": [0, None]}
-
-    result = run("solve", write_case(tmp_path, modify), "--out", tmp_path / "out")
+    rotation but not against a vertical translation, and the load lifts it off the obstacle:
+    the refusal says which motion is free."""
+    result = run("solve", write_case(tmp_path, roller_lifted), "--out", tmp_path / "out")
     assert_refused(result, tmp_path / "out", CASE_NAME, "leave a rigid motion of the body free",
                    "a translation along (0, ")
 

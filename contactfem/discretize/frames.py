@@ -64,6 +64,7 @@ class ReducedSystem:
             multiplier_mass=method.multiplier_mass(contact.masses),
             fixed_dofs=fixed_dofs[order],
             fixed_values=fixed_values[order],
+            free_modes=None if problem.free_modes is None else rotation.T @ problem.free_modes,
         )
         return cls(system=system, rotation=rotation, problem=problem)
 

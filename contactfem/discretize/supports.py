@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from contactfem.assembly import edge_geometry
@@ -10,9 +12,15 @@ from contactfem.discretize.finite import refuse_non_finite
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
 
+if TYPE_CHECKING:
+    from contactfem.discretize.contact import ContactBoundary
+
 
 def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Prescribed unknowns and their values; refuses conflicts and supports that allow rigid motion."""
+    """Prescribed unknowns and their values; refuses conflicting supports.
+
+    Whether they leave a rigid motion free is decided by :func:`free_rigid_modes`, once the
+    contact nodes and the load are known: contact may hold a motion the supports leave free."""
     values = np.full(2 * mesh.n_points, np.nan)
     owner = np.full(2 * mesh.n_points, -1)
     for index, part in enumerate(case.parts):
@@ -54,7 +62,6 @@ def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     keep = np.isin(unique, pinned, invert=True)
     symmetry_nodes, symmetry_normals = unique[keep], symmetry_normals[first[keep]]
     dofs = np.flatnonzero(owner >= 0)
-    _refuse_rigid_motion(case, mesh, dofs, symmetry_nodes, symmetry_normals)
     return dofs, values[dofs], symmetry_nodes, symmetry_normals
 
 
@@ -97,11 +104,26 @@ def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.
 RIGID_MOTION_TOLERANCE = 1e-14
 
 
+def free_rigid_modes(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
+                     symmetry_normals: np.ndarray, contact: "ContactBoundary", load: np.ndarray) -> np.ndarray:
+    """The rigid motions (2 n_points, k) the supports leave free and contact holds; refuses the others."""
+    modes = _refuse_rigid_motion(case, mesh, dofs, symmetry_nodes, symmetry_normals, contact, load)
+    return np.zeros((2 * mesh.n_points, 0)) if modes is None else modes
+
+
+#: The load's work along a free rigid motion counts as zero below this fraction of
+#: ‖F‖ ‖r‖: it neither presses the body onto the obstacle nor pulls it away.
+LOAD_WORK_TOLERANCE = 1e-10
+
+
 def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
-                         symmetry_normals: np.ndarray) -> None:
+                         symmetry_normals: np.ndarray, contact: "ContactBoundary | None" = None,
+                         load: np.ndarray | None = None) -> np.ndarray:
     """Every connected piece of the mesh must have its three rigid motions (translations along
-    x and y, rotation) pinned by its own supports: a piece joined to the rest by no edge is
-    held by nothing else."""
+    x and y, rotation) pinned by its own supports, or by its contact nodes pressed onto the
+    obstacle by the load: a piece joined to the rest by no edge is held by nothing else.
+
+    Returns the free motions contact holds as nodal displacements (2 n_points, k)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -115,7 +137,6 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
     # component (d = e_x or e_y) or a symmetry line (d = n_s).
     directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals])
     nodes = np.concatenate([dofs // 2, symmetry_nodes])
-    piece = piece_of[nodes]
     # Each piece's own centre and size, so that its rotation is measured in its own units.
     count = np.bincount(piece_of[used], minlength=n_pieces).astype(float)
     centre = np.stack([np.bincount(piece_of[used], mesh.points[used, k], minlength=n_pieces) for k in range(2)],
@@ -126,35 +147,123 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
     np.maximum.at(high, piece_of[used], mesh.points[used])
     size = np.where(count > 0, (high - low).max(axis=1), 1.0)
     size = np.where(size > 0, size, 1.0)
-    arm = (mesh.points[nodes] - centre[piece]) / size[piece][:, None]
-    # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc)/size, seen through each constraint.
-    modes = np.stack([directions[:, 0], directions[:, 1],
-                      -arm[:, 1] * directions[:, 0] + arm[:, 0] * directions[:, 1]], axis=1)
-    gram = np.zeros((n_pieces, 3, 3))
-    np.add.at(gram, piece, modes[:, :, None] * modes[:, None, :])
-    eigenvalues, eigenvectors = np.linalg.eigh(gram)
-    free = (eigenvalues[:, 0] <= RIGID_MOTION_TOLERANCE * np.maximum(eigenvalues[:, 2], 1.0)) & (count > 0)
+
+    def seen_through(points_nodes: np.ndarray, d: np.ndarray) -> np.ndarray:
+        # Rigid displacement r = a e_x + b e_y + c (−(y−yc), x−xc)/size, seen through u(p)·d.
+        arm = (mesh.points[points_nodes] - centre[piece_of[points_nodes]]) / size[piece_of[points_nodes]][:, None]
+        return np.stack([d[:, 0], d[:, 1], -arm[:, 1] * d[:, 0] + arm[:, 0] * d[:, 1]], axis=1)
+
+    def gram_of(rows: np.ndarray, where: np.ndarray) -> np.ndarray:
+        gram = np.zeros((n_pieces, 3, 3))
+        np.add.at(gram, piece_of[where], rows[:, :, None] * rows[:, None, :])
+        return gram
+
+    def loose(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        eigenvalues, eigenvectors = np.linalg.eigh(gram)
+        weak = eigenvalues <= RIGID_MOTION_TOLERANCE * np.maximum(eigenvalues[:, 2:], 1.0)
+        return weak & (count > 0)[:, None], eigenvalues, eigenvectors
+
+    support_gram = gram_of(seen_through(nodes, directions), nodes)
+    weak, _, eigenvectors = loose(support_gram)
+    free = weak[:, 0]
     if not free.any():
-        return
-    names = ", ".join(case.dirichlet_parts) or "none"
-    loose = int(np.flatnonzero(free)[0])
-    motion = _motion_text(eigenvectors[loose, :, 0], centre[loose], size[loose])
+        return np.zeros((2 * mesh.n_points, 0))
+    if contact is not None:
+        c_nodes = contact.nodes
+        contact_rows = seen_through(c_nodes, np.tile(contact.normal, (len(c_nodes), 1)))
+        held_weak, _, held_vectors = loose(support_gram + gram_of(contact_rows, c_nodes))
+    else:
+        c_nodes, contact_rows = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        held_weak, held_vectors = weak, eigenvectors
+    unheld = held_weak[:, 0]
+    if unheld.any():
+        _refuse_unheld(case, mesh, int(np.flatnonzero(unheld)[0]), held_vectors, centre, size, count, piece_of,
+                       n_pieces, held_by_contact=len(c_nodes) > 0)
+    modes = []
+    for piece in np.flatnonzero(free):
+        basis = eigenvectors[piece][:, weak[piece]]  # (3, k): the motions the supports leave free
+        members = np.flatnonzero(piece_of == piece)
+        arm = (mesh.points[members] - centre[piece]) / size[piece]
+        nodal = np.zeros((2 * mesh.n_points, basis.shape[1]))
+        nodal[2 * members] = basis[0] - np.outer(arm[:, 1], basis[2])
+        nodal[2 * members + 1] = basis[1] + np.outer(arm[:, 0], basis[2])
+        if load is not None:
+            _refuse_unpressed(case, nodal, contact_rows[piece_of[c_nodes] == piece] @ basis, basis,
+                              load, centre[piece], size[piece])
+        modes.append(nodal / np.abs(nodal).max(axis=0))
+    return np.concatenate(modes, axis=1)
+
+
+def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, centre: np.ndarray, size: np.ndarray,
+                   count: np.ndarray, piece_of: np.ndarray, n_pieces: int, held_by_contact: bool) -> None:
+    names = _support_names(case)
+    motion = _motion_text(vectors[loose, :, 0], centre[loose], size[loose])
+    unheld = " and contact with the obstacle cannot hold it" if held_by_contact else ""
     if n_pieces - int((count == 0).sum()) == 1:
         raise CaseError(
             f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body free "
-            f"({motion}), so the problem is ill-posed; prescribe both components on a part of positive length"
+            f"({motion}){unheld}, so the problem is ill-posed; prescribe both components on a part of positive length"
         )
     where = mesh.points[np.flatnonzero(piece_of == loose)[0]]
     raise CaseError(
         f"{case.source.name}: boundary: the mesh has {int((count > 0).sum())} separate pieces (no edge joins "
         f"them) and the one through ({where[0]:g}, {where[1]:g}) is not held: the supports ({names}) leave "
-        f"a rigid motion of it free ({motion}); join the pieces in the mesh or support each one"
+        f"a rigid motion of it free ({motion}){unheld}; join the pieces in the mesh or support each one"
     )
+
+
+def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, basis: np.ndarray,
+                      load: np.ndarray, centre: np.ndarray, size: float) -> None:
+    """Contact holds a free motion r (coefficients ``basis`` @ ray) only one way: the load
+    must do positive work along every r that moves the body into the obstacle
+    (r · n ≥ 0 at every contact node), or it lifts the body off or leaves it unheld.
+
+    ``normal_part`` (m, k): r · n at the piece's contact nodes for each free motion.
+    """
+    k = basis.shape[1]
+    if k == 1:
+        rays = np.array([[1.0], [-1.0]])
+    else:
+        # The cone {ray : normal_part @ ray ≥ 0} of a 2-D coefficient space is spanned by
+        # boundary rays, each orthogonal to a row.
+        perpendicular = np.stack([-normal_part[:, 1], normal_part[:, 0]], axis=1)
+        rays = np.concatenate([perpendicular, -perpendicular])
+        rays = rays[np.linalg.norm(rays, axis=1) > 0]
+        rays /= np.linalg.norm(rays, axis=1)[:, None]
+    slack = 1e-9 * np.abs(normal_part).max(initial=0.0)
+    for ray in rays:
+        if (normal_part @ ray).min(initial=0.0) < -slack:
+            continue  # presses into the obstacle somewhere and lifts off elsewhere: contact holds it
+        r = nodal @ ray
+        work = float(load @ r)
+        scale = float(np.linalg.norm(load) * np.linalg.norm(r))
+        if work > LOAD_WORK_TOLERANCE * scale:
+            continue
+        motion = _motion_text(basis @ ray, centre, size)
+        loads = _load_names(case)
+        why = ("does no work along it, so contact cannot hold the body" if abs(work) <= LOAD_WORK_TOLERANCE * scale
+               else "pulls the body away from the obstacle along it")
+        raise CaseError(
+            f"{case.source.name}: boundary: the supports ({_support_names(case)}) leave "
+            f"a rigid motion of the body free ({motion}) that only contact can hold, and the load ({loads}) "
+            f"{why}; press the body onto the obstacle or support it"
+        )
+
+
+def _support_names(case: Case) -> str:
+    return ", ".join(p.name for p in case.parts if p.is_dirichlet or p.kind == "symmetry") or "none"
+
+
+def _load_names(case: Case) -> str:
+    names = [f"boundary.{p.name} {p.kind}" for p in case.parts if p.kind in ("traction", "pressure")]
+    if case.body_force is not None:
+        names.append("body_force")
+    return ", ".join(names) or "none"
 
 
 def _motion_text(mode: np.ndarray, centre: np.ndarray, size: float) -> str:
     """A free rigid motion (a, b, c): u = (a, b) + c (−(y − yc), x − xc)/size, in words."""
-    a, b, c = mode / np.abs(mode).max()
+    a, b, c = np.where(np.abs(mode) > 1e-9 * np.abs(mode).max(), mode, 0.0) / np.abs(mode).max()
     if abs(c) < 1e-6:
         return f"a translation along ({a / np.hypot(a, b):.3g}, {b / np.hypot(a, b):.3g})"
     # The rotation's fixed point: (a, b) + c/size · (−(y − yc), x − xc) = 0.
