@@ -403,16 +403,22 @@ def load_case(path: str | Path) -> Case:
         If the file cannot be read or any key is missing, unknown, mistyped or out of range.
     """
     path = Path(path)
+    return parse_case(read_text_file(path), source=path)
+
+
+def read_text_file(path: str | os.PathLike[str], what: str = "case") -> str:
+    """A YAML input (a case or a sweep file) as text: its path checked as text, a regular
+    file, at most :data:`MAX_CASE_BYTES` read, UTF-8; refusals say which ``what`` file."""
+    path = Path(path)
     shown = shortened(str(path))
     problem = path_problem(path)
     if problem is not None:
-        raise CaseError(f"{shown}: the case file's path {problem}")
-    data = _read_bounded(path, shown)
+        raise CaseError(f"{shown}: the {what} file's path {problem}")
+    data = _read_bounded(path, shown, what)
     try:
-        text = data.decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError as error:
         raise CaseError(f"{shortened(path.name)}: {_not_utf8(data, error)}") from None
-    return parse_case(text, source=path)
 
 
 def path_problem(path: str | os.PathLike[str], *, name_reserve: int = 0, path_reserve: int = 0) -> str | None:
@@ -453,22 +459,22 @@ def path_problem(path: str | os.PathLike[str], *, name_reserve: int = 0, path_re
     return None
 
 
-def _read_bounded(path: Path, shown: str) -> bytes:
+def _read_bounded(path: Path, shown: str, what: str = "case") -> bytes:
     """The bytes of a regular file of at most MAX_CASE_BYTES, reading no more than one byte past it."""
     try:
         mode = os.stat(path).st_mode
     except (OSError, ValueError) as error:
-        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
-    _refuse_special(mode, shown)
+        raise CaseError(f"{shown}: cannot read the {what} file ({_reason(error)})") from None
+    _refuse_special(mode, shown, what)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
         fd = os.open(path, flags)
     except (OSError, ValueError) as error:
-        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
+        raise CaseError(f"{shown}: cannot read the {what} file ({_reason(error)})") from None
     chunks, size = [], 0
     try:
         info = os.fstat(fd)  # the file opened, which may differ from the one looked at
-        _refuse_special(info.st_mode, shown)
+        _refuse_special(info.st_mode, shown, what)
         if info.st_size > MAX_CASE_BYTES:
             size = info.st_size
         while size <= MAX_CASE_BYTES:
@@ -478,23 +484,23 @@ def _read_bounded(path: Path, shown: str) -> bytes:
             chunks.append(chunk)
             size += len(chunk)
     except OSError as error:
-        raise CaseError(f"{shown}: cannot read the case file ({_reason(error)})") from None
+        raise CaseError(f"{shown}: cannot read the {what} file ({_reason(error)})") from None
     finally:
         os.close(fd)
     if size > MAX_CASE_BYTES:
-        raise CaseError(f"{shown}: the case file is larger than {MAX_CASE_BYTES} bytes (1 MiB); "
-                        "expected a YAML case of a few kB")
+        raise CaseError(f"{shown}: the {what} file is larger than {MAX_CASE_BYTES} bytes (1 MiB); "
+                        f"expected a YAML {what} file of a few kB")
     return b"".join(chunks)
 
 
-def _refuse_special(mode: int, shown: str) -> None:
+def _refuse_special(mode: int, shown: str, what: str = "case") -> None:
     if stat.S_ISDIR(mode):
-        raise CaseError(f"{shown}: is a directory; expected a YAML case file")
+        raise CaseError(f"{shown}: is a directory; expected a YAML {what} file")
     if not stat.S_ISREG(mode):
         kinds = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
                  (stat.S_ISSOCK, "a socket"))
         kind = next((name for test, name in kinds if test(mode)), "not a regular file")
-        raise CaseError(f"{shown}: is {kind}, not a regular file; expected a YAML case file")
+        raise CaseError(f"{shown}: is {kind}, not a regular file; expected a YAML {what} file")
 
 
 def _not_utf8(data: bytes, error: UnicodeDecodeError) -> str:

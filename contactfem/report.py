@@ -44,6 +44,8 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     contact = solution.contact
     method = get_method(solution.method)
     diameters = mesh.triangle_diameters()
+    # The push and the reactions (one product K u) serve both balances below.
+    forces = contact_and_reactions(problem, solution.displacement, contact.nodal_force)
     material = case.material
     report = {
         "schema_version": SCHEMA_VERSION,
@@ -91,9 +93,9 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             "normal": float(contact.nodal_force.sum()),
             "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
         },
-        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force),
+        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces),
         "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
-                                           {part.name: part.label for part in case.parts}),
+                                           {part.name: part.label for part in case.parts}, forces),
         "errors": exact_errors(problem, solution),
         "warnings": material_warnings(case.material),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
@@ -200,7 +202,8 @@ def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:
     return {"active_nodes": int(active.sum()), "contact_nodes": int(m), "intervals": intervals}
 
 
-def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray) -> dict:
+def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
+                forces: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Force and moment balance: applied loads + contact force + support reactions = 0.
 
     The reactions are what the supports must add for K u to balance: R = K u − F − f_c
@@ -208,23 +211,12 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     obstacle's push on each contact node.
     """
     points = problem.mesh.points
-    u = displacement.ravel()
-    contact_force = np.zeros_like(u)
-    nodes = problem.contact.nodes
-    contact_force[2 * nodes] = -problem.contact.normal[0] * nodal_force
-    contact_force[2 * nodes + 1] = -problem.contact.normal[1] * nodal_force
-    internal = problem.stiffness @ u
-    reactions = np.zeros_like(u)
-    symmetry = problem.symmetry_nodes
-    d = np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1])
-    reactions[d] = internal[d] - problem.load[d] - contact_force[d]
+    contact_force, reactions = forces or contact_and_reactions(problem, displacement, nodal_force)
     centre = points.mean(axis=0)
 
     def resultant(force: np.ndarray) -> list[float]:
-        f = force.reshape(-1, 2)
-        arm = points - centre
-        moment = float(np.sum(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))
-        return [float(f[:, 0].sum()), float(f[:, 1].sum()), moment]
+        total = _resultant(points, centre, force)
+        return [*total["force"], total["moment"]]
 
     applied, contact, support = (resultant(v) for v in (problem.load, contact_force, reactions))
     total = np.add(np.add(applied, contact), support)
@@ -241,8 +233,35 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     }
 
 
+def contact_and_reactions(problem: DiscreteProblem, displacement: np.ndarray,
+                          nodal_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The obstacle's push f_c = −n Λ at the contact nodes and the supports' reactions
+    R = K u − F − f_c on the held unknowns (prescribed, and both at symmetry-line nodes), each (2n,)."""
+    u = displacement.ravel()
+    contact = problem.contact
+    push = np.zeros_like(u)
+    push[2 * contact.nodes] = -contact.normal[0] * nodal_force
+    push[2 * contact.nodes + 1] = -contact.normal[1] * nodal_force
+    symmetry = problem.symmetry_nodes
+    held = np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1])
+    reactions = np.zeros_like(u)
+    reactions[held] = (problem.stiffness @ u)[held] - problem.load[held] - push[held]
+    return push, reactions
+
+
+def _resultant(points: np.ndarray, centre: np.ndarray, force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
+    """Force and moment about ``centre`` of nodal forces (2n,), over ``nodes`` (all by default)."""
+    f = force.reshape(-1, 2)
+    where = points
+    if nodes is not None:
+        f, where = f[nodes], points[nodes]
+    arm = where - centre
+    return {"force": [float(f[:, 0].sum()), float(f[:, 1].sum())],
+            "moment": float(np.sum(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))}
+
+
 def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
-                    labels: Mapping[str, str]) -> dict:
+                    labels: Mapping[str, str], forces: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Force and moment of every boundary part on the body, and of the body force.
 
     Applied surface forces on the natural parts, reactions on the supports (clamped,
@@ -252,27 +271,12 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     """
     mesh = problem.mesh
     points = mesh.points
-    n_dof = 2 * mesh.n_points
-    u = displacement.ravel()
-    contact = problem.contact
-    push = np.zeros(n_dof)
-    push[2 * contact.nodes] = -contact.normal[0] * nodal_force
-    push[2 * contact.nodes + 1] = -contact.normal[1] * nodal_force
-    held = np.concatenate([problem.dirichlet_dofs, 2 * problem.symmetry_nodes, 2 * problem.symmetry_nodes + 1])
-    reaction = np.zeros(n_dof)
-    reaction[held] = (problem.stiffness @ u)[held] - problem.load[held] - push[held]
+    push, reaction = forces or contact_and_reactions(problem, displacement, nodal_force)
     natural = problem.loads.natural
     centre = points.mean(axis=0)
 
     def resultant(force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
-        f = force.reshape(-1, 2)
-        if nodes is not None:
-            f, where = f[nodes], points[nodes]
-        else:
-            where = points
-        arm = where - centre
-        return {"force": [float(f[:, 0].sum()), float(f[:, 1].sum())],
-                "moment": float(np.sum(arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]))}
+        return _resultant(points, centre, force, nodes)
 
     # Reactions belong to the support parts holding the node, the obstacle's push to the
     # contact parts: a node shared by two such parts counts for the first in the mesh's order.

@@ -61,11 +61,10 @@ from contactfem.case import (
     OUTPUT_NAME_RESERVE,
     OUTPUT_PATH_RESERVE,
     _load_yaml,
-    _not_utf8,
-    _read_bounded,
     _Reader,
     parse_case,
     path_problem,
+    read_text_file,
     shortened,
 )
 from contactfem.errors import CaseError, ContactFemError, MeshError, SolverError
@@ -161,11 +160,7 @@ def load_sweep(path: str | Path) -> Sweep:
         If the sweep file or the base case cannot be read or is malformed.
     """
     path = Path(path)
-    shown = shortened(str(path))
-    problem = path_problem(path)
-    if problem is not None:
-        raise CaseError(f"{shown}: the sweep file's path {problem}")
-    text = _read_text(path, shown)
+    text = read_text_file(path, what="sweep")
     r = _Reader(shortened(path.name))
     data = _load_yaml(text, r.filename)
     if data is None:
@@ -186,7 +181,7 @@ def load_sweep(path: str | Path) -> Sweep:
         raise r.fail("case", reference, f"the path {path_problem(reference)}")
     base = path.parent / reference
     try:
-        base_text = _read_text(base, shortened(str(base)), what="case")
+        base_text = read_text_file(base)
         base_case = parse_case(base_text, source=base)
     except CaseError as error:
         raise CaseError(f"{r.filename}: case: {error}") from None
@@ -217,21 +212,6 @@ def load_sweep(path: str | Path) -> Sweep:
     return Sweep(source=path, digest=hashlib.sha256(text.encode("utf-8")).hexdigest(), title=title, base=base,
                  base_title=base_case.title, base_digest=base_case.digest, kind=kind, keys=keys, points=points,
                  directory=Path(directory))
-
-
-def _read_text(path: Path, shown: str, what: str = "sweep") -> str:
-    """A case-sized UTF-8 file, read with the case reader's bounds."""
-    try:
-        data = _read_bounded(path, shown)
-    except CaseError as error:
-        message = str(error)
-        if what != "case" and message.startswith(shown):
-            message = shown + message[len(shown):].replace("case file", f"{what} file")
-        raise CaseError(message) from None
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise CaseError(f"{shortened(path.name)}: {_not_utf8(data, error)}") from None
 
 
 def _grid(r: _Reader, grid: Any) -> list[dict[str, Any]]:
