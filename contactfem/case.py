@@ -57,7 +57,11 @@ if TYPE_CHECKING:
     from contactfem.exact import ExactSolution
 
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
-PART_LOADS = ("traction", "pressure", "displacement")
+PART_LOADS = ("traction", "pressure", "displacement", "platen")
+#: How a platen is driven: the force it presses with, or how far it advances into the body.
+PLATEN_CONTROLS = ("force", "displacement")
+#: The most steps a load path may have (each is a solve and a time step of the outputs).
+MAX_LOAD_STEPS = 1000
 DIAGONALS = ("right", "left", "alternate", "crossed")
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 SIDES = ("bottom", "right", "top", "left")
@@ -158,17 +162,19 @@ class Material:
 class BoundaryPart:
     """A named boundary part and what holds on it.
 
-    ``kind`` is clamped | free | contact | traction | pressure | displacement. ``values``
-    holds the two components of a traction or a displacement (None for a displacement
-    component left free), or the single pressure. ``exact`` marks ``{traction: exact}``
-    (``values`` empty: σ(u_exact) n depends on the edge's normal) and
-    ``{displacement: exact}`` (``values`` are the exact block's two expressions).
+    ``kind`` is clamped | free | contact | symmetry | traction | pressure | displacement |
+    platen. ``values`` holds the two components of a traction or a displacement (None for
+    a displacement component left free), or the single pressure. ``exact`` marks
+    ``{traction: exact}`` (``values`` empty: σ(u_exact) n depends on the edge's normal)
+    and ``{displacement: exact}`` (``values`` are the exact block's two expressions).
+    ``platen`` is the drive of a platen part.
     """
 
     name: str
     kind: str
     values: tuple[Expression | None, ...] = ()
     exact: bool = False
+    platen: "Platen | None" = None
 
     @property
     def label(self) -> str:
@@ -178,6 +184,32 @@ class BoundaryPart:
     @property
     def is_dirichlet(self) -> bool:
         return self.kind in ("clamped", "displacement")
+
+    @property
+    def is_support(self) -> bool:
+        """Whether the part holds the body somewhere (a prescribed motion, a symmetry line, a platen)."""
+        return self.is_dirichlet or self.kind in ("symmetry", "platen")
+
+
+@dataclass(frozen=True)
+class Platen:
+    """A rigid, frictionless platen on a straight boundary part: the part's normal
+    displacement is one unknown δ (its advance into the body, along the inward normal),
+    its tangential motion free. ``control`` is ``force`` (δ unknown, the platen presses
+    with ``value`` per unit thickness; negative pulls) or ``displacement`` (δ = ``value``).
+    """
+
+    control: str
+    value: float
+
+
+@dataclass(frozen=True)
+class LoadPath:
+    """Load factors applied in turn (``factors``, each > 0): every load, prescribed
+    displacement and platen drive of the case is multiplied by the factor; the obstacle
+    stays where it is."""
+
+    factors: tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -265,6 +297,7 @@ class Case:
     output: OutputSettings
     exact: ExactBlock | None = None
     units: Units = Units()
+    load_path: LoadPath | None = None
 
     def part(self, name: str) -> BoundaryPart:
         return next(p for p in self.parts if p.name == name)
@@ -540,7 +573,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     top = r.mapping(
         data, "",
         ("title", "description", "geometry", "mesh", "material", "body_force",
-         "boundary", "obstacle", "solver", "output", "exact", "units"),
+         "boundary", "obstacle", "solver", "output", "exact", "units", "load_path"),
         required=("geometry", "material", "boundary", "obstacle"),
     )
     title = top.get("title", source.stem)
@@ -562,6 +595,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     solver = _solver(r, top.get("solver", {}))
     output = _output(r, top.get("output", {}), source)
     units = _units(r, top.get("units", {}))
+    load_path = _load_path(r, top["load_path"]) if "load_path" in top else None
     return Case(
         source=source,
         text=text,
@@ -577,6 +611,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
         output=output,
         exact=exact,
         units=units,
+        load_path=load_path,
     )
 
 
@@ -1424,6 +1459,9 @@ def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None,
                 raise r.fail(f"{key}.{kind}", value, "'exact' needs an exact: block with the displacement")
             parts.append(BoundaryPart(name, kind, exact if kind == "displacement" else (), exact=True))
             continue
+        if kind == "platen":
+            parts.append(BoundaryPart(name, "platen", platen=_platen(r, value, f"{key}.platen")))
+            continue
         if kind == "pressure":
             values: tuple[Expression | None, ...] = (r.expression(value, f"{key}.pressure"),)
         else:
@@ -1431,14 +1469,46 @@ def _boundary(r: _Reader, data: Any, part_names: tuple[str, ...] | None,
             if kind == "displacement" and all(v is None for v in values):
                 raise r.fail(f"{key}.displacement", value, "at least one component must be prescribed")
         parts.append(BoundaryPart(name, kind, values))
-    if not any(p.is_dirichlet or p.kind == "symmetry" for p in parts):
+    if not any(p.is_support for p in parts):
         raise CaseError(
-            f"{r.filename}: boundary: no clamped, displacement or symmetry part; the body could move "
+            f"{r.filename}: boundary: no clamped, displacement, symmetry or platen part; the body could move "
             "rigidly, so the problem is ill-posed (give at least one part: clamped)"
         )
     if not any(p.kind == "contact" for p in parts):
         raise CaseError(f"{r.filename}: boundary: no contact part; mark the part that may touch the obstacle: contact")
     return tuple(parts)
+
+
+def _platen(r: _Reader, data: Any, key: str) -> Platen:
+    """``{force: P}`` or ``{displacement: d}``: one number, the drive of a rigid frictionless platen."""
+    if not isinstance(data, dict) or len(data) != 1:
+        raise r.fail(key, data, "expected {force: P} (the force the platen presses with, per unit thickness) "
+                                "or {displacement: d} (how far it advances into the body)")
+    data = r.mapping(data, key, PLATEN_CONTROLS)
+    (control, value), = data.items()
+    limit = SCALE_LIMIT
+    amount = r.number(value, f"{key}.{control}", low=-limit, high=limit,
+                      expected=f"expected a number in [-{limit:g}, {limit:g}]")
+    return Platen(control=control, value=amount)
+
+
+def _load_path(r: _Reader, data: Any) -> LoadPath:
+    """``{steps: n}`` (factors 1/n, 2/n, …, 1) or ``{factors: [f1, f2, …]}`` (each > 0)."""
+    data = r.mapping(data, "load_path", ("steps", "factors"))
+    if len(data) != 1:
+        raise r.fail("load_path", data, "give one of steps (equal increments up to 1) or factors (a list)")
+    if "steps" in data:
+        steps = data["steps"]
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= MAX_LOAD_STEPS:
+            raise r.fail("load_path.steps", steps, f"expected a whole number from 1 to {MAX_LOAD_STEPS}")
+        return LoadPath(factors=tuple((i + 1) / steps for i in range(steps)))
+    factors = data["factors"]
+    if not isinstance(factors, list) or not 1 <= len(factors) <= MAX_LOAD_STEPS:
+        raise r.fail("load_path.factors", factors, f"expected a list of 1 to {MAX_LOAD_STEPS} load factors")
+    values = tuple(r.number(f, f"load_path.factors[{i}]", low=0, low_open=True, high=SCALE_LIMIT,
+                            expected=f"expected a load factor > 0 and at most {SCALE_LIMIT:g}")
+                   for i, f in enumerate(factors))
+    return LoadPath(factors=values)
 
 
 def _obstacle(r: _Reader, data: Any) -> Obstacle:

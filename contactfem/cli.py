@@ -741,6 +741,17 @@ def _force_lines(forces: dict | None) -> list[str]:
     return lines
 
 
+def _platen_lines(platens: dict | None) -> list[str]:
+    """One line per platen: how it is driven, its advance into the body and its force."""
+    lines = []
+    for name, entry in (platens or {}).items():
+        label = "platens" if not lines else ""
+        driven = "force" if entry["control"] == "force" else "displacement"
+        lines.append(f"  {label:<12} {name} ({driven} {entry['prescribed']:.6g}): advance {entry['advance']:.6g}, "
+                     f"force {entry['force']:.6g}")
+    return lines
+
+
 def _certificate_line(certificate: dict | None) -> str:
     """The kernel's certificate in one line: each condition's relative value against its tolerance."""
     if certificate is None:
@@ -773,6 +784,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         f"  equilibrium  relative residual {report['equilibrium']['relative_force_residual']:.1e}",
         _certificate_line(report["solver"].get("certificate")),
         *_force_lines(report.get("boundary_forces")),
+        *_platen_lines(report.get("platens")),
         "  time         " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()),
     ]
     for warning in report.get("warnings", []):

@@ -96,6 +96,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces),
         "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
                                            {part.name: part.label for part in case.parts}, forces),
+        "platens": platen_figures(problem, solution.displacement, forces[1]),
         "errors": exact_errors(problem, solution),
         "warnings": material_warnings(case.material),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
@@ -236,17 +237,38 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
 def contact_and_reactions(problem: DiscreteProblem, displacement: np.ndarray,
                           nodal_force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The obstacle's push f_c = −n Λ at the contact nodes and the supports' reactions
-    R = K u − F − f_c on the held unknowns (prescribed, and both at symmetry-line nodes), each (2n,)."""
+    R = K u − F − f_c on the held unknowns (prescribed, and both at symmetry-line and platen
+    nodes), each (2n,)."""
     u = displacement.ravel()
     contact = problem.contact
     push = np.zeros_like(u)
     push[2 * contact.nodes] = -contact.normal[0] * nodal_force
     push[2 * contact.nodes + 1] = -contact.normal[1] * nodal_force
-    symmetry = problem.symmetry_nodes
-    held = np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1])
+    symmetry = np.concatenate([problem.symmetry_nodes, *(p.nodes for p in problem.platens)])
+    held = np.unique(np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1]))
     reactions = np.zeros_like(u)
     reactions[held] = (problem.stiffness @ u)[held] - problem.load[held] - push[held]
     return push, reactions
+
+
+def platen_figures(problem: DiscreteProblem, displacement: np.ndarray, reactions: np.ndarray) -> dict:
+    """Each platen's advance δ into the body, its displacement vector −δ n, and the force
+    it presses with: the work of its nodes' reactions per unit advance, Σ m · R (equal to
+    the prescribed force of a force-driven platen, to the solve's residual)."""
+    u = displacement.reshape(-1, 2)
+    r = reactions.reshape(-1, 2)
+    figures = {}
+    for platen in problem.platens:
+        advance = float(-(u[platen.master] @ platen.normal))
+        figures[platen.name] = {
+            "control": platen.control,
+            "prescribed": platen.value,
+            "advance": advance,
+            "displacement": (-advance * platen.normal).tolist(),
+            "force": float(np.sum(platen.motion * r[platen.nodes])),
+            "normal": platen.normal.tolist(),
+        }
+    return figures
 
 
 def _resultant(points: np.ndarray, centre: np.ndarray, force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
@@ -289,7 +311,7 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
                 owner[np.unique(mesh.boundary_edges[mesh.edge_parts == index])] = index
         return owner
 
-    support_owner = owners({"clamped", "displacement", "symmetry"})
+    support_owner = owners({"clamped", "displacement", "symmetry", "platen"})
     contact_owner = owners({"contact"})
     entries: dict[str, dict] = {}
     for index, name in enumerate(mesh.part_names):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,6 +13,9 @@ from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import arc_sweep, loop_signed_area
 from contactfem.methods import ContactBoundaryMasses
+
+if TYPE_CHECKING:
+    from contactfem.discretize.supports import Supports
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,8 +98,7 @@ class ContactBoundary:
         return self.obstacle.tangent
 
 
-def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetry_nodes: np.ndarray,
-                     symmetry_normals: np.ndarray) -> ContactBoundary:
+def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundary:
     """ΓC of ``mesh``: refuses a contact part facing away from the obstacle, naming it."""
     obstacle = FlatObstacle.from_case(case)
     normal = obstacle.normal
@@ -111,6 +114,7 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
                             f"along each edge and > {FACING_TOLERANCE:g} somewhere on it)")
     # A node whose normal motion a support fixes carries no multiplier: both components
     # prescribed, or one prescribed while the obstacle's normal is not along the other.
+    dirichlet_dofs, symmetry_nodes, symmetry_normals = held.dirichlet_dofs, held.symmetry_nodes, held.symmetry_normals
     prescribed = np.zeros((mesh.n_points, 2), dtype=bool)
     prescribed[dirichlet_dofs // 2, dirichlet_dofs % 2] = True
     roller_keeps_normal = np.where(prescribed[:, 0], abs(normal[1]), abs(normal[0])) > 1 - 1e-12
@@ -118,6 +122,11 @@ def contact_boundary(case: Case, mesh: Mesh, dirichlet_dofs: np.ndarray, symmetr
     # On a symmetry line the node keeps contact only if the obstacle's normal runs along the line.
     along_line = np.abs(symmetry_normals @ obstacle.tangent) > 1 - 1e-12
     supported[symmetry_nodes[~along_line]] = True
+    # A platen holds its nodes' motion along its normal: like a roller, a node keeps
+    # contact only if the obstacle's normal runs along the platen, and not on a symmetry line too.
+    for platen in held.platens:
+        along_platen = abs(platen.tangent @ normal) > 1 - 1e-12
+        supported[platen.nodes[platen.on_symmetry | (not along_platen)]] = True
     gamma_nodes = np.unique(edges)
     candidates = gamma_nodes[~supported[gamma_nodes]]
     facing = obstacle.faces(mesh.points[candidates])

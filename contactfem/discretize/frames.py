@@ -23,12 +23,20 @@ class ReducedSystem:
     out). At a contact node with both components free, (u_x, u_y) = u_n n + u_t t: its x
     slot holds u_n and its y slot u_t. A contact node on a roller (one component
     prescribed) keeps its prescribed slot, and its free slot c, along which the normal
-    lies, holds u_n (u_c = n_c u_n with n_c = ±1).
+    lies, holds u_n (u_c = n_c u_n with n_c = ±1). A platen's first node holds its
+    advance δ in its x slot; every other platen node j moves by a_j (δ + s_x) + b_j s_y
+    with s_x fixed to 0, so ``rotation`` is not orthogonal there: its column of δ has an
+    entry at every node of the platen.
     """
 
     system: ContactSystem
     rotation: sp.csr_matrix
     problem: DiscreteProblem
+    #: Each framed node's 2x2 frame [a b] (k, 2, 2), the nodes (k,) and each one's platen
+    #: master (−1 when it is on no platen), to map mesh displacements back (:meth:`reduce`).
+    frame_nodes: np.ndarray
+    frames: np.ndarray
+    masters: np.ndarray
 
     @classmethod
     def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
@@ -36,14 +44,16 @@ class ReducedSystem:
         contact = problem.contact
         supported = np.zeros(n_dof, dtype=bool)
         supported[problem.dirichlet_dofs] = True
-        nodes, normal_slot, a, b = _frames(problem, supported)
+        frames = _frames(problem, supported)
+        nodes, a, b = frames.nodes, frames.a, frames.b
         # Each framed node's slots hold u · a (x slot) and u · b (y slot): Q's 2x2 block is
         # [a b]. E = Q − I lives on those nodes only, so QᵀKQ = K + EᵀK + KE + EᵀKE costs a
         # few products with thin matrices instead of two full ones.
         x, y = 2 * nodes, 2 * nodes + 1
-        rows = np.concatenate([x, x, y, y])
-        cols = np.concatenate([x, y, x, y])
-        vals = np.concatenate([a[:, 0] - 1.0, b[:, 0], a[:, 1], b[:, 1] - 1.0])
+        slaves = (frames.masters >= 0) & (nodes != frames.masters)
+        rows = np.concatenate([x, x, y, y, x[slaves], y[slaves]])
+        cols = np.concatenate([x, y, x, y, 2 * frames.masters[slaves], 2 * frames.masters[slaves]])
+        vals = np.concatenate([a[:, 0] - 1.0, b[:, 0], a[:, 1], b[:, 1] - 1.0, a[slaves, 0], a[slaves, 1]])
         shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
         shift.eliminate_zeros()
         stiffness = problem.stiffness
@@ -53,42 +63,93 @@ class ReducedSystem:
         rotated = sp.csr_matrix(stiffness + (k_shift + k_shift.T + shift.T @ k_shift))
         rotated.sum_duplicates()
         rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
-        fixed_dofs = np.concatenate([problem.dirichlet_dofs, 2 * problem.symmetry_nodes])
-        fixed_values = np.concatenate([problem.dirichlet_values, np.zeros(len(problem.symmetry_nodes))])
+        fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
+        fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
         order = np.argsort(fixed_dofs)
+        load = rotation.T @ problem.load
+        np.add.at(load, frames.force_dofs, frames.forces)
+        blocks = np.stack([a, b], axis=2)
+        free_modes = None
+        if problem.free_modes is not None:
+            free_modes = _reduce(problem.free_modes, nodes, blocks, frames.masters)
         system = ContactSystem(
             stiffness=rotated,
-            load=rotation.T @ problem.load,
-            normal_dofs=normal_slot,
+            load=load,
+            normal_dofs=frames.normal_slot,
             gap=contact.gap,
             multiplier_mass=method.multiplier_mass(contact.masses),
             fixed_dofs=fixed_dofs[order],
             fixed_values=fixed_values[order],
-            free_modes=None if problem.free_modes is None else rotation.T @ problem.free_modes,
+            free_modes=free_modes,
         )
-        return cls(system=system, rotation=rotation, problem=problem)
+        return cls(system=system, rotation=rotation, problem=problem, frame_nodes=nodes, frames=blocks,
+                   masters=frames.masters)
 
     def displacement(self, reduced: np.ndarray) -> np.ndarray:
         """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
         return (self.rotation @ reduced).reshape(-1, 2)
 
+    def reduce(self, displacement: np.ndarray) -> np.ndarray:
+        """The kernel's unknowns of mesh displacements (2 n_points,) or (2 n_points, j) that
+        the constraints allow (a rigid motion a platen follows): the inverse of :meth:`displacement`."""
+        return _reduce(displacement, self.frame_nodes, self.frames, self.masters)
 
-def _frames(problem: DiscreteProblem, supported: np.ndarray):
+
+def _reduce(displacement: np.ndarray, nodes: np.ndarray, frames: np.ndarray, masters: np.ndarray) -> np.ndarray:
+    """Slots s with Q s = ``displacement`` (see :meth:`ReducedSystem.reduce`)."""
+    single = displacement.ndim == 1
+    u = displacement.reshape(len(displacement), -1).copy()
+    blocks = u.reshape(-1, 2, u.shape[1])
+    slots = np.linalg.solve(frames, blocks[nodes])  # (k, 2, j)
+    # A platen node's frame has a = its column of δ, so its x slot is what it moves along a beyond δ.
+    on_platen = (masters >= 0) & (nodes != masters)
+    position = np.full(len(blocks), -1)
+    position[nodes] = np.arange(len(nodes))
+    slots[on_platen, 0] -= slots[position[masters[on_platen]], 0]
+    blocks[nodes] = slots
+    return u[:, 0] if single else u
+
+
+@dataclass(frozen=True, eq=False)
+class _Frames:
+    """The rotated unknowns: per framed node its frame (a, b) and platen master (−1 if
+    none); the contact normal slots; the slots the frames fix (symmetry normals, platen
+    slaves, a displacement-driven platen's advance) and the platens' forces on their slots."""
+
+    nodes: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    masters: np.ndarray
+    normal_slot: np.ndarray
+    fixed_dofs: np.ndarray
+    fixed_values: np.ndarray
+    force_dofs: np.ndarray
+    forces: np.ndarray
+
+
+def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
     """Local frames (a, b) of the nodes whose unknowns are rotated, and the contact normal slots.
 
     - contact node with both components free: a = n, b = t (u_n in the x slot);
     - contact node with one component prescribed (a roller, n along the free axis): the
       prescribed axis stays, the free slot holds u_n;
     - symmetry node: a = n_s (its x slot is fixed to 0), b = t_s, or b = n when it is also a
-      contact node (n along the symmetry line), its y slot then holding u_n.
-    Returns nodes (k,), normal_slot (m,) aligned with the contact nodes, a (k, 2), b (k, 2).
+      contact node (n along the symmetry line), its y slot then holding u_n;
+    - platen node: a = −n_p (its x slot is the platen's advance δ at the platen's first
+      node, fixed to 0 elsewhere: the node moves by a δ), b = t_p, or b = n on a contact
+      node (n along the platen); on a symmetry line a is the platen's motion there
+      (a · n_p = −1, a · n_s = 0), b = n_s, and the y slot is fixed to 0.
     """
     contact = problem.contact
     n_o, t_o = contact.normal, contact.tangent
+    n_points = problem.mesh.n_points
     c = contact.nodes
     sx, sy = supported[2 * c], supported[2 * c + 1]
-    sym_index = np.full(problem.mesh.n_points, -1)
+    sym_index = np.full(n_points, -1)
     sym_index[problem.symmetry_nodes] = np.arange(len(problem.symmetry_nodes))
+    platen_of = np.full(n_points, -1)
+    for index, platen in enumerate(problem.platens):
+        platen_of[platen.nodes] = index
     on_symmetry = sym_index[c] >= 0
     m = len(c)
     a = np.tile(n_o, (m, 1))
@@ -104,9 +165,52 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray):
     a[on_symmetry] = problem.symmetry_normals[sym_index[c[on_symmetry]]]
     b[on_symmetry] = n_o
     slot = np.where(on_symmetry, 2 * c + 1, slot)
-    # Symmetry nodes that are not contact nodes: a = n_s, b = t_s.
+    fixed = [2 * c[on_symmetry]]
+    # Contact nodes on a platen (the contact boundary keeps them only with n along it).
+    platen_contact = platen_of[c] >= 0
+    for index, platen in enumerate(problem.platens):
+        here = platen_of[c] == index
+        a[here] = -platen.normal
+        b[here] = n_o
+    slot = np.where(platen_contact, 2 * c + 1, slot)
+    # Symmetry nodes that are not contact nodes: a = n_s, b = t_s (or the platen's frame).
     others = np.setdiff1d(problem.symmetry_nodes, c)
     normals = problem.symmetry_normals[sym_index[others]]
-    tangents = np.stack([-normals[:, 1], normals[:, 0]], axis=1)
-    nodes = np.concatenate([c, others])
-    return nodes, slot, np.concatenate([a, normals]), np.concatenate([b, tangents])
+    sym_a = normals.copy()
+    sym_b = np.stack([-normals[:, 1], normals[:, 0]], axis=1)
+    sym_platen = platen_of[others] >= 0
+    plain = others[~sym_platen]
+    fixed.append(2 * plain)
+    for platen in problem.platens:
+        here = platen_of[others] == platen_of[platen.master]
+        position = np.searchsorted(platen.nodes, others[here])
+        sym_a[here] = platen.motion[position]
+        sym_b[here] = normals[here]
+    fixed.append(2 * others[sym_platen] + 1)
+    # Platen nodes on neither: a = −n_p, b = t_p.
+    platen_nodes = np.concatenate([p.nodes for p in problem.platens]) if problem.platens else np.zeros(0, int)
+    rest = np.setdiff1d(platen_nodes, np.concatenate([c, others]))
+    rest_a = np.zeros((len(rest), 2))
+    rest_b = np.zeros((len(rest), 2))
+    for index, platen in enumerate(problem.platens):
+        here = platen_of[rest] == index
+        rest_a[here] = -platen.normal
+        rest_b[here] = platen.tangent
+    nodes = np.concatenate([c, others, rest])
+    masters = platen_of[nodes]
+    masters = np.where(masters >= 0, np.array([p.master for p in problem.platens] + [-1])[masters], -1)
+    # Every platen node but the first has its x slot fixed to 0; the first's x slot is δ.
+    on_platen = masters >= 0
+    slaves = nodes[on_platen & (nodes != masters)]
+    fixed_values = [np.zeros(sum(len(f) for f in fixed) + len(slaves))]
+    fixed.append(2 * slaves)
+    driven = [p for p in problem.platens if p.control == "displacement"]
+    pushed = [p for p in problem.platens if p.control == "force"]
+    fixed.append(np.array([2 * p.master for p in driven], dtype=np.int64))
+    fixed_values.append(np.array([p.value for p in driven]))
+    return _Frames(
+        nodes=nodes, a=np.concatenate([a, sym_a, rest_a]), b=np.concatenate([b, sym_b, rest_b]), masters=masters,
+        normal_slot=slot, fixed_dofs=np.concatenate(fixed).astype(np.int64), fixed_values=np.concatenate(fixed_values),
+        force_dofs=np.array([2 * p.master for p in pushed], dtype=np.int64),
+        forces=np.array([p.value for p in pushed], dtype=float),
+    )

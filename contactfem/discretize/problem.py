@@ -14,7 +14,7 @@ from contactfem.discretize.contact import ContactBoundary, contact_boundary
 from contactfem.discretize.exact_checks import check_exact_contact
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
-from contactfem.discretize.supports import free_rigid_modes, supports
+from contactfem.discretize.supports import PlatenConstraint, free_rigid_modes, supports
 from contactfem.mesh import Mesh
 from contactfem.methods import ContactMethod
 
@@ -48,6 +48,8 @@ class DiscreteProblem:
     # Rigid motions (2n, k) the supports leave free and only contact holds (the load presses
     # the body onto the obstacle along them); None when the supports hold the body.
     free_modes: np.ndarray | None = None
+    # Rigid frictionless platens: their nodes' normal motion is one unknown each.
+    platens: tuple[PlatenConstraint, ...] = ()
 
     @property
     def n_unknowns(self) -> int:
@@ -65,16 +67,17 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0) -> DiscreteProbl
     law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
     stiffness = stiffness_matrix(mesh.points, mesh.triangles, law, topology=mesh.topology)
     loads = compile_loads(case, mesh)
-    dirichlet_dofs, dirichlet_values, symmetry_nodes, symmetry_normals = supports(case, mesh)
-    contact = contact_boundary(case, mesh, dirichlet_dofs, symmetry_nodes, symmetry_normals)
+    held = supports(case, mesh)
+    contact = contact_boundary(case, mesh, held)
     load = loads.load_vector(mesh)
-    free_modes = free_rigid_modes(case, mesh, dirichlet_dofs, symmetry_nodes, symmetry_normals, contact, load)
+    free_modes = free_rigid_modes(case, mesh, held, contact, load)
     exact = case.exact.solution if case.exact is not None else None
     if exact is not None:
         check_exact_contact(case, mesh, contact.edges)
     return DiscreteProblem(
         mesh=mesh, law=law, stiffness=stiffness, load=load,
-        dirichlet_dofs=dirichlet_dofs, dirichlet_values=dirichlet_values, contact=contact, loads=loads,
-        exact=exact, refinements=refinements, symmetry_nodes=symmetry_nodes, symmetry_normals=symmetry_normals,
-        free_modes=free_modes if free_modes.shape[1] else None,
+        dirichlet_dofs=held.dirichlet_dofs, dirichlet_values=held.dirichlet_values, contact=contact, loads=loads,
+        exact=exact, refinements=refinements, symmetry_nodes=held.symmetry_nodes,
+        symmetry_normals=held.symmetry_normals, free_modes=free_modes if free_modes.shape[1] else None,
+        platens=held.platens,
     )

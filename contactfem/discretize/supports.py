@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -16,8 +17,55 @@ if TYPE_CHECKING:
     from contactfem.discretize.contact import ContactBoundary
 
 
-def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Prescribed unknowns and their values; refuses conflicting supports.
+@dataclass(frozen=True, eq=False)
+class PlatenConstraint:
+    """A platen part on the mesh: its nodes move along ``normal`` (outward, unit) by one
+    common amount, minus δ, the platen's advance into the body; the first node carries δ.
+
+    ``nodes`` (k,) excludes nodes with a prescribed component (the prescription wins, as
+    on a symmetry line); ``on_symmetry`` (k,) marks nodes also on a symmetry line, whose
+    motion is then δ times a fixed vector. ``motion`` (k, 2) is each node's displacement
+    per unit advance where the platen alone would leave it free: −n, or on a symmetry line
+    of normal n_s the vector m with m · n = −1 and m · n_s = 0. The platen's force on the
+    body is the work of the nodes' reactions along it: Σ motion · R.
+    """
+
+    name: str
+    nodes: np.ndarray
+    normal: np.ndarray
+    control: str
+    value: float
+    on_symmetry: np.ndarray
+    motion: np.ndarray
+
+    @property
+    def master(self) -> int:
+        return int(self.nodes[0])
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return np.array([-self.normal[1], self.normal[0]])
+
+
+@dataclass(frozen=True, eq=False)
+class Supports:
+    """What holds the body: prescribed unknowns ``dirichlet_dofs`` (sorted) with their
+    ``dirichlet_values``, the nodes held on symmetry lines with each line's unit normal,
+    and the platens."""
+
+    dirichlet_dofs: np.ndarray
+    dirichlet_values: np.ndarray
+    symmetry_nodes: np.ndarray
+    symmetry_normals: np.ndarray
+    platens: tuple[PlatenConstraint, ...] = ()
+
+    @property
+    def platen_nodes(self) -> np.ndarray:
+        return np.concatenate([p.nodes for p in self.platens]) if self.platens else np.zeros(0, dtype=np.int64)
+
+
+def supports(case: Case, mesh: Mesh) -> Supports:
+    """Prescribed unknowns and their values, symmetry lines and platens; refuses conflicting supports.
 
     Whether they leave a rigid motion free is decided by :func:`free_rigid_modes`, once the
     contact nodes and the load are known: contact may hold a motion the supports leave free."""
@@ -52,7 +100,21 @@ def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
             values[dofs] = prescribed
             owner[dofs] = index
     prescribed = owner.reshape(-1, 2) >= 0
-    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh, prescribed)
+    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh, np.zeros_like(prescribed))
+    # A symmetry node with one component prescribed is held completely when the line is not
+    # along that component: u · n_s = 0 then gives the other one.
+    one = prescribed[symmetry_nodes].sum(axis=1) == 1
+    given = np.argmax(prescribed[symmetry_nodes[one]], axis=1)
+    n_given = symmetry_normals[one, given]
+    n_other = symmetry_normals[one, 1 - given]
+    across = np.abs(n_other) > 1e-12
+    nodes_one = symmetry_nodes[one][across]
+    value = values[2 * nodes_one + given[across]]
+    values[2 * nodes_one + 1 - given[across]] = -n_given[across] * value / n_other[across]
+    owner[2 * nodes_one + 1 - given[across]] = len(case.parts)
+    prescribed = owner.reshape(-1, 2) >= 0
+    keep = ~prescribed[symmetry_nodes].any(axis=1)
+    symmetry_nodes, symmetry_normals = symmetry_nodes[keep], symmetry_normals[keep]
     # A node on two symmetry lines that are not parallel cannot move at all.
     unique, first, counts = np.unique(symmetry_nodes, return_index=True, return_counts=True)
     pinned = unique[counts > 1]
@@ -61,8 +123,28 @@ def supports(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
         owner[np.concatenate([2 * pinned, 2 * pinned + 1])] = len(case.parts)
     keep = np.isin(unique, pinned, invert=True)
     symmetry_nodes, symmetry_normals = unique[keep], symmetry_normals[first[keep]]
+    platens = _platens(case, mesh, owner.reshape(-1, 2) >= 0, symmetry_nodes, symmetry_normals)
     dofs = np.flatnonzero(owner >= 0)
-    return dofs, values[dofs], symmetry_nodes, symmetry_normals
+    return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens)
+
+
+def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """The outward unit normal of a straight part and its edges; refuses a part that is not straight."""
+    edges = mesh.edges_of(name)
+    if len(edges) == 0:
+        raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
+    _, outward = edge_geometry(mesh.points, edges)
+    normal = outward.mean(axis=0)
+    normal /= np.linalg.norm(normal)
+    points = mesh.points[np.unique(edges)]
+    offset = (points - points[0]) @ normal
+    extent = np.ptp(mesh.points, axis=0).max()
+    if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
+        raise CaseError(
+            f"{case.source.name}: boundary.{name} = {kind}: the part is not straight; "
+            f"a {kind} {'support' if kind == 'symmetry' else 'part'} needs all its edges on one line"
+        )
+    return normal, edges
 
 
 def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,20 +157,7 @@ def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.
     for part in case.parts:
         if part.kind != "symmetry":
             continue
-        edges = mesh.edges_of(part.name)
-        if len(edges) == 0:
-            raise CaseError(f"{case.source.name}: boundary.{part.name}: the mesh has no edge on this part")
-        _, outward = edge_geometry(mesh.points, edges)
-        normal = outward.mean(axis=0)
-        normal /= np.linalg.norm(normal)
-        points = mesh.points[np.unique(edges)]
-        offset = (points - points[0]) @ normal
-        extent = np.ptp(mesh.points, axis=0).max()
-        if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
-            raise CaseError(
-                f"{case.source.name}: boundary.{part.name} = symmetry: the part is not straight; "
-                "a symmetry support needs all its edges on one line"
-            )
+        normal, edges = _straight_normal(case, mesh, part.name, "symmetry")
         part_nodes = np.unique(edges)
         part_nodes = part_nodes[~prescribed[part_nodes].any(axis=1)]
         nodes.append(part_nodes)
@@ -98,16 +167,57 @@ def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.
     return np.concatenate(nodes), np.concatenate(normals)
 
 
+def _platens(case: Case, mesh: Mesh, prescribed: np.ndarray, symmetry_nodes: np.ndarray,
+             symmetry_normals: np.ndarray) -> tuple[PlatenConstraint, ...]:
+    """The platen parts on the mesh; refuses a platen sharing a node with another platen or
+    with a symmetry line parallel to it (the node would be held twice along one direction)."""
+    platens: list[PlatenConstraint] = []
+    taken = np.full(mesh.n_points, -1)
+    sym_index = np.full(mesh.n_points, -1)
+    sym_index[symmetry_nodes] = np.arange(len(symmetry_nodes))
+    for part in case.parts:
+        if part.kind != "platen":
+            continue
+        normal, edges = _straight_normal(case, mesh, part.name, "platen")
+        nodes = np.unique(edges)
+        nodes = nodes[~prescribed[nodes].any(axis=1)]
+        if len(nodes) == 0:
+            raise CaseError(f"{case.source.name}: boundary.{part.name} = platen: every node of the part has a "
+                            "prescribed displacement, so the platen holds nothing; make it free or drop the prescription")
+        shared = taken[nodes] >= 0
+        if shared.any():
+            where = mesh.points[nodes[shared][0]]
+            raise CaseError(
+                f"{case.source.name}: boundary.{part.name} = platen: shares the node ({where[0]:g}, {where[1]:g}) "
+                f"with the platen boundary.{platens[taken[nodes[shared][0]]].name}; two platens must not touch")
+        on_symmetry = sym_index[nodes] >= 0
+        parallel = on_symmetry.copy()
+        parallel[on_symmetry] = np.abs(symmetry_normals[sym_index[nodes[on_symmetry]]] @ normal) > 1 - 1e-9
+        if parallel.any():
+            where = mesh.points[nodes[parallel][0]]
+            raise CaseError(
+                f"{case.source.name}: boundary.{part.name} = platen: shares the node ({where[0]:g}, {where[1]:g}) "
+                "with a symmetry line parallel to it, which holds that node where the platen moves it")
+        taken[nodes] = len(platens)
+        motion = np.tile(-normal, (len(nodes), 1))
+        line = symmetry_normals[sym_index[nodes[on_symmetry]]]
+        along_line = np.stack([-line[:, 1], line[:, 0]], axis=1)
+        motion[on_symmetry] = -along_line / (along_line @ normal)[:, None]
+        platens.append(PlatenConstraint(part.name, nodes, normal, part.platen.control, part.platen.value,
+                                        on_symmetry, motion))
+    return tuple(platens)
+
+
 #: A piece whose constraints see a rigid motion (unit translations, rotations scaled by the
 #: piece's size) weaker than this fraction of the strongest leaves that motion free: the
 #: Gram matrix's eigenvalue ratio, so 1e-14 is a singular value ratio of 1e-7.
 RIGID_MOTION_TOLERANCE = 1e-14
 
 
-def free_rigid_modes(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
-                     symmetry_normals: np.ndarray, contact: "ContactBoundary", load: np.ndarray) -> np.ndarray:
+def free_rigid_modes(case: Case, mesh: Mesh, held: Supports, contact: "ContactBoundary",
+                     load: np.ndarray) -> np.ndarray:
     """The rigid motions (2 n_points, k) the supports leave free and contact holds; refuses the others."""
-    modes = _refuse_rigid_motion(case, mesh, dofs, symmetry_nodes, symmetry_normals, contact, load)
+    modes = _refuse_rigid_motion(case, mesh, held, contact, load)
     return np.zeros((2 * mesh.n_points, 0)) if modes is None else modes
 
 
@@ -116,17 +226,21 @@ def free_rigid_modes(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: n
 LOAD_WORK_TOLERANCE = 1e-10
 
 
-def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_nodes: np.ndarray,
-                         symmetry_normals: np.ndarray, contact: "ContactBoundary | None" = None,
+def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "ContactBoundary | None" = None,
                          load: np.ndarray | None = None) -> np.ndarray:
     """Every connected piece of the mesh must have its three rigid motions (translations along
     x and y, rotation) pinned by its own supports, or by its contact nodes pressed onto the
     obstacle by the load: a piece joined to the rest by no edge is held by nothing else.
 
+    A platen driven by displacement holds its nodes along its normal, like a symmetry line;
+    one driven by force holds only their relative normal motion (the platen is rigid), so
+    a translation along its normal is free and its force is part of the load.
+
     Returns the free motions contact holds as nodal displacements (2 n_points, k)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
+    dofs, symmetry_nodes, symmetry_normals = held.dirichlet_dofs, held.symmetry_nodes, held.symmetry_normals
     edges = mesh.topology.edges
     n_pieces, piece_of = connected_components(
         coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(mesh.n_points, mesh.n_points)),
@@ -135,8 +249,10 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
     used[mesh.triangles.ravel()] = True
     # Each constraint holds u(p) · d = 0 for a point p and direction d: a prescribed
     # component (d = e_x or e_y) or a symmetry line (d = n_s).
-    directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals])
-    nodes = np.concatenate([dofs // 2, symmetry_nodes])
+    fixed_platens = [p for p in held.platens if p.control == "displacement"]
+    directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals,
+                                 *(np.tile(p.normal, (len(p.nodes), 1)) for p in fixed_platens)])
+    nodes = np.concatenate([dofs // 2, symmetry_nodes, *(p.nodes for p in fixed_platens)])
     # Each piece's own centre and size, so that its rotation is measured in its own units.
     count = np.bincount(piece_of[used], minlength=n_pieces).astype(float)
     centre = np.stack([np.bincount(piece_of[used], mesh.points[used, k], minlength=n_pieces) for k in range(2)],
@@ -164,6 +280,13 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
         return weak & (count > 0)[:, None], eigenvalues, eigenvectors
 
     support_gram = gram_of(seen_through(nodes, directions), nodes)
+    for platen in held.platens:
+        if platen.control == "force" and len(platen.nodes) > 1:
+            # (u_i − u_master) · n = 0: what a rigid platen holds whatever its advance.
+            others = platen.nodes[1:]
+            normals = np.tile(platen.normal, (len(others), 1))
+            relative = seen_through(others, normals) - seen_through(np.full(len(others), platen.master), normals)
+            support_gram += gram_of(relative, others)
     weak, _, eigenvectors = loose(support_gram)
     free = weak[:, 0]
     if not free.any():
@@ -189,7 +312,7 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, dofs: np.ndarray, symmetry_node
         nodal[2 * members + 1] = basis[1] + np.outer(arm[:, 0], basis[2])
         if load is not None:
             _refuse_unpressed(case, nodal, contact_rows[piece_of[c_nodes] == piece] @ basis, basis,
-                              load, centre[piece], size[piece])
+                              load, centre[piece], size[piece], held.platens)
         modes.append(nodal / np.abs(nodal).max(axis=0))
     return np.concatenate(modes, axis=1)
 
@@ -212,8 +335,16 @@ def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, cent
     )
 
 
+def platen_work(platens: tuple[PlatenConstraint, ...], motion: np.ndarray) -> float:
+    """The work of the force-driven platens' forces along a nodal motion (2 n_points,):
+    each platen advances by −u(master) · n and presses with its force."""
+    return float(sum(p.value * -(motion[2 * p.master: 2 * p.master + 2] @ p.normal)
+                     for p in platens if p.control == "force"))
+
+
 def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, basis: np.ndarray,
-                      load: np.ndarray, centre: np.ndarray, size: float) -> None:
+                      load: np.ndarray, centre: np.ndarray, size: float,
+                      platens: tuple[PlatenConstraint, ...] = ()) -> None:
     """Contact holds a free motion r (coefficients ``basis`` @ ray) only one way: the load
     must do positive work along every r that moves the body into the obstacle
     (r · n ≥ 0 at every contact node), or it lifts the body off or leaves it unheld.
@@ -235,8 +366,9 @@ def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, ba
         if (normal_part @ ray).min(initial=0.0) < -slack:
             continue  # presses into the obstacle somewhere and lifts off elsewhere: contact holds it
         r = nodal @ ray
-        work = float(load @ r)
-        scale = float(np.linalg.norm(load) * np.linalg.norm(r))
+        work = float(load @ r) + platen_work(platens, r)
+        forces = np.linalg.norm(np.concatenate([load, [p.value for p in platens if p.control == "force"]]))
+        scale = float(forces * np.linalg.norm(r))
         if work > LOAD_WORK_TOLERANCE * scale:
             continue
         motion = _motion_text(basis @ ray, centre, size)
@@ -251,11 +383,13 @@ def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, ba
 
 
 def _support_names(case: Case) -> str:
-    return ", ".join(p.name for p in case.parts if p.is_dirichlet or p.kind == "symmetry") or "none"
+    return ", ".join(p.name for p in case.parts
+                     if p.is_support and not (p.kind == "platen" and p.platen.control == "force")) or "none"
 
 
 def _load_names(case: Case) -> str:
-    names = [f"boundary.{p.name} {p.kind}" for p in case.parts if p.kind in ("traction", "pressure")]
+    names = [f"boundary.{p.name} {p.kind}" for p in case.parts
+             if p.kind in ("traction", "pressure") or (p.kind == "platen" and p.platen.control == "force")]
     if case.body_force is not None:
         names.append("body_force")
     return ", ".join(names) or "none"
