@@ -32,7 +32,7 @@ import hashlib
 import math
 import os
 import stat
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -596,6 +596,12 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     output = _output(r, top.get("output", {}), source)
     units = _units(r, top.get("units", {}))
     load_path = _load_path(r, top["load_path"]) if "load_path" in top else None
+    if load_path is not None and exact is not None:
+        raise r.fail("load_path", top["load_path"], "a manufactured solution (exact:) is the answer to one load; "
+                                                    "drop load_path or the exact: block")
+    if load_path is not None and "path" not in output.files:
+        files = [name for name in output.files if name != "json"]
+        output = replace(output, files=(*files, "path", *(("json",) if "json" in output.files else ())))
     return Case(
         source=source,
         text=text,

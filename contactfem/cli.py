@@ -259,8 +259,10 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
     """
     from contactfem.io.atomic import claimed_directory
-    from contactfem.report import build_report
-    from contactfem.solve import solve_case
+    from contactfem.io.registry import PATH_PNG
+    from contactfem.plots import plot_load_path
+    from contactfem.report import build_report, load_path_figures
+    from contactfem.solve import solve_case, solve_load_path
 
     progress = _progress(quiet)
     try:
@@ -269,10 +271,20 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
         with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
-            result = solve_case(case, method=method, refine=refine, progress=progress, accept_uncertified=True)
+            path, extras = None, {}
+            if case.load_path is not None:
+                path = solve_load_path(case, method=method, refine=refine, progress=progress,
+                                       accept_uncertified=True)
+                result, extras = path.final, {"load_path": load_path_figures(path)}
+            else:
+                result = solve_case(case, method=method, refine=refine, progress=progress, accept_uncertified=True)
             with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
-                report = _write_solution(staging, case, result, build_report(case, result), progress)
+                report = _write_solution(staging, case, result, build_report(case, result, extras), progress,
+                                         path=path)
                 names = _files_of(case.output.files)
+                if path is not None:
+                    names.append(plot_load_path(staging / PATH_PNG, report["load_path"]["curves"],
+                                                case.units.to_dict(), title=case.title).name)
                 if make_plot:
                     names += _pictures(staging, staging, progress)
         written = [Path(directory) / name for name in names]
@@ -321,13 +333,18 @@ def _files_of(formats: tuple[str, ...]) -> list[str]:
     return [name for format in formats for name in FORMATS[format].files]
 
 
-def _write_solution(staging: Path, case, result, report: dict, progress) -> dict:
-    """Write one result's files (the case's formats) into a staging directory. Returns the
+def _write_solution(staging: Path, case, result, report: dict, progress, path=None) -> dict:
+    """Write one result's files (the case's formats) into a staging directory, and the steps of
+    the load ``path`` (a :class:`contactfem.solve.PathResult`) that ended in it. Returns the
     report as written (its timings include the writing)."""
-    from contactfem.io.registry import result_data, write_result
+    from contactfem.io.registry import PathData, result_data, write_result
 
     _refuse_non_finite(case, result.solution, report)
-    _, written_report = write_result(result_data(case, result, report), staging, case.output.files,
+    steps = None
+    if path is not None:
+        steps = PathData(factors=path.factors, solutions=tuple(step.solution for step in path.steps),
+                         curves=report["load_path"]["curves"])
+    _, written_report = write_result(result_data(case, result, report, steps), staging, case.output.files,
                                      progress=progress)
     return written_report
 
@@ -752,6 +769,18 @@ def _platen_lines(platens: dict | None) -> list[str]:
     return lines
 
 
+def _path_lines(path: dict | None) -> list[str]:
+    """The load path in one line: its steps and their cost, and the contact force along it."""
+    if not path:
+        return []
+    curves = path["curves"]
+    return [f"  load path    {len(curves['factor'])} steps, factors {curves['factor'][0]:.4g} to "
+            f"{curves['factor'][-1]:.4g}: {path['factorizations']} factorisation{'' if path['factorizations'] == 1 else 's'}, "
+            f"{path['seconds']:.2f} s; "
+            f"contact force {curves['contact_force'][0]:.6g} to {curves['contact_force'][-1]:.6g}, "
+            f"width {curves['contact_width'][0]:.4g} to {curves['contact_width'][-1]:.4g}"]
+
+
 def _certificate_line(certificate: dict | None) -> str:
     """The kernel's certificate in one line: each condition's relative value against its tolerance."""
     if certificate is None:
@@ -785,6 +814,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         _certificate_line(report["solver"].get("certificate")),
         *_force_lines(report.get("boundary_forces")),
         *_platen_lines(report.get("platens")),
+        *_path_lines(report.get("load_path")),
         "  time         " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()),
     ]
     for warning in report.get("warnings", []):

@@ -31,10 +31,11 @@ or numerically singular stiffness is reported by :mod:`contactfem.linalg` (Solve
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -261,6 +262,7 @@ def solve_contact(
     initial_active: np.ndarray | None = None,
     on_iteration: Callable[[Iteration], None] | None = None,
     safeguard: bool = True,
+    linear: "ActiveSetSolver | None" = None,
 ) -> KernelResult:
     """Run the primal–dual active set iteration until the active set repeats, then certify.
 
@@ -286,6 +288,10 @@ def solve_contact(
     safeguard : bool
         When the active set repeats, go on with least-index single changes (default);
         False stops with status CYCLING instead.
+    linear : ActiveSetSolver, optional
+        The linear solver of an earlier solve of the same stiffness and constraints, set to
+        this system's load (:meth:`ActiveSetSolver.set_loading`): its factorisation and
+        cached columns are reused. The result counts only this solve's factorisations.
 
     Raises
     ------
@@ -308,7 +314,8 @@ def solve_contact(
     holder = _ModeHolder(system) if system.free_modes is not None and m else None
     if holder is not None:
         active = holder.hold(active, holder.first_touch())
-    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
+    linear = ActiveSetSolver(system, backend, tolerance=tolerance) if linear is None else linear
+    factorizations_before, column_solves_before = linear.factorizations, linear.column_solves
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     least_index = False
@@ -440,10 +447,71 @@ def solve_contact(
         c=c,
         history=history,
         cycle_detected_at=cycle_detected_at,
-        factorizations=linear.factorizations,
-        column_solves=linear.column_solves,
+        factorizations=linear.factorizations - factorizations_before,
+        column_solves=linear.column_solves - column_solves_before,
         certificate=certificate,
     )
+
+
+def solve_path(
+    system: ContactSystem,
+    factors: Sequence[float],
+    *,
+    backend: str = "auto",
+    initial_active: np.ndarray | None = None,
+    on_step: Callable[[int, float, KernelResult], None] | None = None,
+    **options,
+) -> list[KernelResult]:
+    """Solve ``system`` with its load and prescribed values multiplied by each of ``factors`` in turn.
+
+    The stiffness and the constraints do not change along the path, so one
+    :class:`ActiveSetSolver` serves every step: its factorisation and Schur columns carry
+    over, a new load costs one solve with the factor, and each step starts from the
+    step's active set extrapolated (:func:`extrapolated_active`; the first from
+    ``initial_active``). ``options`` are those of :func:`solve_contact`. Stops after the
+    first step that does not converge; returns the results of the steps solved.
+    """
+    tolerance = options.get("tolerance", 1e-10)
+    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
+    results: list[KernelResult] = []
+    active = initial_active
+    c = options.get("c") or default_c(system)
+    normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
+    gap = np.asarray(system.gap, dtype=float)
+    # The state before the first step: unloaded, untouched, when nothing starts inside the obstacle.
+    history = [(0.0, np.zeros(len(gap)), -gap)] if (gap >= 0).all() else []
+    for index, factor in enumerate(factors):
+        if index > 0 and len(history) >= 2:
+            active = extrapolated_active(history[-2:], factor, c)
+        step = dataclasses.replace(system, load=factor * np.asarray(system.load, dtype=float),
+                                   fixed_values=factor * np.asarray(system.fixed_values, dtype=float))
+        solves_before = linear.column_solves
+        linear.set_loading(step.load, step.fixed_values)
+        result = solve_contact(step, backend=backend, initial_active=active, linear=linear, **options)
+        # The step's solves with the factor: its new load's and its Schur columns.
+        result.column_solves = linear.column_solves - solves_before
+        results.append(result)
+        if on_step is not None:
+            on_step(index, factor, result)
+        if result.status is not Status.CONVERGED:
+            break
+        active = result.active
+        history.append((factor, result.nodal_force, result.displacement[normal_dofs] - gap))
+    return results
+
+
+def extrapolated_active(states: list[tuple[float, np.ndarray, np.ndarray]], factor: float, c: float) -> np.ndarray:
+    """The active set predicted at load ``factor`` from the last two solved ``states``
+    (factor, contact force Λ, slack d − G): both extrapolated linearly in the factor, a node
+    is predicted active where the indicator Λ + c (d − G) is positive. Along a path the
+    contact zone moves smoothly, so this is closer than the last set, which Newton's method
+    would otherwise first overshoot (every node penetrating at once) and then release a few
+    at a time."""
+    (f0, force0, slack0), (f1, force1, slack1) = states
+    ratio = (factor - f1) / (f1 - f0) if f1 != f0 else 0.0
+    force = force1 + ratio * (force1 - force0)
+    slack = slack1 + ratio * (slack1 - slack0)
+    return force + c * slack > 0
 
 
 @dataclass(frozen=True)
@@ -498,9 +566,10 @@ class ActiveSetSolver:
         self.max_changes = max_changes
         n = self.stiffness.shape[0]
         self.supported = np.zeros(n, dtype=bool)
-        self.supported[system.fixed_dofs] = True
+        self.fixed_dofs = np.asarray(system.fixed_dofs, dtype=np.int64)
+        self.supported[self.fixed_dofs] = True
         self.support_values = np.zeros(n)
-        self.support_values[system.fixed_dofs] = system.fixed_values
+        self.support_values[self.fixed_dofs] = system.fixed_values
         k = self.stiffness
         self.entry_rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
         self.diagonal = np.flatnonzero(self.entry_rows == k.indices)
@@ -520,6 +589,23 @@ class ActiveSetSolver:
         # |K|, for the round-off bound of the equations: k products and the load and contact force.
         self.absolute = sp.csr_matrix((np.abs(k.data), k.indices, k.indptr), shape=k.shape)
         self.gamma = roundoff_bound(int(np.diff(k.indptr).max(initial=0)) + 2)
+
+    def set_loading(self, load: np.ndarray, fixed_values: np.ndarray) -> None:
+        """Another load and other values of the same fixed unknowns: the factorisation and
+        the cached columns (K00⁻¹ K0j, K00⁻¹ e_j) depend on neither and are kept; only the
+        factor's solution for the reference set is recomputed (one solve)."""
+        self.load = np.asarray(load, dtype=float)
+        self.support_values = np.zeros(len(self.load))
+        self.support_values[self.fixed_dofs] = fixed_values
+        self._solved = self._internal = None
+        if self.factor is None:
+            return
+        self.values = self.support_values.copy()
+        self.values[self.normal_dofs[self.reference]] = self.gap[self.reference]
+        rhs = self.load - self.stiffness @ self.values
+        rhs[~self.free] = self.values[~self.free]
+        self.base = np.ascontiguousarray(np.asarray(self.factor.solve(rhs)).reshape(-1))
+        self.column_solves += 1
 
     @property
     def free_rows(self) -> np.ndarray:
@@ -610,8 +696,8 @@ class ActiveSetSolver:
         changed = np.flatnonzero(active != self.reference)
         if self.max_changes is not None:
             return len(changed) > self.max_changes
-        missing = sum(1 for j in changed if int(j) not in self.columns)
-        if (len(self.columns) + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
+        missing = int((self.slot_of[changed] < 0).sum())
+        if (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
             return True
         k = len(changed)
         update = missing * (self.column_seconds or 0.0) + k**3 / 3 / DENSE_FLOPS
@@ -686,13 +772,20 @@ class ActiveSetSolver:
         norm = float((self.absolute @ self.free.astype(float))[self.free].max(initial=0.0))
         self.checks.append(check_factorization(masked, self.factor, equations=self.free, probe=probe,
                                                solution=both[:, 1], norm=norm, name=name))
-        self.columns: dict[int, np.ndarray] = {}
+        # The cached columns, side by side in one Fortran-ordered block (n, capacity), so
+        # that products with any subset of them run over contiguous memory without copying
+        # the columns out: slot_of[j] is node j's column, −1 when not computed yet.
+        self.slot_of = np.full(len(self.normal_dofs), -1)
+        self.column_count = 0
+        if getattr(self, "column_store", None) is None:
+            self.column_store = np.empty((k.shape[0], 0), order="F")
 
-    def _columns(self, nodes: np.ndarray) -> np.ndarray:
-        """K00⁻¹ K0j for released nodes and K00⁻¹ e_j for added ones, cached per node."""
+    def _slots(self, nodes: np.ndarray) -> np.ndarray:
+        """The slots of K00⁻¹ K0j (released nodes) and K00⁻¹ e_j (added ones) in the column
+        block, computing the missing ones as one block of solves."""
         n = self.stiffness.shape[0]
-        missing = [int(j) for j in nodes if int(j) not in self.columns]
-        if missing:
+        missing = np.unique(nodes[self.slot_of[nodes] < 0])
+        if len(missing):
             rhs = np.zeros((n, len(missing)))
             for k, j in enumerate(missing):
                 dof = self.normal_dofs[j]
@@ -706,11 +799,29 @@ class ActiveSetSolver:
             solved = np.asarray(self.factor.solve(rhs)).reshape(n, len(missing))
             self.column_seconds = (time.perf_counter() - started) / len(missing)
             self.column_solves += len(missing)
-            for k, j in enumerate(missing):
-                self.columns[j] = solved[:, k]
-        if len(nodes) == 0:
-            return np.zeros((n, 0))
-        return np.stack([self.columns[int(j)] for j in nodes], axis=1)
+            count = self.column_count
+            if count + len(missing) > self.column_store.shape[1]:
+                grown = np.empty((n, max(16, 2 * (count + len(missing)))), order="F")
+                grown[:, :count] = self.column_store[:, :count]
+                self.column_store = grown
+            self.column_store[:, count:count + len(missing)] = solved
+            self.slot_of[missing] = np.arange(count, count + len(missing))
+            self.column_count = count + len(missing)
+        return self.slot_of[nodes]
+
+    def _combine(self, slots: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """Σ_k weights[k] · column(slots[k]) (n,), one matrix-vector product over the block."""
+        if len(slots) == 0:
+            return np.zeros(self.stiffness.shape[0])
+        if 4 * len(slots) < self.column_count:
+            return self.column_store[:, slots] @ weights
+        full = np.zeros(self.column_count)
+        np.add.at(full, slots, weights)
+        return self.column_store[:, :self.column_count] @ full
+
+    def _rows(self, rows: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """Entries ``rows`` of the columns ``slots`` (len(rows), len(slots))."""
+        return self.column_store[rows][:, slots]
 
     def _solve_changed(self, released: np.ndarray, added: np.ndarray, base: np.ndarray, load: np.ndarray,
                        fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
@@ -719,19 +830,24 @@ class ActiveSetSolver:
         factor's solution for the reference set."""
         if len(released) == 0 and len(added) == 0:
             return base.copy()
-        z_r, z_d = self._columns(released), self._columns(added)
+        slots = self._slots(np.concatenate([released, added]))
+        s_r, s_d = slots[:len(released)], slots[len(released):]
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
         # Released normals lose their fixed value: b0 gains K_0r G_r, so z0 gains Z_r G_r.
-        z0 = base + z_r @ fixed_values[dofs_r]
+        z0 = base + self._combine(s_r, fixed_values[dofs_r])
         values = fixed_values.copy()
         values[dofs_r] = 0.0
         rows_r = self.stiffness[dofs_r]
         k_r0 = rows_r.multiply(self.free[None, :]).tocsr()
+        k_r0.eliminate_zeros()
+        # K_r0 Z touches only the rows of Z where K_r0 has entries: a few per released node.
+        touched = np.unique(k_r0.indices)
+        k_touched = k_r0[:, touched]
         k_rr = rows_r[:, dofs_r].toarray()
         b_r = load[dofs_r] - rows_r @ values
-        top = np.hstack([k_rr - k_r0 @ z_r, -(k_r0 @ z_d)])
-        bottom = np.hstack([-z_r[dofs_d], -z_d[dofs_d]])
+        top = np.hstack([k_rr - k_touched @ self._rows(touched, s_r), -(k_touched @ self._rows(touched, s_d))])
+        bottom = np.hstack([-self._rows(dofs_d, s_r), -self._rows(dofs_d, s_d)])
         rhs = np.concatenate([b_r - k_r0 @ z0, added_values - z0[dofs_d]])
         try:
             solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
@@ -741,7 +857,7 @@ class ActiveSetSolver:
                 f"{len(added)} added (Schur complement: {error}); is part of the body held only by contact?"
             ) from error
         u_r, mu = solution[: len(released)], solution[len(released):]
-        u = z0 - z_r @ u_r - z_d @ mu
+        u = z0 - self._combine(slots, np.concatenate([u_r, mu]))
         u[dofs_r] = u_r
         return u
 

@@ -154,6 +154,32 @@ def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 9
         plt.close(figure)
 
 
+def plot_load_path(path: Path, curves: dict, units: dict | None = None, title: str = "") -> Path:
+    """The curves of a load path against its load factor (report.json's ``load_path.curves``):
+    total contact force, contact width along the obstacle, and each platen's advance."""
+    plt = _pyplot()
+    units = units or {}
+    length, force = units.get("length"), units.get("force")
+    factor = np.asarray(curves["factor"], dtype=float)
+    platens = [name[len("platen_"):-len("_advance")] for name in curves
+               if name.startswith("platen_") and name.endswith("_advance")]
+    panels = [("contact_force", _with_unit("total contact force", f"{force}/{length}" if force and length else None)),
+              ("contact_width", _with_unit("contact width", length))]
+    panels += [(f"platen_{name}_advance", _with_unit(f"platen {name}: advance", length)) for name in platens]
+    figure, axes = plt.subplots(len(panels), 1, figsize=(8, 2.6 * len(panels)), dpi=110, sharex=True)
+    try:
+        for axis, (name, label) in zip(np.atleast_1d(axes), panels):
+            axis.plot(factor, np.asarray(curves[name], dtype=float), "-o", ms=4)
+            axis.set_ylabel(label)
+            axis.grid(True, alpha=0.3)
+        np.atleast_1d(axes)[-1].set_xlabel("load factor")
+        np.atleast_1d(axes)[0].set_title(title or "load path")
+        figure.tight_layout()
+        return _save(figure, path)
+    finally:
+        plt.close(figure)
+
+
 # --------------------------------------------------------------------------- compare
 
 

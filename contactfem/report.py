@@ -20,7 +20,7 @@ from contactfem.methods import get_method
 from contactfem.result import Solution
 
 if TYPE_CHECKING:
-    from contactfem.solve import SolveResult
+    from contactfem.solve import PathResult, SolveResult
 
 SCHEMA_VERSION = 1
 
@@ -249,6 +249,44 @@ def contact_and_reactions(problem: DiscreteProblem, displacement: np.ndarray,
     reactions = np.zeros_like(u)
     reactions[held] = (problem.stiffness @ u)[held] - problem.load[held] - push[held]
     return push, reactions
+
+
+def load_path_figures(path: "PathResult") -> dict:
+    """report.json's ``load_path``: per step its factor, the solve's account and the curves a
+    user plots against the factor (total contact force, contact width along the obstacle,
+    active nodes, each platen's advance and force); ``curves`` holds the same as columns."""
+    steps = []
+    for factor, step in zip(path.factors, path.steps):
+        solution, kernel = step.solution, step.kernel
+        zone = contact_zone(step.problem, solution.contact.active)
+        _, reactions = contact_and_reactions(step.problem, solution.displacement, solution.contact.nodal_force)
+        platens = platen_figures(step.problem, solution.displacement, reactions)
+        steps.append({
+            "factor": float(factor),
+            "status": kernel.status.value,
+            "iterations": kernel.iterations,
+            "factorizations": kernel.factorizations,
+            "column_solves": kernel.column_solves,
+            "seconds": float(step.timings["solve"]),
+            "active_nodes": zone["active_nodes"],
+            "contact_patches": len(zone["intervals"]),
+            "contact_force": float(solution.contact.nodal_force.sum()),
+            "contact_width": float(sum(i["abscissa"][1] - i["abscissa"][0] for i in zone["intervals"])),
+            "platens": {name: {"advance": entry["advance"], "force": entry["force"]} for name, entry in platens.items()},
+        })
+    return {"steps": steps, "curves": path_curves(steps), "factorizations": path.factorizations,
+            "seconds": path.seconds}
+
+
+def path_curves(steps: list[dict]) -> dict[str, list[float]]:
+    """The columns of path.csv: the load factor, then each plotted quantity per step."""
+    curves = {name: [step[name] for step in steps]
+              for name in ("factor", "contact_force", "contact_width", "active_nodes", "contact_patches", "iterations",
+                           "factorizations", "column_solves")}
+    for name in steps[0]["platens"] if steps else ():
+        for quantity in ("advance", "force"):
+            curves[f"platen_{name}_{quantity}"] = [step["platens"][name][quantity] for step in steps]
+    return curves
 
 
 def platen_figures(problem: DiscreteProblem, displacement: np.ndarray, reactions: np.ndarray) -> dict:

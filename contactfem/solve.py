@@ -7,6 +7,7 @@ command line hands both to the writers of :mod:`contactfem.io`.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from dataclasses import dataclass, field
@@ -18,7 +19,7 @@ from contactfem.assembly import stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.errors import ContactFemError, SolverError
-from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact
+from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact, solve_path
 from contactfem.linalg import resolve_backend
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
@@ -100,11 +101,14 @@ def solve_case(
     progress: Progress | None = None,
     problem: DiscreteProblem | None = None,
     accept_uncertified: bool = False,
+    load_factor: float = 1.0,
 ) -> SolveResult:
     """Mesh, assemble and solve ``case`` with ``method`` (default: the case's).
 
     A ``problem`` already assembled for this case (see :func:`prepare`) skips meshing and
-    assembly, which is how ``compare`` solves both methods on one system. With
+    assembly, which is how ``compare`` solves both methods on one system; it is taken as
+    given, while ``load_factor`` scales the loads of the coarser meshes that predict its
+    active set (a problem scaled by that factor, the first step of a load path). With
     ``accept_uncertified``, a solve whose active set settled but whose iterate fails the
     kernel's certificate is returned (``result.kernel.status`` says so) rather than raised,
     so that its figures can be reported.
@@ -127,7 +131,7 @@ def solve_case(
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    initial_active, sequencing = _predict_from_coarser(case, problem, c, say)
+    initial_active, sequencing = _predict_from_coarser(case, problem, c, say, load_factor)
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
@@ -158,8 +162,90 @@ def solve_case(
                        timings=timings, sequencing=sequencing)
 
 
-def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress) -> tuple[np.ndarray | None, dict]:
+@dataclass(frozen=True, eq=False)
+class PathResult:
+    """A load path solved step by step: ``steps[i]`` is the solve at ``factors[i]`` (its
+    problem scaled by that factor, its timings its own). ``seconds`` is the contact solve
+    of the whole path, ``factorizations`` its factorisations, ``timings`` and
+    ``sequencing`` those of the whole path (as a single solve reports them)."""
+
+    factors: tuple[float, ...]
+    steps: tuple[SolveResult, ...]
+    seconds: float
+    factorizations: int
+    timings: Mapping[str, float] = field(default_factory=dict)
+    sequencing: Mapping = field(default_factory=dict)
+
+    @property
+    def final(self) -> SolveResult:
+        """The last step, with the whole path's timings: what report.json and the solution files describe."""
+        return dataclasses.replace(self.steps[-1], timings=self.timings, sequencing=self.sequencing)
+
+
+def solve_load_path(
+    case: Case,
+    *,
+    method: str | None = None,
+    refine: int | None = None,
+    progress: Progress | None = None,
+    accept_uncertified: bool = False,
+) -> PathResult:
+    """Solve ``case`` at each factor of its load path (``case.load_path``) with one linear solver.
+
+    Raises
+    ------
+    SolverError
+        If a step does not converge (naming the step and its factor) or, unless accepted,
+        the last step solved is not certified.
+    """
+    say = progress or (lambda message: None)
+    method_name = method or case.solver.method
+    contact_method = get_method(method_name)
+    backend = resolve_backend(case.solver.backend)
+    factors = case.load_path.factors
+    timings: dict[str, float] = {}
+    problem = prepare(case, refine=refine, progress=say, timings=timings)
+    clock = time.perf_counter()
+    say(f"solving {len(factors)} load steps with method {contact_method.equation} ({method_name}), "
+        f"backend {backend}")
+    reduced = problem.contact_system(contact_method)
+    c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
+    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), c, say, factors[0])
+    steps: list[SolveResult] = []
+    started = [clock]
+
+    def on_step(index: int, factor: float, kernel: KernelResult) -> None:
+        seconds = time.perf_counter() - started[0]
+        say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
+            f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
+        scaled = problem.scaled(factor)
+        post = time.perf_counter()
+        solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel)
+        steps.append(SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel,
+                                 backend=backend, timings={"solve": seconds, "postprocess": time.perf_counter() - post}))
+        started[0] = time.perf_counter()
+
+    kernels = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
+                         max_iterations=case.solver.max_iterations, backend=backend, on_step=on_step,
+                         initial_active=initial_active)
+    seconds = time.perf_counter() - clock
+    last = kernels[-1]
+    accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
+    if len(kernels) < len(factors) or last.status not in accepted:
+        raise SolverError(f"{case.source.name}: method {method_name}: load step {len(kernels)} of {len(factors)} "
+                          f"(factor {factors[len(kernels) - 1]:g}): {last.message}")
+    postprocess = sum(step.timings["postprocess"] for step in steps)
+    return PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds,
+                      factorizations=sum(k.factorizations for k in kernels),
+                      timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess},
+                      sequencing=sequencing)
+
+
+def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
+                          factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively), and its cost.
+
+    ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
 
     (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
@@ -175,12 +261,15 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: P
     coarse_case, coarse_refine = coarse
     try:
         coarse_problem = prepare(coarse_case, refine=coarse_refine)
+        if factor != 1.0:
+            coarse_problem = coarse_problem.scaled(factor)
     except ContactFemError:
         return None, {}  # a decimated boundary the mesher or the contact checks refuse
     if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
         return None, {}
     try:
-        coarse_result = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem)
+        coarse_result = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem,
+                                   load_factor=factor)
     except SolverError:
         return None, {}
     active = predict_active_set(problem.contact, coarse_result.solution.contact, c)

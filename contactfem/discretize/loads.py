@@ -7,7 +7,7 @@ the reports all read this object; none of them goes back to the case.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -73,6 +73,15 @@ class Loads:
     body_force: VectorField | None
     natural: NaturalBoundary
     body_force_values: np.ndarray | None = None
+
+    def scaled(self, factor: float) -> "Loads":
+        """The same loads multiplied by ``factor`` (a step of a load path)."""
+        force = self.body_force
+        return Loads(
+            body_force=None if force is None else (lambda x, y: factor * force(x, y)),
+            natural=replace(self.natural, traction=factor * self.natural.traction),
+            body_force_values=None if self.body_force_values is None else factor * self.body_force_values,
+        )
 
     def load_vector(self, mesh: Mesh) -> np.ndarray:
         """F (2 n_points,): ∫ f·v + ∫ g·v."""
@@ -150,7 +159,8 @@ def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:
             if held.all():
                 continue
             free = np.broadcast_to(np.diag((~held).astype(float)), (len(edges), 2, 2)).copy()
-        elif kind == "symmetry":
+        elif kind in ("symmetry", "platen"):
+            # The line (or the platen) holds the normal direction: only σν · t = 0 is a residual.
             tangent = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
             free = np.einsum("ka,kb->kab", tangent, tangent)
         pieces.append((edges, length, normal, traction, free, np.full(len(edges), index, dtype=np.int64)))

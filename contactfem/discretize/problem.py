@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,6 +55,15 @@ class DiscreteProblem:
     def n_unknowns(self) -> int:
         """Displacement unknowns once the supports are eliminated."""
         return 2 * self.mesh.n_points - len(self.dirichlet_dofs)
+
+    def scaled(self, factor: float) -> "DiscreteProblem":
+        """The problem with its loads, prescribed displacements and platen drives multiplied
+        by ``factor`` (a step of a load path); the stiffness and the obstacle are shared."""
+        return replace(
+            self, load=factor * self.load, dirichlet_values=factor * self.dirichlet_values,
+            loads=self.loads.scaled(factor),
+            platens=tuple(replace(p, value=factor * p.value) for p in self.platens),
+        )
 
     def contact_system(self, method: ContactMethod) -> ReducedSystem:
         """The kernel's view: supports eliminated, contact nodes in (normal, tangent) unknowns."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import os
 import secrets
@@ -264,8 +265,8 @@ class ClaimedDirectory:
         The block writes plain files into the staging directory. When it completes, a
         switch file listing them is written and synced: that single atomic rename decides
         the switch-over. The files are then moved into place with :func:`os.replace`
-        (``last`` moved last), the files named in ``replaces`` that this run did not write
-        are deleted, and the staging directory is removed, with SIGINT and SIGTERM held back.
+        (``last`` moved last), the files named in ``replaces`` (names, or glob patterns
+        such as ``path-*.vtu``) that this run did not write are deleted, and the staging directory is removed, with SIGINT and SIGTERM held back.
         If the block raises, the staging directory is removed and nothing in the output
         directory changes. If the process dies after the decision, the next claim completes
         the switch-over; if before, it removes the staging directory.
@@ -284,7 +285,12 @@ class ClaimedDirectory:
             if last in names:
                 names.remove(last)
                 names.append(last)
-            plan = {"files": names, "replaces": [name for name in replaces if name not in names]}
+            # A pattern (a series whose length varies from run to run) names every file
+            # of the output directory it matches.
+            existing = [p.name for p in self.directory.iterdir()] if any(_is_pattern(r) for r in replaces) else []
+            expanded = [name for pattern in replaces
+                        for name in (fnmatch.filter(existing, pattern) if _is_pattern(pattern) else [pattern])]
+            plan = {"files": names, "replaces": [name for name in expanded if name not in names]}
             with _signals_deferred():
                 atomic_write_text(staging / SWITCH_FILE, json.dumps(plan))
                 _fsync_directory(staging)
@@ -293,6 +299,10 @@ class ClaimedDirectory:
         finally:
             if not decided:
                 shutil.rmtree(staging, ignore_errors=True)
+
+
+def _is_pattern(name: str) -> bool:
+    return any(character in name for character in "*?[")
 
 
 def _fresh_name(directory: Path, label: str) -> Path:

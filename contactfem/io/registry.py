@@ -19,6 +19,15 @@ import numpy as np
 
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.hdf5 import SOLUTION_H5, write_hdf5
+from contactfem.io.path import (
+    PATH_CSV,
+    PATH_H5,
+    PATH_PVD,
+    PATH_STEP_FILES,
+    write_path_csv,
+    write_path_h5,
+    write_path_series,
+)
 from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, SOLUTION_VTU, write_vtu
 from contactfem.io.xdmf import COMPANION_H5, XDMF_FILE, write_xdmf
 from contactfem.result import Solution
@@ -31,6 +40,8 @@ CONTACT_CSV = "contact.csv"
 DEFORMED_PNG = "deformed.png"
 PROFILE_PNG = "contact_profile.png"
 PICTURES = (DEFORMED_PNG, PROFILE_PNG)
+#: The curves of a load path against its load factor (written with the path's files).
+PATH_PNG = "path.png"
 #: The study commands' own files.
 COMPARE_JSON = "compare.json"
 COMPARE_PNG = "compare.png"
@@ -49,6 +60,16 @@ def schema_path(file_name: str) -> Path:
 
 
 @dataclass(frozen=True, eq=False)
+class PathData:
+    """A load path's steps for its writers: the factors, each step's solution, and the curves
+    (report.json's ``load_path.curves``)."""
+
+    factors: tuple[float, ...]
+    solutions: tuple[Solution, ...]
+    curves: dict[str, list[float]]
+
+
+@dataclass(frozen=True, eq=False)
 class ResultData:
     """What the writers of one result are given.
 
@@ -63,6 +84,7 @@ class ResultData:
     case_text: str
     attributes: dict[str, str] = field(default_factory=dict)
     exact_pressure: np.ndarray | None = None
+    path: PathData | None = None
 
 
 @dataclass(frozen=True)
@@ -76,10 +98,11 @@ class OutputFormat:
     description: str = ""
 
 
-def result_data(case, result, report: dict) -> ResultData:
+def result_data(case, result, report: dict, path: PathData | None = None) -> ResultData:
     """The writers' input for ``result`` of ``case`` (a :class:`contactfem.solve.SolveResult`)
     with its ``report``: the metadata every file that can carry it stores, and the exact
-    contact pressure at the contact nodes when the problem has an exact solution."""
+    contact pressure at the contact nodes when the problem has an exact solution; ``path``
+    the steps of a load path that ended in ``result``."""
     from contactfem import __version__
 
     units = case.units
@@ -94,7 +117,7 @@ def result_data(case, result, report: dict) -> ResultData:
         with np.errstate(all="ignore"):  # a singular point (a crack tip) gives NaN, stored as such
             exact_pressure = np.asarray(exact.pressure(where[:, 0], where[:, 1]), dtype=float).reshape(-1)
     return ResultData(solution=result.solution, report=report, case_text=case.text, attributes=attributes,
-                      exact_pressure=exact_pressure)
+                      exact_pressure=exact_pressure, path=path)
 
 
 def to_json(data: dict) -> str:
@@ -136,6 +159,17 @@ def _write_csv(data: ResultData, directory: Path) -> list[Path]:
     return [atomic_write_text(directory / CONTACT_CSV, contact_table(data.solution))]
 
 
+def _write_path(data: ResultData, directory: Path) -> list[Path]:
+    path = data.path
+    if path is None:
+        return []
+    written = write_path_series(directory, path.factors, path.solutions)
+    written.append(write_path_h5(directory, path.factors, path.solutions, path.curves, case_text=data.case_text,
+                                 attributes=data.attributes))
+    written.append(write_path_csv(directory, path.curves))
+    return written
+
+
 def _write_json(data: ResultData, directory: Path) -> list[Path]:
     return [atomic_write_text(directory / REPORT_JSON, to_json(data.report))]
 
@@ -152,6 +186,10 @@ FORMATS: dict[str, OutputFormat] = {
         OutputFormat("csv", (CONTACT_CSV,), _write_csv,
                      description="the contact fields along ΓC: position along the obstacle, x, y, pressure, "
                                  "nodal force, gap, normal displacement, active"),
+        OutputFormat("path", (PATH_PVD, PATH_STEP_FILES, PATH_H5, PATH_CSV), _write_path,
+                     description="a load path's steps: a PVD series with the load factor as time, every step in "
+                                 "path.h5, and the curves against the factor in path.csv (written when the case "
+                                 "has a load_path)"),
         OutputFormat("json", (REPORT_JSON,), _write_json, description="the report"),
     )
 }
@@ -160,7 +198,8 @@ FORMAT_NAMES = tuple(FORMATS)
 DEFAULT_FORMATS = ("vtu", "h5", "csv", "json")
 #: Every file a solve can leave in its directory (formats and pictures), and the XDMF companion
 #: earlier versions wrote, so that replacing such a result removes it.
-RESULT_FILES = tuple(name for format in FORMATS.values() for name in format.files) + PICTURES + (COMPANION_H5,)
+RESULT_FILES = (tuple(name for format in FORMATS.values() for name in format.files) + PICTURES
+                + (PATH_PNG, COMPANION_H5))
 #: Files whose presence marks a directory as holding a finished result.
 RESULT_MARKERS = (REPORT_JSON, SOLUTION_H5)
 

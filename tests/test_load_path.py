@@ -1,0 +1,155 @@
+"""Load paths: the case solved at a sequence of load factors with one factorisation.
+
+What theory says and is checked here:
+- the discrete Signorini problem has one solution for each load, so every step of a path
+  equals a separate solve of the case with its loads scaled by that step's factor (to the
+  solver's tolerance), whatever the steps before it and whatever the path reuses;
+- with no initial gap and nothing prescribed but zero, the solution is positively
+  homogeneous in the load: u(f) = f u(1), the active set is the same at every factor, so
+  the path needs one factorisation and no Schur column;
+- a platen driven by force P at factor f presses with f P, and the contact carries it all
+  when nothing else holds the body (to 1e-10).
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from conftest import CASES, make_runner
+from test_platen import hertz_pressed
+from test_semicoercive import case_of
+
+from contactfem.cli import main
+from contactfem.errors import CaseError, SolverError
+from contactfem.kernel import Status
+from contactfem.solve import prepare, solve_case, solve_load_path
+
+FORCE = 2.0e3
+
+
+def square_path(factors) -> dict:
+    data = yaml.safe_load((CASES / "square.yaml").read_text(encoding="utf-8"))
+    data["mesh"]["divisions"] = 16
+    data["load_path"] = {"factors": list(factors)}
+    return data
+
+
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_each_step_is_the_solve_of_the_scaled_load(method):
+    factors = [0.25, 0.5, 0.8, 1.0]
+    data = hertz_pressed({"force": FORCE})
+    data["load_path"] = {"factors": factors}
+    path = solve_load_path(case_of(data), method=method)
+    assert len(path.steps) == len(factors)
+    for factor, step in zip(factors, path.steps):
+        assert step.kernel.status is Status.CONVERGED and step.kernel.certificate.passed
+        alone = hertz_pressed({"force": factor * FORCE})
+        direct = solve_case(case_of(alone), method=method)
+        scale = np.abs(direct.solution.displacement).max()
+        assert np.abs(step.solution.displacement - direct.solution.displacement).max() <= 1e-8 * scale
+        assert np.array_equal(step.solution.contact.active, direct.solution.contact.active)
+        pressure = np.abs(direct.solution.contact.multiplier).max()
+        assert np.abs(step.solution.contact.multiplier - direct.solution.contact.multiplier).max() <= 1e-8 * pressure
+        assert abs(step.solution.contact.nodal_force.sum() - factor * FORCE) <= 1e-10 * FORCE
+    # One factorisation serves the path (the first step's); later steps reuse it.
+    assert path.steps[0].kernel.factorizations >= 1
+    assert path.factorizations <= 2
+
+
+def test_a_proportional_path_is_homogeneous_and_needs_one_factorisation():
+    factors = [0.1, 0.35, 0.7, 1.0]
+    path = solve_load_path(case_of(square_path(factors)))
+    final = path.steps[-1].solution
+    for factor, step in zip(factors, path.steps):
+        assert np.abs(step.solution.displacement - factor * final.displacement).max() \
+            <= 1e-10 * np.abs(final.displacement).max()
+        assert np.array_equal(step.solution.contact.active, final.contact.active)
+    assert path.factorizations == 1
+    assert sum(step.kernel.column_solves for step in path.steps[1:]) == len(factors) - 1  # one load solve each
+
+
+def test_a_step_that_does_not_converge_is_named():
+    data = hertz_pressed({"force": FORCE})
+    data["load_path"] = {"steps": 3}
+    data["solver"] = {"max_iterations": 1}
+    with pytest.raises(SolverError, match=r"load step 1 of 3 \(factor 0.333333\)"):
+        solve_load_path(case_of(data))
+
+
+def test_the_path_files(tmp_path):
+    data = hertz_pressed({"force": FORCE})
+    data["load_path"] = {"steps": 4}
+    data["mesh"]["contact_size"] = 0.004
+    case_file = tmp_path / "path.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    result = make_runner().invoke(main, ["solve", str(case_file), "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.stderr
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    factors = [0.25, 0.5, 0.75, 1.0]
+    curves = report["load_path"]["curves"]
+    assert curves["factor"] == factors
+    assert np.allclose(curves["contact_force"], np.multiply(factors, FORCE), rtol=1e-10)
+    assert np.allclose(curves["platen_top_force"], np.multiply(factors, FORCE), rtol=1e-10)
+    assert all(np.diff(curves["platen_top_advance"]) > 0) and all(np.diff(curves["contact_width"]) >= 0)
+    assert report["platens"]["top"]["force"] == pytest.approx(FORCE, rel=1e-10)
+    rows = (out / "path.csv").read_text(encoding="utf-8").splitlines()
+    assert rows[0].split(",")[:3] == ["factor", "contact_force", "contact_width"] and len(rows) == 5
+    with h5py.File(out / "path.h5", "r") as file:
+        assert file.attrs["format"] == "contactfem-path"
+        assert np.array_equal(file["factors"][()], factors)
+        n = len(file["mesh/points"])
+        assert file["steps/displacement"].shape == (4, n, 2)
+        assert np.allclose(file["curves/contact_force"][()], curves["contact_force"])
+        with h5py.File(out / "solution.h5", "r") as final:
+            assert np.array_equal(file["steps/displacement"][-1], final["fields/displacement"][()])
+    sets = ET.parse(out / "path.pvd").getroot().iter("DataSet")
+    assert [(float(d.get("timestep")), d.get("file")) for d in sets if d.get("part") == "0"] == \
+        [(f, f"path-{k}.vtu") for k, f in enumerate(factors, start=1)]
+    assert (out / "path.png").stat().st_size > 0
+    # A shorter path replacing this result leaves none of the longer one's steps behind.
+    data["load_path"] = {"steps": 2}
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    result = make_runner().invoke(main, ["solve", str(case_file), "--out", str(out), "--quiet", "--overwrite"])
+    assert result.exit_code == 0, result.stderr
+    assert sorted(p.name for p in out.glob("path-*.vtu")) == ["path-1-contact.vtu", "path-1.vtu",
+                                                              "path-2-contact.vtu", "path-2.vtu"]
+
+
+@pytest.mark.parametrize("load_path, fragment", [
+    ({"steps": 0}, "load_path.steps = 0: expected a whole number from 1 to 1000"),
+    ({"steps": 2.5}, "load_path.steps = 2.5"),
+    ({"factors": [0.5, -1]}, "load_path.factors[1] = -1.0: expected a load factor > 0"),
+    ({"factors": []}, "load_path.factors"),
+    ({"factors": [1], "steps": 1}, "give one of steps"),
+    ({"increments": 3}, "unknown key"),
+])
+def test_a_bad_load_path_is_refused(load_path, fragment):
+    data = square_path([1.0])
+    data["load_path"] = load_path
+    with pytest.raises(CaseError) as error:
+        case_of(data)
+    assert fragment in str(error.value)
+
+
+def test_a_load_path_with_a_manufactured_solution_is_refused():
+    data = yaml.safe_load((CASES / "manufactured.yaml").read_text(encoding="utf-8"))
+    data["load_path"] = {"steps": 2}
+    with pytest.raises(CaseError, match="load_path.*manufactured solution"):
+        case_of(data)
+
+
+def test_the_problem_scaled_by_a_factor_scales_every_load():
+    data = hertz_pressed({"displacement": 2.0e-3})
+    data["body_force"] = [0, -10.0]
+    problem = prepare(case_of(data))
+    half = problem.scaled(0.5)
+    assert np.array_equal(half.load, 0.5 * problem.load)
+    assert half.platens[0].value == 0.5 * problem.platens[0].value
+    assert half.stiffness is problem.stiffness
+    assert np.allclose(half.loads.load_vector(problem.mesh), 0.5 * problem.loads.load_vector(problem.mesh))
