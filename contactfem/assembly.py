@@ -392,17 +392,22 @@ def boundary_mass(points: np.ndarray, edges: np.ndarray, n_points: int) -> sp.cs
     return sp.coo_matrix((vals, (rows, cols)), shape=(n_points, n_points)).tocsr()
 
 
-def strains(points: np.ndarray, triangles: np.ndarray, displacement: np.ndarray) -> np.ndarray:
-    """Engineering strains (n_triangles, 3): ε_xx, ε_yy, γ_xy = 2 ε_xy, constant per P1 triangle."""
-    g, _ = shape_gradients(points, triangles)
+def strains(points: np.ndarray, triangles: np.ndarray, displacement: np.ndarray,
+            gradients: np.ndarray | None = None) -> np.ndarray:
+    """Engineering strains (n_triangles, 3): ε_xx, ε_yy, γ_xy = 2 ε_xy, constant per P1 triangle.
+
+    ``gradients`` are :func:`shape_gradients`' of the mesh, when the caller keeps them (the
+    steps of a load path share one mesh)."""
+    g = shape_gradients(points, triangles)[0] if gradients is None else gradients
     u = displacement[triangles]  # (n, 3, 2)
     grad_u = np.einsum("tia,tib->tab", u, g)  # grad_u[t, a, b] = ∂u_a/∂x_b
     return np.stack([grad_u[:, 0, 0], grad_u[:, 1, 1], grad_u[:, 0, 1] + grad_u[:, 1, 0]], axis=1)
 
 
-def stresses(points: np.ndarray, triangles: np.ndarray, displacement: np.ndarray, law: Elasticity) -> np.ndarray:
+def stresses(points: np.ndarray, triangles: np.ndarray, displacement: np.ndarray, law: Elasticity,
+             gradients: np.ndarray | None = None) -> np.ndarray:
     """Cauchy stress per triangle (n_triangles, 4): xx, yy, xy, zz (zz = 0 in plane stress)."""
-    e = strains(points, triangles, displacement)
+    e = strains(points, triangles, displacement, gradients)
     trace = e[:, 0] + e[:, 1]
     sxx = law.lam * trace + 2 * law.mu * e[:, 0]
     syy = law.lam * trace + 2 * law.mu * e[:, 1]

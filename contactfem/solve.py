@@ -15,11 +15,18 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from contactfem.assembly import stresses, von_mises
+from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.errors import ContactFemError, SolverError
-from contactfem.kernel import Iteration, KernelResult, Status, default_c, solve_contact, solve_path
+from contactfem.kernel import (
+    Iteration,
+    KernelResult,
+    Status,
+    default_c,
+    solve_contact,
+    solve_path,
+)
 from contactfem.linalg import resolve_backend
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
@@ -211,6 +218,7 @@ def solve_load_path(
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), c, say, factors[0])
+    gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     started = [clock]
 
@@ -220,7 +228,7 @@ def solve_load_path(
             f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
         scaled = problem.scaled(factor)
         post = time.perf_counter()
-        solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel)
+        solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel, gradients)
         steps.append(SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel,
                                  backend=backend, timings={"solve": seconds, "postprocess": time.perf_counter() - post}))
         started[0] = time.perf_counter()
@@ -284,10 +292,12 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: P
     }
 
 
-def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult) -> Solution:
-    """The fields of a converged solve: stresses per triangle and the contact fields."""
+def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult,
+              gradients: np.ndarray | None = None) -> Solution:
+    """The fields of a converged solve: stresses per triangle and the contact fields
+    (``gradients``: the mesh's shape gradients, when the caller keeps them)."""
     mesh = problem.mesh
-    stress = stresses(mesh.points, mesh.triangles, displacement, problem.law)
+    stress = stresses(mesh.points, mesh.triangles, displacement, problem.law, gradients)
     contact = problem.contact
     return Solution(
         method=method,
