@@ -98,6 +98,14 @@ def test_the_path_files(tmp_path):
     assert np.allclose(curves["platen_top_force"], np.multiply(factors, FORCE), rtol=1e-10)
     assert all(np.diff(curves["platen_top_advance"]) > 0) and all(np.diff(curves["contact_width"]) >= 0)
     assert report["platens"]["top"]["force"] == pytest.approx(FORCE, rel=1e-10)
+    try:
+        import jsonschema
+    except ImportError:
+        pass
+    else:
+        from contactfem.io.registry import schema_path
+
+        jsonschema.validate(report, json.loads(schema_path("report.json").read_text(encoding="utf-8")))
     rows = (out / "path.csv").read_text(encoding="utf-8").splitlines()
     assert rows[0].split(",")[:3] == ["factor", "contact_force", "contact_width"] and len(rows) == 5
     with h5py.File(out / "path.h5", "r") as file:
