@@ -32,7 +32,7 @@ from contactfem.io.registry import (
     RESULT_MARKERS,
     to_json,
 )
-from contactfem.linalg import BACKEND_CHOICES
+from contactfem.linalg import BACKEND_CHOICES, DISTRIBUTED_BACKENDS
 from contactfem.methods import METHOD_NAMES
 
 EXIT_FAILURE = 1
@@ -41,10 +41,13 @@ EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports it
 EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
+def _exit_code(error: ContactFemError) -> int:
+    return EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ExistingResultError)) else EXIT_FAILURE
+
+
 def _fail(error: ContactFemError) -> None:
-    code = EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ExistingResultError)) else EXIT_FAILURE
     click.echo(f"error: {_printable(str(error))}", err=True)
-    sys.exit(code)
+    sys.exit(_exit_code(error))
 
 
 def _printable(text: str) -> str:
@@ -246,9 +249,13 @@ def main() -> None:
 @overwrite_option
 @click.option("--plot", "make_plot", is_flag=True,
               help="Also write deformed.png and contact_profile.png (as `contactfem plot`).")
+@click.option("--petsc-solver", type=click.Choice(("mumps", "gamg")), default="mumps", show_default=True,
+              help="With --backend petsc (under mpiexec): MUMPS, distributed direct, or CG with GAMG "
+                   "(the least memory per rank).")
 @_interruptible
 def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int | None,
-          backend: str | None, quiet: bool, as_json: bool, overwrite: bool, make_plot: bool = False) -> None:
+          backend: str | None, quiet: bool, as_json: bool, overwrite: bool, make_plot: bool = False,
+          petsc_solver: str = "mumps") -> None:
     """Solve CASE and write solution.vtu/.pvd, solution.h5 and report.json.
 
     \b
@@ -257,6 +264,7 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       contactfem solve cases/square.yaml --method standard --json > report.json
       contactfem solve cases/square.yaml --overwrite      # replace results/square
       contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
+      mpiexec -n 4 contactfem solve cases/square.yaml --backend petsc   # across 4 MPI ranks
     """
     from contactfem.io.atomic import claimed_directory
     from contactfem.io.registry import PATH_PNG
@@ -266,10 +274,14 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
 
     progress = _progress(quiet)
     try:
-        case = _load(case_file, backend)
+        case = _load(case_file, backend, distributed=True)
         if make_plot and "h5" not in case.output.files:
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
+        if case.solver.backend in DISTRIBUTED_BACKENDS:
+            _solve_distributed(case, method, refine, petsc_solver, directory, quiet, as_json, overwrite, make_plot,
+                               progress)
+            return
         with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
             path, extras = None, {}
             if case.load_path is not None:
@@ -299,6 +311,57 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
     _refuse_uncertified(case, result, directory)
 
 
+def _solve_distributed(case, method: str | None, refine: int | None, petsc_solver: str, directory: Path,
+                       quiet: bool, as_json: bool, overwrite: bool, make_plot: bool, progress) -> None:
+    """``solve`` under mpiexec: every rank solves its share; rank 0 alone claims the output
+    directory, writes and prints. Its verdict on the directory is shared before the solve, so
+    that a refusal stops every rank (the others would otherwise wait in a collective step)."""
+    import contextlib
+
+    from contactfem.distributed import distributed_report, mpi_world, solve_distributed
+    from contactfem.io.atomic import claimed_directory
+
+    if case.load_path is not None:
+        raise CaseError(f"{case.source.name}: load_path: the petsc backend solves one load; "
+                        "run the path with a serial backend (auto, cholmod, pardiso or superlu)")
+    world = mpi_world()
+    root = world.Get_rank() == 0
+    with contextlib.ExitStack() as stack:
+        refusal = None
+        if root:
+            try:
+                claim = stack.enter_context(claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite))
+            except ContactFemError as error:
+                refusal = error
+        code = world.bcast(_exit_code(refusal) if refusal is not None else 0, root=0)
+        if code:
+            if root:
+                _fail(refusal)
+            sys.exit(code)
+        try:
+            outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver,
+                                        progress=progress if root else None, accept_uncertified=True)
+        except ContactFemError as error:  # raised on every rank alike: decisions use shared data
+            if root:
+                _fail(error)
+            sys.exit(_exit_code(error))
+        if not root:
+            return
+        result = outcome.result
+        with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+            report = _write_solution(staging, case, result, distributed_report(case, outcome), progress)
+            names = _files_of(case.output.files)
+            if make_plot:
+                names += _pictures(staging, staging, progress)
+    written = [Path(directory) / name for name in names]
+    _end_progress()
+    if as_json:
+        click.echo(to_json(report), nl=False)
+    elif not quiet:
+        click.echo(_summary(report, written))
+    _refuse_uncertified(case, result, directory)
+
+
 def _refuse_uncertified(case, result, directory: Path) -> None:
     """Exit 1 for a result the kernel could not certify: its files are written (report.json
     says status not_certified, with each check) but it is not an answer."""
@@ -310,8 +373,9 @@ def _refuse_uncertified(case, result, directory: Path) -> None:
                           f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
 
 
-def _load(case_file: Path, backend: str | None = None):
-    """The validated case, with --backend applied; a backend that is not installed is bad input."""
+def _load(case_file: Path, backend: str | None = None, distributed: bool = False):
+    """The validated case, with --backend applied; a backend that is not installed is bad input,
+    and so is one that runs across MPI ranks for a command that does not (all but ``solve``)."""
     from contactfem.case import load_case
     from contactfem.errors import SolverError
     from contactfem.linalg import resolve_backend
@@ -319,11 +383,15 @@ def _load(case_file: Path, backend: str | None = None):
     case = load_case(case_file)
     if backend is not None:
         case = case.with_solver(backend=backend)
+    key = "--backend" if backend is not None else "solver.backend"
     try:
         resolve_backend(case.solver.backend)
     except SolverError as error:
-        key = "--backend" if backend is not None else "solver.backend"
         raise CaseError(f"{case_file.name}: {key} = {case.solver.backend}: {error}") from None
+    if case.solver.backend in DISTRIBUTED_BACKENDS and not distributed:
+        raise CaseError(f"{case_file.name}: {key} = {case.solver.backend}: only `contactfem solve` runs across MPI "
+                        "ranks (mpiexec -n P contactfem solve CASE --backend petsc); this command solves in one "
+                        "process: use auto, cholmod, pardiso or superlu")
     return case
 
 
@@ -769,6 +837,14 @@ def _platen_lines(platens: dict | None) -> list[str]:
     return lines
 
 
+def _parallel_lines(parallel: dict | None) -> list[str]:
+    """A distributed solve in one line: ranks, solver and the largest peak memory of a rank."""
+    if not parallel:
+        return []
+    return [f"  ranks        {parallel['ranks']} (petsc {parallel['solver']}), peak memory per rank up to "
+            f"{parallel['max_peak_rss_bytes'] / 2**30:.2f} GiB"]
+
+
 def _path_lines(path: dict | None) -> list[str]:
     """The load path in one line: its steps and their cost, and the contact force along it."""
     if not path:
@@ -815,6 +891,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         *_force_lines(report.get("boundary_forces")),
         *_platen_lines(report.get("platens")),
         *_path_lines(report.get("load_path")),
+        *_parallel_lines(report.get("parallel")),
         "  time         " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()),
     ]
     for warning in report.get("warnings", []):

@@ -291,7 +291,10 @@ def solve_contact(
     linear : ActiveSetSolver, optional
         The linear solver of an earlier solve of the same stiffness and constraints, set to
         this system's load (:meth:`ActiveSetSolver.set_loading`): its factorisation and
-        cached columns are reused. The result counts only this solve's factorisations.
+        cached columns are reused. The result counts only this solve's factorisations. Any
+        object with its ``load``, ``solve``, ``normals``, ``measure``, ``non_finite``,
+        ``certify``, ``factorizations`` and ``column_solves`` serves (the distributed
+        solver of :mod:`contactfem.distributed`, whose vectors are each rank's part).
 
     Raises
     ------
@@ -299,10 +302,9 @@ def solve_contact(
         If the stiffness (with its supports and an active set fixed) is singular or
         numerically singular: there is no answer to certify.
     """
-    normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
     gap = np.asarray(system.gap, dtype=float)
     mass = sp.csc_matrix(system.multiplier_mass)
-    m = len(normal_dofs)
+    m = len(gap)
     c = default_c(system) if c is None else float(c)
     mass_solver = _mass_solver(mass) if m else None
 
@@ -337,7 +339,7 @@ def solve_contact(
         multiplier = mass_solver(reaction_at_contact) if m else multiplier
         # The method's own complementarity rows: its multiplier times its mass.
         nodal_force = mass @ multiplier if m else nodal_force
-        slack = displacement[normal_dofs] - gap
+        slack = linear.normals(displacement) - gap
         scales = linear.measure(displacement, nodal_force)
 
         # Newton's update of the active set, decided per node in the data's scales: on A
@@ -351,7 +353,7 @@ def solve_contact(
         if holder is not None:
             indicator = np.where(active, reaction_at_contact, c * slack)
             new_active = holder.hold(new_active, indicator)
-        finite = bool(np.isfinite(displacement).all() and np.isfinite(nodal_force).all())
+        finite = linear.non_finite(displacement) == 0 and bool(np.isfinite(nodal_force).all())
 
         with np.errstate(invalid="ignore", over="ignore"):
             complementarity = np.abs(
@@ -524,6 +526,47 @@ class Scales:
     equilibrium: float
 
 
+def build_certificate(non_finite: int, slack: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray,
+                      scales: Scales, tolerance: float, condition: float) -> Certificate:
+    """The :class:`Certificate` of an iterate: ``non_finite`` entries of its u (counted by the
+    caller, who may hold only part of it), its ``slack`` N u − G and multipliers at every
+    contact node, its ``scales``, and ``condition`` κ̂ of the factorisation it came from."""
+    force_tolerance = max(tolerance, scales.roundoff)
+    gap_tolerance = max(tolerance, roundoff_bound(2))
+    non_finite += int(sum(np.count_nonzero(~np.isfinite(a)) for a in (multiplier, nodal_force)))
+    checks = {"finite": Check(float(non_finite), 0.0, non_finite == 0, "non-finite entries of u, mu, B mu")}
+    if non_finite == 0:
+        force, displacement = scales.force, scales.displacement
+        pushed = max(0.0, -nodal_force.min(initial=0.0)) / force
+        penetration = max(0.0, slack.max(initial=0.0)) / displacement
+        product = np.abs(nodal_force * slack).max(initial=0.0) / max(force * displacement, np.finfo(float).tiny)
+        both = max(force_tolerance, gap_tolerance)
+        checks.update({
+            "force_resolution": Check(scales.roundoff, FORCE_RESOLUTION_LIMIT,
+                                      scales.roundoff <= FORCE_RESOLUTION_LIMIT,
+                                      "round-off bound of the equilibrium equations / force scale (forces lost in cancellation)"),
+            "equilibrium": Check(scales.equilibrium, force_tolerance, scales.equilibrium <= force_tolerance,
+                                 "max |K u + N^T Lambda - F| / force scale"),
+            "force_sign": Check(pushed, force_tolerance, pushed <= force_tolerance,
+                                "max(-Lambda) / force scale (Lambda = B mu >= 0)"),
+            "penetration": Check(penetration, gap_tolerance, penetration <= gap_tolerance,
+                                 "max(N u - G) / displacement scale"),
+            "complementarity": Check(float(product), both, product <= both,
+                                     "max |Lambda (N u - G)| / (force scale * displacement scale)"),
+        })
+    return Certificate(
+        checks=checks,
+        scales={
+            "force": scales.force,
+            "displacement": scales.displacement,
+            "roundoff": scales.roundoff,
+            "condition_estimate": condition,
+            "relative_precision": EPS * condition,
+            "solver_tolerance": float(tolerance),
+        },
+    )
+
+
 class ActiveSetSolver:
     """Solves K u = F with supports and the normal unknowns of an active set fixed,
     reusing one factorisation across active sets.
@@ -639,44 +682,19 @@ class ActiveSetSolver:
                 equilibrium=float(np.abs(residual).max(initial=0.0) / force),
             )
 
+    def normals(self, u: np.ndarray) -> np.ndarray:
+        """The normal displacement of every contact node (m,)."""
+        return u[self.normal_dofs]
+
+    def non_finite(self, u: np.ndarray) -> int:
+        """Entries of u that are not finite."""
+        return int(np.count_nonzero(~np.isfinite(u)))
+
     def certify(self, u: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray, scales: Scales,
                 tolerance: float) -> Certificate:
         """The :class:`Certificate` of the iterate (u, μ, Λ = Bμ) with its ``scales``."""
-        force_tolerance = max(tolerance, scales.roundoff)
-        gap_tolerance = max(tolerance, roundoff_bound(2))
-        non_finite = int(sum(np.count_nonzero(~np.isfinite(a)) for a in (u, multiplier, nodal_force)))
-        checks = {"finite": Check(float(non_finite), 0.0, non_finite == 0, "non-finite entries of u, mu, B mu")}
-        if non_finite == 0:
-            slack = u[self.normal_dofs] - self.gap
-            force, displacement = scales.force, scales.displacement
-            pushed = max(0.0, -nodal_force.min(initial=0.0)) / force
-            penetration = max(0.0, slack.max(initial=0.0)) / displacement
-            product = np.abs(nodal_force * slack).max(initial=0.0) / max(force * displacement, np.finfo(float).tiny)
-            both = max(force_tolerance, gap_tolerance)
-            checks.update({
-                "force_resolution": Check(scales.roundoff, FORCE_RESOLUTION_LIMIT,
-                                          scales.roundoff <= FORCE_RESOLUTION_LIMIT,
-                                          "round-off bound of the equilibrium equations / force scale (forces lost in cancellation)"),
-                "equilibrium": Check(scales.equilibrium, force_tolerance, scales.equilibrium <= force_tolerance,
-                                     "max |K u + N^T Lambda - F| / force scale"),
-                "force_sign": Check(pushed, force_tolerance, pushed <= force_tolerance,
-                                    "max(-Lambda) / force scale (Lambda = B mu >= 0)"),
-                "penetration": Check(penetration, gap_tolerance, penetration <= gap_tolerance,
-                                     "max(N u - G) / displacement scale"),
-                "complementarity": Check(float(product), both, product <= both,
-                                         "max |Lambda (N u - G)| / (force scale * displacement scale)"),
-            })
-        return Certificate(
-            checks=checks,
-            scales={
-                "force": scales.force,
-                "displacement": scales.displacement,
-                "roundoff": scales.roundoff,
-                "condition_estimate": self.condition,
-                "relative_precision": EPS * self.condition,
-                "solver_tolerance": float(tolerance),
-            },
-        )
+        return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
+                                 tolerance, self.condition)
 
     def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""

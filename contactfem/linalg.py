@@ -206,10 +206,13 @@ _BACKENDS: dict[str, tuple[tuple[str | None, Callable[..., Factorization]], ...]
 }
 
 BACKEND_NAMES = tuple(_BACKENDS)
+#: Backends that run the whole solve across MPI ranks (:mod:`contactfem.distributed`, under
+#: ``mpiexec ... contactfem solve``), not a :class:`Factorizer`.
+DISTRIBUTED_BACKENDS = ("petsc",)
 #: What a case or the command line may ask for: a backend by name, or ``auto`` (the fastest installed).
-BACKEND_CHOICES = ("auto", *BACKEND_NAMES)
+BACKEND_CHOICES = ("auto", *BACKEND_NAMES, *DISTRIBUTED_BACKENDS)
 #: The extra that installs each optional backend.
-_EXTRAS = {"cholmod": "cholmod", "pardiso": "pardiso"}
+_EXTRAS = {"cholmod": "cholmod", "pardiso": "pardiso", "petsc": "petsc"}
 
 
 def _installed(module: str | None) -> bool:
@@ -246,6 +249,12 @@ def resolve_backend(name: str = "auto") -> str:
     available = available_backends()
     if name == "auto":
         return available[0]
+    if name in DISTRIBUTED_BACKENDS:
+        if not all(_installed(module) for module in ("petsc4py", "mpi4py")):
+            raise SolverError(
+                f"solver backend {name!r} is not installed (needs petsc4py and mpi4py built against an "
+                "installed PETSc; see the README's section on PETSc)")
+        return name
     if name not in _BACKENDS:
         raise SolverError(f"unknown solver backend {name!r}; pick one of {', '.join(BACKEND_CHOICES)}")
     if name not in available:

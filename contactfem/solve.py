@@ -18,7 +18,7 @@ import numpy as np
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
-from contactfem.errors import ContactFemError, SolverError
+from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
     Iteration,
     KernelResult,
@@ -27,7 +27,7 @@ from contactfem.kernel import (
     solve_contact,
     solve_path,
 )
-from contactfem.linalg import resolve_backend
+from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
 from contactfem.sequencing import (
@@ -129,7 +129,7 @@ def solve_case(
     say = progress or (lambda message: None)
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
-    backend = resolve_backend(case.solver.backend)
+    backend = _serial_backend(case)
     timings: dict[str, float] = {}
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
@@ -208,7 +208,7 @@ def solve_load_path(
     say = progress or (lambda message: None)
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
-    backend = resolve_backend(case.solver.backend)
+    backend = _serial_backend(case)
     factors = case.load_path.factors
     timings: dict[str, float] = {}
     problem = prepare(case, refine=refine, progress=say, timings=timings)
@@ -249,11 +249,47 @@ def solve_load_path(
                       sequencing=sequencing)
 
 
+def _serial_backend(case: Case) -> str:
+    """The case's backend, which must run in this process (petsc runs under mpiexec)."""
+    backend = resolve_backend(case.solver.backend)
+    if backend in DISTRIBUTED_BACKENDS:
+        raise CaseError(f"{case.source.name}: solver.backend = {backend}: runs a solve across MPI ranks, as "
+                        "`mpiexec -n P contactfem solve CASE --backend petsc`; this command solves in one "
+                        "process (use auto, cholmod, pardiso or superlu)")
+    return backend
+
+
+@dataclass(frozen=True, eq=False)
+class CoarseSolve:
+    """What a coarse level hands the prediction: its contact fields and its solve's account."""
+
+    contact: ContactFields
+    kernel: KernelResult
+    sequencing: Mapping
+
+
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
                           factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively), and its cost.
 
     ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
+    """
+    def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
+        outcome = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem, load_factor=factor)
+        return CoarseSolve(outcome.solution.contact, outcome.kernel, outcome.sequencing)
+
+    def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
+        coarse_problem = prepare(coarse_case, refine=refine)
+        return coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
+
+    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse)
+
+
+def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
+                         prepare_coarse: Callable[[Case, int], DiscreteProblem],
+                         solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve]) -> tuple[np.ndarray | None, dict]:
+    """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
+    process, or across MPI ranks): the predicted active set and what it cost.
 
     (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
@@ -268,19 +304,18 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: P
         return None, {}
     coarse_case, coarse_refine = coarse
     try:
-        coarse_problem = prepare(coarse_case, refine=coarse_refine)
-        if factor != 1.0:
-            coarse_problem = coarse_problem.scaled(factor)
+        coarse_problem = prepare_coarse(coarse_case, coarse_refine)
     except ContactFemError:
         return None, {}  # a decimated boundary the mesher or the contact checks refuse
     if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
         return None, {}
     try:
-        coarse_result = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem,
-                                   load_factor=factor)
+        coarse_result = solve_coarse(coarse_case, coarse_problem)
     except SolverError:
         return None, {}
-    active = predict_active_set(problem.contact, coarse_result.solution.contact, c)
+    if coarse_result.kernel.status is not Status.CONVERGED:
+        return None, {}
+    active = predict_active_set(problem.contact, coarse_result.contact, c)
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
     return active, {
         "coarse_unknowns": coarse_problem.n_unknowns,

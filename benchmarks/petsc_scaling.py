@@ -1,0 +1,170 @@
+"""The petsc backend's cost per rank: the square of cases/square.yaml at --refine 4 (512 divisions,
+525 000 unknowns) and --refine 5 (1024, 2.1 million), on 1 and 2 MPI ranks.
+
+Usage:
+    python benchmarks/petsc_scaling.py                          # refine 4 and 5, 1 and 2 ranks, MUMPS
+    python benchmarks/petsc_scaling.py --refine 4 --ranks 1 2   # choose sizes and rank counts
+    python benchmarks/petsc_scaling.py --solvers mumps gamg     # also CG + GAMG
+    mpiexec -n 2 python benchmarks/petsc_scaling.py --single 4 --solver mumps   # one run: a JSON record on stdout
+
+Each (refine, ranks, solver) runs as its own ``mpiexec -n P`` job, so that each rank's peak
+RSS (getrusage maxrss) is that run's. A run records, per rank: seconds of mesh (every rank
+meshes the whole case), assemble (loads, supports, contact and its share of the stiffness),
+solve (mesh sequencing and the Newton steps), gather (solution and K u to rank 0), and on
+rank 0 postprocess (stresses, contact fields); the factorisation seconds of each Newton
+step, the iterations of each linear solve (1 for MUMPS) and what MUMPS reports of its
+factors (entries, flops, megabytes per rank); its peak RSS; and the totals: Newton steps,
+factorisations, wall time. BLAS threads are pinned
+to one per rank (OMP_NUM_THREADS=1) so that 1 and 2 ranks use the same cores' worth.
+
+Writes JSON (--out, default benchmarks/results/petsc_scaling.json, rewritten after every
+run) and prints a markdown table. Wall-clock seconds of single runs: on a busy machine
+they are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE_FILE = ROOT / "cases" / "square.yaml"
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "petsc_scaling.json"
+RECORD_PREFIX = "DISTRIBUTED-RECORD "
+GB = 1024.0**3
+
+
+def single(refine: int, solver: str, method: str) -> None:
+    """One run on the ranks of this mpiexec job; rank 0 prints the record."""
+    from contactfem.case import load_case
+    from contactfem.distributed import solve_distributed
+
+    started = time.perf_counter()
+    case = load_case(CASE_FILE)
+    outcome = solve_distributed(case, method=method, refine=refine, solver=solver)
+    wall = time.perf_counter() - started
+    if outcome.result is None:
+        return
+    result = outcome.result
+    kernel = result.kernel
+    per_rank = outcome.parallel["per_rank"]
+    record = {
+        "refine": refine,
+        "divisions": 32 * 2**refine,
+        "ranks": outcome.parallel["ranks"],
+        "solver": solver,
+        "method": method,
+        "unknowns": result.problem.n_unknowns,
+        "contact_nodes": int(len(result.problem.contact.nodes)),
+        "status": kernel.status.value,
+        "newton_steps": kernel.iterations,
+        "factorizations": kernel.factorizations,
+        "sequencing": dict(result.sequencing),
+        "active_nodes": int(kernel.active.sum()),
+        "contact_force": float(kernel.nodal_force.sum()),
+        "wall_s": wall,
+        "stages_s": {stage: max(rank["seconds"].get(stage, 0.0) for rank in per_rank)
+                     for stage in ("mesh", "assemble", "solve", "gather")},
+        "postprocess_s": result.timings.get("postprocess", 0.0),
+        "per_rank": [{"rank": rank["rank"], "owned_unknowns": rank["owned_unknowns"],
+                      "owned_triangles": rank["owned_triangles"], "peak_rss_gb": rank["peak_rss_bytes"] / GB,
+                      "factor_s": rank["factor_seconds"], "linear_iterations": rank["linear_iterations"],
+                      "factor": rank["factor"], "seconds": rank["seconds"]} for rank in per_rank],
+        "max_peak_rss_gb": outcome.parallel["max_peak_rss_bytes"] / GB,
+    }
+    print(RECORD_PREFIX + json.dumps(record), flush=True)
+
+
+def _environment() -> dict[str, str]:
+    env = dict(os.environ)
+    env.update({"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+                # Open MPI refuses root and more ranks than slots unless told; other MPIs ignore these.
+                "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+                "OMPI_MCA_rmaps_base_oversubscribe": "1"})
+    return env
+
+
+def run(refine: int, ranks: int, solver: str, method: str, timeout: float) -> dict:
+    mpiexec = shutil.which("mpiexec")
+    if mpiexec is None:
+        return {"refine": refine, "ranks": ranks, "solver": solver, "error": "no mpiexec on the PATH"}
+    command = [mpiexec, "-n", str(ranks), sys.executable, str(Path(__file__).resolve()), "--single", str(refine),
+               "--solver", solver, "--method", method]
+    started = time.perf_counter()
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment())
+    except subprocess.TimeoutExpired:
+        return {"refine": refine, "ranks": ranks, "solver": solver, "error": f"timed out after {timeout:.0f} s"}
+    for line in done.stdout.splitlines():
+        if line.startswith(RECORD_PREFIX):
+            record = json.loads(line[len(RECORD_PREFIX):])
+            record["job_s"] = time.perf_counter() - started
+            return record
+    # The Python error, not mpiexec's epilogue: the last line naming an error, else the tail.
+    lines = (done.stderr + done.stdout).strip().splitlines()
+    errors = [line for line in lines if "Error" in line]
+    return {"refine": refine, "ranks": ranks, "solver": solver,
+            "error": f"exit {done.returncode}: " + (errors[-1] if errors else " | ".join(lines[-5:]))}
+
+
+def table(records: list[dict]) -> str:
+    lines = ["| unknowns | ranks | solver | Newton | mesh s | assemble s | solve s | gather s | wall s "
+             "| factor s (each) | peak RSS per rank GB |",
+             "|---:|---:|---|---:|---:|---:|---:|---:|---:|---|---|"]
+    for r in records:
+        if "error" in r:
+            lines.append(f"| refine {r['refine']} | {r['ranks']} | {r['solver']} | {r['error']} |||||||")
+            continue
+        stages = r["stages_s"]
+        factors = ", ".join(f"{s:.2f}" for s in r["per_rank"][0]["factor_s"])
+        memory = " / ".join(f"{rank['peak_rss_gb']:.2f}" for rank in r["per_rank"])
+        lines.append(f"| {r['unknowns']:,} | {r['ranks']} | {r['solver']} | {r['newton_steps']} | "
+                     f"{stages['mesh']:.2f} | {stages['assemble']:.2f} | {stages['solve']:.2f} | "
+                     f"{stages['gather']:.2f} | {r['wall_s']:.2f} | {factors} | {memory} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--refine", type=int, nargs="+", default=[4, 5])
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--solvers", nargs="+", default=["mumps"], choices=["mumps", "gamg"])
+    parser.add_argument("--method", default="positive", choices=["positive", "standard"])
+    parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--single", type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--solver", default="mumps", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.single is not None:
+        single(args.single, args.solver, args.method)
+        return
+
+    document = {"benchmark": "distributed", "case": str(CASE_FILE.relative_to(ROOT)),
+                "command": " ".join(sys.argv), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "machine": {"python": platform.python_version(), "platform": platform.platform(),
+                            "cpus": os.cpu_count()},
+                "records": []}
+    for refine in args.refine:
+        for solver in args.solvers:
+            for ranks in args.ranks:
+                print(f"refine {refine}, {ranks} rank(s), {solver} ...", flush=True)
+                record = run(refine, ranks, solver, args.method, args.timeout)
+                document["records"].append(record)
+                args.out.parent.mkdir(parents=True, exist_ok=True)
+                args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
+                print(table([record]).splitlines()[-1], flush=True)
+    document["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
+    print(table(document["records"]))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

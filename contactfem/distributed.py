@@ -1,0 +1,897 @@
+"""The contact solve on PETSc/MPI: each rank assembles its share of the stiffness, and the active-set
+iteration of :mod:`contactfem.kernel` runs on distributed vectors, its linear solves done by PETSc.
+
+Run under ``mpiexec -n P``; every rank calls :func:`solve_distributed` with the same
+arguments, and rank 0 receives a :class:`contactfem.solve.SolveResult` for the writers.
+
+What each rank holds:
+
+- the whole mesh, the load vector and the supports (O(n) vectors, built by the serial
+  code: meshing is deterministic, so every rank gets the same mesh without sending it);
+- the rows of the stiffness it owns (nodes in contiguous blocks of a locality-preserving
+  order, see :func:`node_order`), assembled from the triangles whose first vertex it owns,
+  entries of rows owned elsewhere being sent by PETSc's assembly; and a copy of them with
+  absolute values (|K|, for the round-off bound of the equations);
+- the contact data (m ~ √n nodes): gathered on every rank, so that μ = B⁻¹Λ and every
+  active-set decision is computed redundantly and identically, with no further message.
+
+The linear solves: MUMPS Cholesky (distributed direct, the default) or CG with GAMG
+(smoothed aggregation, the rigid motions as near-null space; O(n) memory, for the largest
+meshes). Supports and active normals are imposed by zeroing rows and columns of a work
+copy of K inside its own sparsity pattern, so that MUMPS keeps its ordering and symbolic
+analysis across Newton steps and only refactorises.
+
+The difference from the serial kernel, by design: every Newton step factorises its own
+active set (no Schur updates from a reference set, which would need a distributed column
+solve per changed node). The first active set (predicted from a coarser mesh, solved
+across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
+safeguards and certificate are the serial kernel's.
+
+Not handled yet, refused with one line: platens, and bodies held only by contact (free
+rigid motions).
+"""
+
+from __future__ import annotations
+
+import itertools
+import resource
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from contactfem.assembly import Elasticity, shape_gradients
+from contactfem.case import Case
+from contactfem.discretize import DiscreteProblem, build_mesh
+from contactfem.errors import SolverError
+from contactfem.kernel import (
+    EPS,
+    REFINEMENT_STEPS,
+    Certificate,
+    ContactSystem,
+    Iteration,
+    KernelResult,
+    Scales,
+    Status,
+    build_certificate,
+    roundoff_bound,
+    solve_contact,
+)
+from contactfem.linalg import SINGULARITY_LIMIT, FactorCheck, probe_vector
+from contactfem.methods import get_method
+
+if TYPE_CHECKING:
+    from contactfem.solve import SolveResult
+
+Progress = Callable[[str], None]
+
+#: The linear solvers of the petsc backend.
+SOLVERS = ("mumps", "gamg")
+#: CG + GAMG stops at this relative (unpreconditioned) residual; the kernel's iterative
+#: refinement then brings the equations to their round-off bound as it does for a direct solve.
+GAMG_RTOL = 1e-12
+GAMG_MAX_ITERATIONS = 5000
+#: CG's relative residual for the singularity probe (see :meth:`_DistributedSolver._probe`).
+PROBE_RTOL = 1e-6
+#: Triangles per block of the element loop: bounds the temporaries of assembly.
+ELEMENT_CHUNK = 65536
+
+_INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
+                 "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
+
+
+def petsc_available() -> bool:
+    """Whether petsc4py and mpi4py can be imported (without initialising MPI)."""
+    import importlib.util
+
+    return all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
+
+
+def mpi_world():
+    """MPI_COMM_WORLD (mpi4py), for the caller's own decisions between ranks."""
+    _, MPI = _petsc()
+    return MPI.COMM_WORLD
+
+
+def _petsc():
+    """petsc4py's PETSc and mpi4py's MPI, imported on first use: the module itself imports without them."""
+    try:
+        import petsc4py
+
+        petsc4py.init()
+        from mpi4py import MPI
+        from petsc4py import PETSc
+    except ImportError as error:
+        raise SolverError(f"{_INSTALL_HINT} ({error})") from None
+    return PETSc, MPI
+
+
+@dataclass(frozen=True, eq=False)
+class DistributedResult:
+    """What :func:`solve_distributed` returns on every rank.
+
+    ``result`` is the :class:`~contactfem.solve.SolveResult` on rank 0 (None elsewhere);
+    ``parallel`` the figures of the run, the same on every rank: ranks, solver, per rank
+    its owned unknowns and triangles, peak resident memory (bytes) and seconds per stage.
+    """
+
+    result: "SolveResult | None"
+    parallel: dict
+    rank: int = 0
+
+
+class SolutionProduct:
+    """Stands for the global stiffness on rank 0, which no rank holds: it knows K u for the
+    solution u only (computed distributedly), which is all that
+    :func:`contactfem.report.contact_and_reactions` asks of ``problem.stiffness``.
+
+    Any other product raises :class:`SolverError`: estimators or energy norms that need the
+    matrix itself cannot run on a distributed result.
+    """
+
+    def __init__(self, displacement: np.ndarray, internal_force: np.ndarray) -> None:
+        self._displacement = np.asarray(displacement, dtype=float).ravel()
+        self._internal = np.asarray(internal_force, dtype=float).ravel()
+        self.shape = (len(self._internal), len(self._internal))
+
+    def __matmul__(self, vector: np.ndarray) -> np.ndarray:
+        vector = np.asarray(vector, dtype=float)
+        if vector.shape == self._displacement.shape and np.array_equal(vector, self._displacement):
+            return self._internal.copy()
+        raise SolverError("the stiffness of a distributed solve is held by no rank: only K u of its "
+                          "solution is known on rank 0")
+
+
+def node_order(points: np.ndarray) -> np.ndarray:
+    """Nodes sorted along the longer side of the bounding box (ties by the other coordinate).
+
+    Contiguous blocks of this order are slabs across the body's shorter side, so each
+    rank's interface with its neighbours is one cut of O(√n) nodes, and the triangles a
+    rank assembles touch few rows owned elsewhere. Deterministic, so every rank finds it.
+    """
+    extent = np.ptp(points, axis=0)
+    major = 0 if extent[0] >= extent[1] else 1
+    return np.lexsort((points[:, 1 - major], points[:, major]))
+
+
+def element_stiffness(points: np.ndarray, triangles: np.ndarray, law: Elasticity) -> np.ndarray:
+    """The 6x6 element matrices (t, 6, 6) in interleaved unknowns (2i + c), as the serial
+    element-wise assembly writes them: |T| (λ g_i^a g_j^b + μ g_j^a g_i^b + μ δ_ab g_i·g_j)."""
+    g, area = shape_gradients(points, triangles)
+    gi_gj = np.einsum("tia,tja->tij", g, g)
+    ke = law.lam * g[:, :, :, None, None] * g[:, None, None, :, :]
+    ke += law.mu * g.transpose(0, 2, 1)[:, None, :, :, None] * g[:, :, None, None, :]
+    ke += law.mu * gi_gj[:, :, None, :, None] * np.eye(2)[None, None, :, None, :]
+    ke *= area[:, None, None, None, None]
+    return ke.reshape(len(triangles), 6, 6)
+
+
+@dataclass(eq=False)
+class _Layout:
+    """How unknowns are numbered and shared: mesh dof 2i + c is PETSc unknown 2 position[i] + c;
+    this rank owns PETSc unknowns [first, last)."""
+
+    order: np.ndarray
+    position: np.ndarray
+    first: int
+    last: int
+    node_bounds: np.ndarray
+
+    @classmethod
+    def build(cls, points: np.ndarray, ranks: int, rank: int) -> "_Layout":
+        n = len(points)
+        order = node_order(points)
+        position = np.empty(n, dtype=np.int64)
+        position[order] = np.arange(n)
+        bounds = (n * np.arange(ranks + 1, dtype=np.int64)) // ranks
+        return cls(order=order, position=position, first=2 * int(bounds[rank]), last=2 * int(bounds[rank + 1]),
+                   node_bounds=bounds)
+
+    def petsc(self, dofs: np.ndarray) -> np.ndarray:
+        """PETSc indices of mesh unknowns ``dofs``."""
+        dofs = np.asarray(dofs, dtype=np.int64)
+        return 2 * self.position[dofs // 2] + dofs % 2
+
+    def owned(self, vector: np.ndarray) -> np.ndarray:
+        """This rank's entries of a vector over all mesh unknowns (2n,), in PETSc order."""
+        return vector.reshape(-1, 2)[self.order[self.first // 2: self.last // 2]].ravel()
+
+    def to_mesh(self, petsc_vector: np.ndarray) -> np.ndarray:
+        """A whole vector in PETSc order (2n,) back in mesh unknowns."""
+        mesh = np.empty_like(petsc_vector)
+        mesh.reshape(-1, 2)[self.order] = petsc_vector.reshape(-1, 2)
+        return mesh
+
+
+def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
+                      progress: Progress | None = None, accept_uncertified: bool = False,
+                      sequencing: bool = True) -> DistributedResult:
+    """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
+
+    Parameters
+    ----------
+    case, method, refine, accept_uncertified
+        As for :func:`contactfem.solve.solve_case`.
+    solver : {"mumps", "gamg"}
+        MUMPS Cholesky, or CG preconditioned by GAMG with the rigid motions as near-null space.
+    progress : callable, optional
+        Receives progress lines; called on rank 0 only.
+    sequencing : bool
+        Start from the active set a coarser mesh predicts, when that pays (as the serial
+        solve does; the coarse levels are solved across the ranks too); False starts from
+        the nodes inside the obstacle.
+
+    Raises
+    ------
+    SolverError
+        Without petsc4py/mpi4py, for an unknown ``solver``, for platens or a body held only
+        by contact (not handled yet), and as :func:`~contactfem.solve.solve_case` does when
+        the kernel does not converge. Raised on every rank alike: every decision is taken
+        from data all ranks share.
+    """
+    if solver not in SOLVERS:
+        raise SolverError(f"unknown petsc solver {solver!r}; pick one of {', '.join(SOLVERS)}")
+    PETSc, MPI = _petsc()
+    comm = PETSc.COMM_WORLD
+    mpi = comm.tompi4py()
+    rank, ranks = mpi.Get_rank(), mpi.Get_size()
+    say = (progress or (lambda message: None)) if rank == 0 else (lambda message: None)
+    method_name = method or case.solver.method
+    timings: dict[str, float] = {}
+
+    clock = time.perf_counter()
+    say(f"meshing (each of {ranks} ranks)")
+    mesh = build_mesh(case, refine=refine)
+    timings["mesh"] = time.perf_counter() - clock
+    refinements = case.mesh.refine if refine is None else refine
+    clock = time.perf_counter()
+    problem = _problem_without_stiffness(case, mesh, refinements)
+    problem_seconds = time.perf_counter() - clock
+
+    level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
+    timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
+    kernel, linear, layout, system = level.kernel, level.linear, level.layout, level.system
+    accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
+    if kernel.status not in accepted:
+        linear.destroy()
+        raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
+
+    clock = time.perf_counter()
+    slots = linear.gather_to_zero(linear.solution)
+    internal = linear.gather_to_zero(linear.internal_force)
+    timings["gather"] = time.perf_counter() - clock
+    per_rank = mpi.gather({"rank": rank, "owned_unknowns": (layout.last - layout.first),
+                           "owned_triangles": system.owned_triangles,
+                           "factor_seconds": linear.factor_seconds, "linear_iterations": linear.linear_iterations,
+                           "factor": linear.factor_figures,
+                           "peak_rss_bytes": _peak_rss(),
+                           "seconds": dict(timings)}, root=0)
+    per_rank = mpi.bcast(per_rank, root=0)
+    parallel = {"ranks": ranks, "solver": solver, "per_rank": per_rank,
+                "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
+                "factorizations": kernel.factorizations}
+    linear.destroy()
+    if rank != 0:
+        return DistributedResult(result=None, parallel=parallel, rank=rank)
+
+    clock = time.perf_counter()
+    from contactfem.solve import SolveResult, _solution
+
+    kernel.displacement = layout.to_mesh(slots)
+    displacement = system.mesh_vector(kernel.displacement)
+    force = system.mesh_vector(layout.to_mesh(internal))
+    problem = _with_stiffness(problem, SolutionProduct(displacement, force))
+    solution = _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
+    timings["postprocess"] = time.perf_counter() - clock
+    result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
+                         backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
+    return DistributedResult(result=result, parallel=parallel, rank=rank)
+
+
+@dataclass(eq=False)
+class _Level:
+    """One solved level: the kernel's result (its ``displacement`` this rank's part), the
+    normal displacement at the contact nodes (every rank) and the distributed objects."""
+
+    kernel: KernelResult
+    normal_displacement: np.ndarray
+    linear: "_DistributedSolver"
+    layout: _Layout
+    system: "_DistributedSystem"
+    sequencing: dict
+
+
+def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_name: str, solver: str,
+                 say: Progress, sequencing: bool, timings: dict[str, float]) -> _Level:
+    """Assemble ``problem`` across the ranks and run the active-set iteration on it, from the
+    active set a coarser level predicts when that pays (as :func:`contactfem.solve.solve_case`)."""
+    mpi = comm.tompi4py()
+    contact_method = get_method(method_name)
+    clock = time.perf_counter()
+    say("assembling")
+    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    timings["assemble"] = time.perf_counter() - clock
+    say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
+        f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")
+
+    clock = time.perf_counter()
+    say(f"solving with method {contact_method.equation} ({method_name}), petsc {solver}")
+    c = case.solver.c if case.solver.c is not None else system.default_c()
+    initial_active, predicted = (_predict_from_coarser(PETSc, MPI, comm, case, problem, c, solver, say)
+                                 if sequencing else (None, {}))
+    numbers = itertools.count(1)
+
+    def on_iteration(record: Iteration) -> None:
+        say(f"  Newton {next(numbers)}: {record.active} active (+{record.added} -{record.removed}), "
+            f"residuals {record.equilibrium_residual:.1e} / {record.complementarity_residual:.1e}, "
+            f"{record.seconds:.2f} s")
+
+    linear = _DistributedSolver(PETSc, MPI, comm, system, solver, tolerance=case.solver.tolerance)
+    kernel, normal_displacement = _active_set_iteration(
+        linear, c=c, tolerance=case.solver.tolerance, max_iterations=case.solver.max_iterations,
+        initial_active=initial_active, on_iteration=on_iteration)
+    timings["solve"] = time.perf_counter() - clock
+    return _Level(kernel=kernel, normal_displacement=normal_displacement, linear=linear, layout=layout,
+                  system=system, sequencing=predicted)
+
+
+def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, c: float, solver: str,
+                          say: Progress) -> tuple[np.ndarray | None, dict]:
+    """:func:`contactfem.solve.predict_from_coarser` with the coarse levels solved across the
+    ranks too (a serial coarse solve would put a quarter-size matrix on every rank). Every
+    decision is taken from data all ranks share, so they all recurse alike."""
+    from contactfem.result import ContactFields
+    from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
+
+    def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
+        return _problem_without_stiffness(coarse_case, build_mesh(coarse_case, refine=refine), refine)
+
+    def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
+        level = _solve_level(PETSc, MPI, comm, coarse_case, coarse_problem, SEQUENCING_METHOD, solver,
+                             lambda message: None, True, {})
+        try:
+            contact, kernel = coarse_problem.contact, level.kernel
+            fields = ContactFields(
+                nodes=contact.nodes, edges=contact.edges, multiplier=kernel.multiplier,
+                nodal_force=kernel.nodal_force, normal_displacement=level.normal_displacement, gap=contact.gap,
+                active=kernel.active, abscissa=contact.abscissa, obstacle_point=contact.obstacle.point,
+                obstacle_normal=contact.obstacle.normal, obstacle_ends=contact.obstacle.ends)
+            return CoarseSolve(fields, kernel, level.sequencing)
+        finally:
+            level.linear.destroy()
+
+    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse)
+
+
+def distributed_report(case: Case, outcome: DistributedResult, extras: dict | None = None) -> dict:
+    """report.json's content for a distributed result (rank 0), with the run's figures under ``parallel``."""
+    from contactfem.report import build_report
+
+    if outcome.result is None:
+        raise ValueError("the report of a distributed solve is built on rank 0")
+    return build_report(case, outcome.result, extras={"parallel": outcome.parallel, **(extras or {})})
+
+
+def _peak_rss() -> int:
+    """This process's peak resident memory in bytes (Linux reports kilobytes)."""
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def _problem_without_stiffness(case: Case, mesh, refinements: int) -> DiscreteProblem:
+    """The discrete problem as :func:`contactfem.discretize.build_problem` makes it, but for
+    the stiffness, which no rank assembles whole (``stiffness`` is None until rank 0 gets
+    a :class:`SolutionProduct`)."""
+    from contactfem.discretize.contact import contact_boundary
+    from contactfem.discretize.exact_checks import check_exact_contact
+    from contactfem.discretize.loads import compile_loads
+    from contactfem.discretize.supports import free_rigid_modes, supports
+
+    material = case.material
+    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
+    loads = compile_loads(case, mesh)
+    held = supports(case, mesh)
+    contact = contact_boundary(case, mesh, held)
+    load = loads.load_vector(mesh)
+    platens = tuple(getattr(held, "platens", ()))
+    if platens:
+        raise SolverError(f"{case.source.name}: the petsc backend does not handle platens yet "
+                          f"({', '.join(p.name for p in platens)}); solve without --backend petsc")
+    free_modes = free_rigid_modes(case, mesh, held, contact, load)
+    if free_modes.shape[1]:
+        raise SolverError(f"{case.source.name}: the body is held only by contact along {free_modes.shape[1]} "
+                          "rigid motion(s); the petsc backend does not handle that yet, solve without it")
+    exact = case.exact.solution if case.exact is not None else None
+    if exact is not None:
+        check_exact_contact(case, mesh, contact.edges)
+    return DiscreteProblem(
+        mesh=mesh, law=law, stiffness=None, load=load, dirichlet_dofs=held.dirichlet_dofs,
+        dirichlet_values=held.dirichlet_values, contact=contact, loads=loads, exact=exact,
+        refinements=refinements, symmetry_nodes=held.symmetry_nodes, symmetry_normals=held.symmetry_normals,
+        free_modes=None,
+    )
+
+
+def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:
+    from dataclasses import replace
+
+    return replace(problem, stiffness=stiffness)
+
+
+@dataclass(eq=False)
+class _DistributedSystem:
+    """The kernel's system in rotated unknowns (as :class:`contactfem.discretize.ReducedSystem`),
+    with the stiffness as a PETSc MPIAIJ matrix and the rest as this rank's entries.
+
+    Arrays named ``*_local`` hold this rank's unknowns in PETSc order; contact arrays (m,)
+    are whole on every rank.
+    """
+
+    stiffness: object
+    absolute: object
+    load_local: np.ndarray
+    supported_local: np.ndarray
+    support_values_local: np.ndarray
+    normal_dofs: np.ndarray  # (m,) PETSc indices of the contact normal unknowns
+    normal_slots: np.ndarray  # (m,) the same in mesh numbering
+    supported_mesh: np.ndarray  # (2n,) bool, mesh numbering
+    gap: np.ndarray
+    multiplier_mass: object
+    gamma: float
+    layout: _Layout
+    frame_nodes: np.ndarray
+    frames: np.ndarray  # (k, 2, 2): node k's unknowns u = [a b] s
+    owned_triangles: int
+    n_dof: int
+    rigid_motions_local: np.ndarray  # (3, local) in rotated unknowns: GAMG's near-null space
+
+    @classmethod
+    def assemble(cls, PETSc, comm, problem: DiscreteProblem, method, layout: _Layout) -> "_DistributedSystem":
+        from contactfem.discretize.frames import _frames
+
+        mesh = problem.mesh
+        n_points = mesh.n_points
+        n_dof = 2 * n_points
+        supported = np.zeros(n_dof, dtype=bool)
+        supported[problem.dirichlet_dofs] = True
+        frames = _frames(problem, supported)
+        blocks = np.stack([frames.a, frames.b], axis=2)  # (k, 2, 2), columns a and b
+        frame_of = np.full(n_points, -1, dtype=np.int64)
+        frame_of[frames.nodes] = np.arange(len(frames.nodes))
+
+        first, last = layout.first, layout.last
+        n_local = last - first
+        index_type = PETSc.IntType
+        d_nnz, o_nnz = (count.astype(index_type) for count in _preallocation(mesh, layout))
+        stiffness = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
+                                          nnz=(d_nnz, o_nnz), comm=comm)
+        stiffness.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        # Triangles go to the owner of their first vertex: each is assembled once, and most of
+        # a rank's entries land in its own rows.
+        first_vertex = layout.position[mesh.triangles[:, 0]]
+        owned = np.flatnonzero((first_vertex >= first // 2) & (first_vertex < last // 2))
+        for start in range(0, len(owned), ELEMENT_CHUNK):
+            triangles = mesh.triangles[owned[start:start + ELEMENT_CHUNK]]
+            ke = element_stiffness(mesh.points, triangles, problem.law)
+            _rotate(ke, triangles, frame_of, blocks)
+            dofs = (2 * layout.position[triangles][:, :, None] + np.arange(2)).reshape(len(triangles), 6)
+            dofs = dofs.astype(index_type)
+            stiffness.setValuesRCV(dofs, dofs, ke.reshape(len(triangles), 36), addv=PETSc.InsertMode.ADD_VALUES)
+        stiffness.assemblyBegin()
+        stiffness.assemblyEnd()
+        stiffness.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        stiffness.setOption(PETSc.Mat.Option.SPD, True)
+        indptr, indices, values = stiffness.getValuesCSR()
+        absolute = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
+                                         csr=(indptr, indices, np.abs(values)), comm=comm)
+        from mpi4py import MPI
+
+        longest_row = comm.tompi4py().allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
+        del indptr, indices, values
+
+        # Q^T F in rotated unknowns, as ReducedSystem builds it (without platens: Q is block-diagonal).
+        load = problem.load.copy().reshape(-1, 2)
+        load[frames.nodes] = np.einsum("kca,kc->ka", blocks, load[frames.nodes])
+        load = load.ravel()
+        if len(frames.force_dofs):
+            np.add.at(load, frames.force_dofs, frames.forces)
+        fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
+        fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
+        supported_all = np.zeros(n_dof, dtype=bool)
+        supported_all[fixed_dofs] = True
+        values_all = np.zeros(n_dof)
+        values_all[fixed_dofs] = fixed_values
+        rigid = _rigid_motions(mesh.points, frames.nodes, blocks)
+        return cls(
+            stiffness=stiffness, absolute=absolute, load_local=layout.owned(load),
+            supported_local=layout.owned(supported_all), support_values_local=layout.owned(values_all),
+            normal_dofs=layout.petsc(frames.normal_slot), normal_slots=np.asarray(frames.normal_slot, dtype=np.int64),
+            supported_mesh=supported_all, gap=np.asarray(problem.contact.gap, dtype=float),
+            multiplier_mass=method.multiplier_mass(problem.contact.masses), gamma=roundoff_bound(longest_row + 2),
+            layout=layout, frame_nodes=frames.nodes, frames=blocks, owned_triangles=int(len(owned)), n_dof=n_dof,
+            rigid_motions_local=np.stack([layout.owned(r) for r in rigid]),
+        )
+
+    def mesh_vector(self, slots: np.ndarray) -> np.ndarray:
+        """Mesh-frame vector (2n,) of a vector in rotated unknowns (mesh numbering): Q s. With
+        orthonormal frames Q is orthogonal, so this also maps K' s to K u."""
+        vector = slots.copy().reshape(-1, 2)
+        vector[self.frame_nodes] = np.einsum("kab,kb->ka", self.frames, vector[self.frame_nodes])
+        return vector.ravel()
+
+    def default_c(self) -> float:
+        """:func:`contactfem.kernel.default_c`: the mean normal diagonal entry of K."""
+        if len(self.normal_dofs) == 0:
+            return 1.0
+        diagonal = self.stiffness.getDiagonal()
+        values = _gather_entries(diagonal, self.normal_dofs)
+        diagonal.destroy()
+        return float(np.mean(values))
+
+
+def _preallocation(mesh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Entries per owned row inside and outside this rank's columns: a full 2x2 block for the
+    node itself and for each mesh edge, as the element matrices fill them."""
+    first_node, last_node = layout.first // 2, layout.last // 2
+    edges = layout.position[np.asarray(mesh.topology.edges, dtype=np.int64)]
+    n_local_nodes = last_node - first_node
+    inside = np.ones(n_local_nodes, dtype=np.int64)  # the node's own block
+    outside = np.zeros(n_local_nodes, dtype=np.int64)
+    for this, other in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+        mine = (this >= first_node) & (this < last_node)
+        local = this[mine] - first_node
+        near = (other[mine] >= first_node) & (other[mine] < last_node)
+        inside += np.bincount(local[near], minlength=n_local_nodes)
+        outside += np.bincount(local[~near], minlength=n_local_nodes)
+    return np.repeat(2 * inside, 2), np.repeat(2 * outside, 2)
+
+
+def _rotate(ke: np.ndarray, triangles: np.ndarray, frame_of: np.ndarray, blocks: np.ndarray) -> None:
+    """Element matrices in the rotated unknowns, in place: K_e' = Q_eᵀ K_e Q_e on the few
+    triangles touching a framed node (contact, symmetry), Q_e block-diagonal of node frames."""
+    frame_index = frame_of[triangles]
+    touched = np.flatnonzero((frame_index >= 0).any(axis=1))
+    if len(touched) == 0:
+        return
+    q = np.broadcast_to(np.eye(2), (len(touched), 3, 2, 2)).copy()
+    index = frame_index[touched]
+    framed = index >= 0
+    q[framed] = blocks[index[framed]]
+    k = ke[touched].reshape(len(touched), 3, 2, 3, 2)
+    ke[touched] = np.einsum("tica,ticjd,tjdb->tiajb", q, k, q).reshape(len(touched), 6, 6)
+
+
+def _rigid_motions(points: np.ndarray, frame_nodes: np.ndarray, blocks: np.ndarray) -> list[np.ndarray]:
+    """The plane's rigid motions (x, y translations, rotation about the centroid) in rotated unknowns."""
+    centred = points - points.mean(axis=0)
+    motions = []
+    for field_ in (np.tile([1.0, 0.0], (len(points), 1)), np.tile([0.0, 1.0], (len(points), 1)),
+                   np.stack([-centred[:, 1], centred[:, 0]], axis=1)):
+        rotated = field_.copy()
+        rotated[frame_nodes] = np.einsum("kca,kc->ka", blocks, field_[frame_nodes])
+        motions.append(rotated.ravel())
+    return motions
+
+
+def _gather_entries(vector, indices: np.ndarray) -> np.ndarray:
+    """Entries ``indices`` (global PETSc indices) of a distributed vector, on every rank."""
+    from petsc4py import PETSc
+
+    target = PETSc.Vec().createSeq(len(indices), comm=PETSc.COMM_SELF)
+    where = PETSc.IS().createGeneral(np.asarray(indices, dtype=PETSc.IntType), comm=PETSc.COMM_SELF)
+    scatter = PETSc.Scatter().create(vector, where, target, None)
+    scatter.scatter(vector, target, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
+    values = target.getArray().copy()
+    for item in (scatter, where, target):
+        item.destroy()
+    return values
+
+
+class _DistributedSolver:
+    """:class:`contactfem.kernel.ActiveSetSolver` on a distributed stiffness: solves K u = F with
+    supports and the active normals fixed (rows and columns zeroed in a work copy of K, which
+    keeps K's pattern so that MUMPS only refactorises), with iterative refinement to the
+    equations' round-off bound, a singularity probe per factorisation, and the scales and
+    certificate of the iterate, every norm taken over all ranks."""
+
+    def __init__(self, PETSc, MPI, comm, system: _DistributedSystem, solver: str, tolerance: float) -> None:
+        self.PETSc, self.MPI, self.comm, self.mpi = PETSc, MPI, comm, comm.tompi4py()
+        self.system = system
+        self.tolerance = tolerance
+        self.solver_name = solver
+        self.normal_dofs = system.normal_dofs
+        self.gap = system.gap
+        self.load_local = system.load_local
+        layout = system.layout
+        self.first, self.last = layout.first, layout.last
+        owned = (self.normal_dofs >= self.first) & (self.normal_dofs < self.last)
+        #: Contact nodes whose normal unknown this rank owns, and where it sits in the local arrays.
+        self.owned_contact = np.flatnonzero(owned)
+        self.owned_normal_local = self.normal_dofs[owned] - self.first
+        k = system.stiffness
+        self.work = k.duplicate(copy=True)
+        self.u, self.rhs = k.createVecs()
+        self.scratch, self.product = k.createVecs()
+        self.ksp = self._solver(solver)
+        self.factorizations = 0
+        self.column_solves = 0  # every step factorises its own active set: no Schur columns
+        self.factor_seconds: list[float] = []
+        #: MUMPS's account of the last factorisation (see :func:`_mumps_figures`); empty for GAMG.
+        self.factor_figures: dict = {}
+        #: Iterations of each solve (1 for a direct solve: one substitution).
+        self.linear_iterations: list[int] = []
+        self.checks: list[FactorCheck] = []
+        self.solution = self.u.duplicate()
+        self.internal_force = self.u.duplicate()
+        self.to_normals = self._normal_scatter()
+
+    # ----- PETSc plumbing -----
+    def _solver(self, solver: str):
+        PETSc = self.PETSc
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOperators(self.work)
+        pc = ksp.getPC()
+        if solver == "mumps":
+            ksp.setType("preonly")
+            pc.setType("cholesky")
+            pc.setFactorSolverType("mumps")
+            # PETSc options (PETSC_OPTIONS="-mat_mumps_icntl_14 50 ...") reach MUMPS from here.
+            ksp.setFromOptions()
+        else:
+            ksp.setType("cg")
+            ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+            ksp.setTolerances(rtol=GAMG_RTOL, atol=0.0, max_it=GAMG_MAX_ITERATIONS)
+            pc.setType("gamg")
+            options = PETSc.Options()
+            prefix = "contactfem_gamg_"
+            ksp.setOptionsPrefix(prefix)
+            # The Newton steps change only a few rows: the coarse spaces of the first set serve them all.
+            options[f"{prefix}pc_gamg_reuse_interpolation"] = "true"
+            ksp.setFromOptions()
+            self.work.setNearNullSpace(self._near_null_space())
+        return ksp
+
+    def _near_null_space(self):
+        PETSc = self.PETSc
+        vectors = []
+        for motion in self.system.rigid_motions_local:
+            vector = self.u.duplicate()
+            vector.setArray(motion)
+            for previous in vectors:  # Gram–Schmidt: PETSc wants an orthonormal basis
+                vector.axpy(-vector.dot(previous), previous)
+            vector.normalize()
+            vectors.append(vector)
+        return PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
+
+    def _normal_scatter(self):
+        PETSc = self.PETSc
+        target = PETSc.Vec().createSeq(len(self.normal_dofs), comm=PETSc.COMM_SELF)
+        where = PETSc.IS().createGeneral(np.asarray(self.normal_dofs, dtype=PETSc.IntType), comm=PETSc.COMM_SELF)
+        scatter = PETSc.Scatter().create(self.u, where, target, None)
+        where.destroy()
+        return scatter, target
+
+    def normals(self, local: np.ndarray) -> np.ndarray:
+        """Entries at the contact normals (m,) of a distributed vector given by its local part, on every rank."""
+        scatter, target = self.to_normals
+        self.scratch.setArray(local)
+        scatter.scatter(self.scratch, target, addv=self.PETSc.InsertMode.INSERT_VALUES,
+                        mode=self.PETSc.ScatterMode.FORWARD)
+        return target.getArray().copy()
+
+    def multiply(self, matrix, local: np.ndarray) -> np.ndarray:
+        self.scratch.setArray(local)
+        matrix.mult(self.scratch, self.product)
+        return self.product.getArray().copy()
+
+    def linear_solve(self, local: np.ndarray, rtol: float = GAMG_RTOL) -> np.ndarray:
+        """Solve with the factorised (or preconditioned) work matrix; ``rtol`` only matters to CG."""
+        self.rhs.setArray(local)
+        if self.solver_name == "gamg":
+            self.ksp.setTolerances(rtol=rtol)
+        self.ksp.solve(self.rhs, self.u)
+        self.linear_iterations.append(int(self.ksp.getIterationNumber()))
+        reason = self.ksp.getConvergedReason()
+        if reason < 0:
+            raise SolverError(
+                f"the stiffness matrix with its supports and active contact normals fixed could not be solved "
+                f"(PETSc {self.solver_name}: {_reason_name(self.PETSc, reason)}); is part of the body held only by contact?")
+        return self.u.getArray().copy()
+
+    def maximum(self, local: np.ndarray) -> float:
+        """max |local| over all ranks (inf if any entry is not finite)."""
+        value = np.abs(local).max(initial=0.0) if len(local) else 0.0
+        value = value if np.isfinite(value) else np.inf
+        return float(self.mpi.allreduce(value, op=self.MPI.MAX))
+
+    def gather_to_zero(self, vector) -> np.ndarray | None:
+        """A whole distributed vector on rank 0 (PETSc order), None elsewhere."""
+        scatter, whole = self.PETSc.Scatter.toZero(vector)
+        scatter.scatter(vector, whole, addv=self.PETSc.InsertMode.INSERT_VALUES,
+                        mode=self.PETSc.ScatterMode.FORWARD)
+        values = whole.getArray().copy() if self.mpi.Get_rank() == 0 else None
+        scatter.destroy()
+        whole.destroy()
+        return values
+
+    def destroy(self) -> None:
+        self.ksp.destroy()
+        self.to_normals[0].destroy()
+        self.to_normals[1].destroy()
+        for item in (self.work, self.u, self.rhs, self.scratch, self.product, self.solution,
+                     self.internal_force, self.system.stiffness, self.system.absolute):
+            item.destroy()
+
+    # ----- the kernel's linear algebra -----
+    @property
+    def condition(self) -> float:
+        return self.checks[-1].condition if self.checks else 1.0
+
+    def _factorize(self, active: np.ndarray) -> None:
+        PETSc = self.PETSc
+        fixed = self.system.supported_local.copy()
+        active_owned = active[self.owned_contact]
+        fixed[self.owned_normal_local[active_owned]] = True
+        values = self.system.support_values_local.copy()
+        values[self.owned_normal_local[active_owned]] = self.gap[self.owned_contact[active_owned]]
+        self.free = ~fixed
+        self.system.stiffness.copy(self.work, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        rows = (self.first + np.flatnonzero(fixed)).astype(PETSc.IntType)
+        self.scratch.setArray(values)
+        self.rhs.setArray(self.load_local)
+        self.work.zeroRowsColumns(rows, diag=1.0, x=self.scratch, b=self.rhs)
+        self.work.setOption(PETSc.Mat.Option.SPD, True)
+        base_rhs = self.rhs.getArray().copy()
+        started = time.perf_counter()
+        self.ksp.setOperators(self.work)
+        self.ksp.setUp()
+        self.factor_seconds.append(time.perf_counter() - started)
+        self.factorizations += 1
+        if self.solver_name == "mumps":
+            self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
+        self.base = self.linear_solve(base_rhs)
+        self.checks.append(self._probe(active))
+
+    def _probe(self, active: np.ndarray) -> FactorCheck:
+        """:func:`contactfem.linalg.check_factorization` of the factorised work matrix: the same
+        probe vector, residual and condition estimate."""
+        # The probe is drawn over the mesh's unknowns in their own numbering, as the serial
+        # kernel draws it, so that its entries depend neither on the ranks nor on their order.
+        free_mesh = ~self.system.supported_mesh
+        free_mesh[self.system.normal_slots[active]] = False
+        b = self.system.layout.owned(probe_vector(self.system.n_dof, free_mesh))
+        rows = self.free
+        if not self.mpi.allreduce(bool(rows.any()), op=self.MPI.LOR):
+            return FactorCheck(residual=0.0, condition=1.0)
+        # Two or three correct digits of x decide the verdict and the condition estimate: CG
+        # need not solve the probe to the equations' accuracy.
+        x = self.linear_solve(b, rtol=PROBE_RTOL)
+        scale = self.maximum(b[rows])
+        norm = self.maximum(self.multiply(self.system.absolute, rows.astype(float))[rows])
+
+        def measure(x: np.ndarray) -> tuple[np.ndarray, float]:
+            residual = np.where(rows, b - self.multiply(self.work, x), 0.0)
+            return residual, self.maximum(residual) / scale
+
+        refined = False
+        finite = self.mpi.allreduce(bool(np.isfinite(x).all()), op=self.MPI.LAND)
+        relative = np.inf
+        if finite:
+            residual, relative = measure(x)
+            if relative > SINGULARITY_LIMIT:
+                refined = True
+                x = x + self.linear_solve(residual, rtol=PROBE_RTOL)
+                finite = self.mpi.allreduce(bool(np.isfinite(x).all()), op=self.MPI.LAND)
+                residual, relative = measure(x) if finite else (residual, np.inf)
+        name = "the stiffness matrix with its supports and active contact normals fixed"
+        if not np.isfinite(relative):
+            raise SolverError(f"{name} is singular: solving with its factorisation gives non-finite values")
+        condition = float(norm * self.maximum(x[rows]) / scale)
+        if relative > SINGULARITY_LIMIT or EPS * condition > SINGULARITY_LIMIT:
+            raise SolverError(
+                f"{name} is singular or numerically singular: probe residual {relative:.1e} after refinement, "
+                f"condition estimate {condition:.1e} (eps*kappa {EPS * condition:.1e}), bound {SINGULARITY_LIMIT:g} "
+                "(a part of the body not held, or too slender for double precision)")
+        return FactorCheck(residual=relative, condition=condition, refined=refined)
+
+    def solve(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """u (local part) and the reactions (F − K u) at the normal unknowns of ``active`` (on every rank)."""
+        self._factorize(active)
+        system = self.system
+        active_owned = active[self.owned_contact]
+        fixed_normals = self.owned_normal_local[active_owned]
+        equations = ~system.supported_local
+        equations[fixed_normals] = False
+        u = self.base.copy()
+        load = self.load_local
+        target = system.gamma * self.maximum(
+            np.where(equations, self.multiply(system.absolute, np.abs(u)) + np.abs(load), 0.0))
+        residual = np.where(equations, load - self.multiply(system.stiffness, u), 0.0)
+        for _ in range(REFINEMENT_STEPS):
+            size = self.maximum(residual)
+            if not size > target:
+                break
+            correction = self.linear_solve(np.where(self.free, residual, 0.0))
+            trial = np.where(equations, residual - self.multiply(system.stiffness, correction), 0.0)
+            if not self.maximum(trial) < size:
+                break
+            u, residual = u + correction, trial
+        # Active normals are constraints: returned exactly (complementarity holds exactly).
+        u[fixed_normals] = self.gap[self.owned_contact[active_owned]]
+        self._u = u
+        self._internal = self.multiply(system.stiffness, u)
+        reaction = self.normals(load - self._internal)[active]
+        return u, reaction
+
+    def measure(self, u: np.ndarray, nodal_force: np.ndarray) -> Scales:
+        """:meth:`contactfem.kernel.ActiveSetSolver.measure` over all ranks."""
+        system = self.system
+        contact = np.zeros(len(u))
+        contact[self.owned_normal_local] = nodal_force[self.owned_contact]
+        internal = self._internal if u is self._u else self.multiply(system.stiffness, u)
+        equations = ~system.supported_local
+        load = self.load_local
+        with np.errstate(invalid="ignore", over="ignore"):
+            residual = np.where(equations, internal + contact - load, 0.0)
+            terms = np.where(equations, self.multiply(system.absolute, np.abs(u)) + np.abs(load) + np.abs(contact),
+                             0.0)
+            force = self.maximum(load) + self.maximum(internal) + float(np.abs(nodal_force).max(initial=0.0))
+            force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
+            displacement = max(self.maximum(u), float(np.abs(self.gap).max(initial=0.0)))
+            displacement = max(displacement, np.finfo(float).tiny) if np.isfinite(displacement) else np.inf
+            return Scales(force=float(force), displacement=float(displacement),
+                          roundoff=float(system.gamma * self.maximum(terms) / force),
+                          equilibrium=float(self.maximum(residual) / force))
+
+    def non_finite(self, u: np.ndarray) -> int:
+        return int(self.mpi.allreduce(int(np.count_nonzero(~np.isfinite(u))), op=self.MPI.SUM))
+
+    def keep(self, u: np.ndarray) -> None:
+        """Store the iterate and its K u as the distributed vectors returned to rank 0."""
+        self.solution.setArray(u)
+        internal = self._internal if u is self._u else self.multiply(self.system.stiffness, u)
+        self.internal_force.setArray(internal)
+
+    @property
+    def load(self) -> np.ndarray:
+        """This rank's part of the load (what the kernel sizes its iterate by)."""
+        return self.load_local
+
+    def certify(self, u: np.ndarray, multiplier: np.ndarray, nodal_force: np.ndarray, scales: Scales,
+                tolerance: float) -> Certificate:
+        """:meth:`contactfem.kernel.ActiveSetSolver.certify` with u's non-finite entries counted over all ranks."""
+        return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
+                                 tolerance, self.condition)
+
+
+def _mumps_figures(factor) -> dict:
+    """What MUMPS reports of a factorisation (its user guide's INFO/INFOG/RINFOG): entries of
+    the factors over all ranks (INFOG(29), negative in millions), flops of the elimination
+    (RINFOG(3)), the ordering it chose (INFOG(7): 2 AMF... 5 METIS, 7 automatic), and this
+    rank's megabytes allocated (INFO(16)) and used (INFO(22)) by the factorisation."""
+    entries = int(factor.getMumpsInfog(29))
+    return {"factor_entries": entries if entries >= 0 else -entries * 10**6,
+            "flops": float(factor.getMumpsRinfog(3)), "ordering": int(factor.getMumpsInfog(7)),
+            "allocated_mb": int(factor.getMumpsInfo(16)), "used_mb": int(factor.getMumpsInfo(22))}
+
+
+def _reason_name(PETSc, reason: int) -> str:
+    names = {value: name for name, value in vars(PETSc.KSP.ConvergedReason).items() if isinstance(value, int)}
+    return names.get(reason, str(reason))
+
+
+def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: float, max_iterations: int,
+                          initial_active: np.ndarray | None = None,
+                          on_iteration: Callable[[Iteration], None] | None = None) -> tuple[KernelResult, np.ndarray]:
+    """:func:`contactfem.kernel.solve_contact` on the distributed solver: the contact arrays
+    are whole on every rank, so every rank takes the same decisions. ``displacement`` of the
+    result is this rank's part (PETSc order); the whole iterate is kept in
+    ``linear.solution``. Also returns the normal displacement at the contact nodes (m,), on
+    every rank."""
+    system = ContactSystem(stiffness=None, load=None, normal_dofs=np.arange(len(linear.gap)), gap=linear.gap,
+                           multiplier_mass=linear.system.multiplier_mass)
+    kernel = solve_contact(system, c=c, tolerance=tolerance, max_iterations=max_iterations,
+                           initial_active=initial_active, on_iteration=on_iteration, linear=linear)
+    linear.keep(kernel.displacement)
+    return kernel, linear.normals(kernel.displacement)

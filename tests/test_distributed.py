@@ -1,0 +1,153 @@
+"""The petsc backend on 2 MPI ranks agrees with the serial solve: displacements and multipliers
+to 1e-8 relative, the same active set, on the square and the plate with a hole, both methods.
+
+Skipped unless petsc4py and mpi4py import and an ``mpiexec`` is on the PATH (see README:
+the petsc extra needs PETSc itself, e.g. Debian's petsc-dev, and PETSC_DIR to build).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactfem.case import load_case
+from contactfem.solve import solve_case
+
+CASES = Path(__file__).resolve().parent.parent / "cases"
+RANKS = 2
+AGREEMENT = 1e-8
+SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive", "standard")]
+
+_have_petsc = all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
+_mpiexec = shutil.which("mpiexec")
+needs_mpi = pytest.mark.skipif(not (_have_petsc and _mpiexec),
+                                reason="petsc4py, mpi4py or mpiexec not available (pip install 'contactfem[petsc]')")
+
+# Rank 0 stores each distributed solve's fields; the comparison runs in the test process.
+SCRIPT = """
+import sys
+import numpy as np
+from contactfem.case import load_case
+from contactfem.distributed import distributed_report, solve_distributed
+
+out = sys.argv[1]
+fields = {}
+for name, method in [item.split(":") for item in sys.argv[2:]]:
+    case = load_case(f"{CASES}/{name}.yaml")
+    outcome = solve_distributed(case, method=method)
+    if outcome.result is not None:
+        solution = outcome.result.solution
+        report = distributed_report(case, outcome)
+        key = f"{name}_{method}"
+        fields[key + "_u"] = solution.displacement
+        fields[key + "_mu"] = solution.contact.multiplier
+        fields[key + "_force"] = solution.contact.nodal_force
+        fields[key + "_active"] = solution.contact.active
+        fields[key + "_ranks"] = np.array(report["parallel"]["ranks"])
+        fields[key + "_rss"] = np.array([r["peak_rss_bytes"] for r in report["parallel"]["per_rank"]])
+        fields[key + "_residual"] = np.array(report["equilibrium"]["relative_force_residual"])
+        fields[key + "_status"] = np.array(report["solver"]["status"])
+if fields:
+    np.savez(out, **fields)
+"""
+
+
+def _mpi_environment() -> dict[str, str]:
+    """Open MPI refuses root and more ranks than cores unless told; other MPIs ignore these."""
+    env = dict(os.environ)
+    env.update({"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+                "OMPI_MCA_rmaps_base_oversubscribe": "1", "OMP_NUM_THREADS": "1"})
+    return env
+
+
+@pytest.fixture(scope="module")
+def distributed(tmp_path_factory) -> dict[str, np.ndarray]:
+    directory = tmp_path_factory.mktemp("distributed")
+    script = directory / "solve.py"
+    script.write_text(f"CASES = {str(CASES)!r}\n" + SCRIPT)
+    out = directory / "fields.npz"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out),
+               *(f"{name}:{method}" for name, method in SOLVES)]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    with np.load(out) as data:
+        return dict(data)
+
+
+@needs_mpi
+@pytest.mark.parametrize("name, method", SOLVES)
+def test_two_ranks_agree_with_the_serial_solve(distributed, name, method):
+    case = load_case(CASES / f"{name}.yaml")
+    serial = solve_case(case, method=method).solution
+    key = f"{name}_{method}"
+    assert int(distributed[key + "_ranks"]) == RANKS
+    assert str(distributed[key + "_status"]) == "converged"
+    np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
+    u = distributed[key + "_u"]
+    assert np.abs(u - serial.displacement).max() <= AGREEMENT * np.abs(serial.displacement).max()
+    for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
+        assert np.abs(distributed[key + field] - reference).max() <= AGREEMENT * np.abs(reference).max()
+    # report.json's figures come from K u computed across the ranks: the balance still closes.
+    assert float(distributed[key + "_residual"]) < 1e-10
+    assert len(distributed[key + "_rss"]) == RANKS and (distributed[key + "_rss"] > 0).all()
+
+
+def test_module_imports_and_refuses_clearly_without_petsc(monkeypatch):
+    """Without petsc4py the module still imports; the solve says what to install, in one line."""
+    import builtins
+
+    from contactfem import distributed as module
+    from contactfem.errors import SolverError
+
+    real_import = builtins.__import__
+
+    def no_petsc(name, *args, **kwargs):
+        if name.split(".")[0] in ("petsc4py", "mpi4py"):
+            raise ImportError(f"No module named {name!r}")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_petsc)
+    with pytest.raises(SolverError, match="petsc4py") as error:
+        module.solve_distributed(load_case(CASES / "square.yaml"))
+    assert "\n" not in str(error.value)
+
+
+@needs_mpi
+def test_the_solve_command_under_mpiexec(tmp_path):
+    """`mpiexec -n 2 contactfem solve CASE --backend petsc`: rank 0 alone writes the usual files
+    and report.json records the ranks; a second run into the same result is refused on every
+    rank, in one line, with exit code 2."""
+    import json
+
+    out = tmp_path / "out"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, "-m", "contactfem.cli", "solve", str(CASES / "hole.yaml"),
+               "--backend", "petsc", "--out", str(out), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["parallel"]["ranks"] == RANKS and report["solver"]["status"] == "converged"
+    assert {"solution.vtu", "solution.h5", "contact.csv"} <= {p.name for p in out.iterdir()}
+    again = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert again.returncode == 2
+    errors = [line for line in again.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "--overwrite" in errors[0], again.stderr
+
+
+def test_other_commands_refuse_the_petsc_backend(tmp_path):
+    from click.testing import CliRunner
+
+    from contactfem.cli import main
+
+    case = tmp_path / "square.yaml"
+    case.write_text((CASES / "square.yaml").read_text(encoding="utf-8").replace(
+        "solver:\n", "solver:\n  backend: petsc\n"), encoding="utf-8")
+    result = CliRunner().invoke(main, ["compare", str(case), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    assert "solver.backend = petsc" in result.output and not (tmp_path / "out").exists()
