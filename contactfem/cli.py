@@ -299,10 +299,15 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
                                                 case.units.to_dict(), title=case.title).name)
                 if make_plot:
                     names += _pictures(staging, staging, progress)
-        written = [Path(directory) / name for name in names]
     except ContactFemError as error:
         _fail(error)
         return
+    _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
+
+
+def _report_solve(case, result, report: dict, written: list[Path], directory: Path, quiet: bool,
+                  as_json: bool) -> None:
+    """A finished solve on stdout (the summary, or the report with --json); exit 1 when uncertified."""
     _end_progress()
     if as_json:
         click.echo(to_json(report), nl=False)
@@ -353,13 +358,7 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
             names = _files_of(case.output.files)
             if make_plot:
                 names += _pictures(staging, staging, progress)
-    written = [Path(directory) / name for name in names]
-    _end_progress()
-    if as_json:
-        click.echo(to_json(report), nl=False)
-    elif not quiet:
-        click.echo(_summary(report, written))
-    _refuse_uncertified(case, result, directory)
+    _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
 
 
 def _refuse_uncertified(case, result, directory: Path) -> None:
