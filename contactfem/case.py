@@ -178,7 +178,9 @@ class BoundaryPart:
 
     @property
     def label(self) -> str:
-        """The kind as the case file says it, e.g. ``traction (exact)``."""
+        """The kind as the case file says it, e.g. ``traction (exact)`` or ``platen (force 2000)``."""
+        if self.platen is not None:
+            return f"{self.kind} ({self.platen.control} {self.platen.value:g})"
         return f"{self.kind} (exact)" if self.exact else self.kind
 
     @property

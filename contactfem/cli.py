@@ -452,6 +452,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         "obstacle": obstacle_figures(problem),
         "method": case.solver.method,
         "estimate": _estimate(case, problem),
+        "load_path": None if case.load_path is None else list(case.load_path.factors),
     }
     if as_json:
         click.echo(json.dumps(summary, indent=2, sort_keys=True))
@@ -466,6 +467,10 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
                f"[{diameters.min():.3g}, {diameters.max():.3g}]")
     click.echo(f"  unknowns   {problem.n_unknowns} displacement, {len(problem.contact.nodes)} contact nodes")
     click.echo(f"  obstacle   {_obstacle_text(summary['obstacle'])}")
+    if case.load_path is not None:
+        factors = case.load_path.factors
+        click.echo(f"  load path  {len(factors)} steps, load factors {factors[0]:g} to {factors[-1]:g} "
+                   "(every load, prescribed displacement and platen drive times each factor)")
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
                f"{cost['backend']} (measured on 2 cores; ±50%)")

@@ -118,7 +118,7 @@ def test_the_report_balances_the_platen_with_the_contact():
     case = case_of(hertz_pressed({"force": FORCE}))
     forces = boundary_forces(outcome.problem, outcome.solution.displacement, outcome.solution.contact.nodal_force,
                              {p.name: p.label for p in case.parts})
-    assert forces["parts"]["top"]["condition"] == "platen"
+    assert forces["parts"]["top"]["condition"] == "platen (force 2000)"
     assert abs(forces["parts"]["top"]["force"][1] + FORCE) <= 1e-10 * FORCE
     assert forces["total"]["relative_force_residual"] <= 1e-10
 
