@@ -290,7 +290,7 @@ def solve_contact(
         False stops with status CYCLING instead.
     linear : ActiveSetSolver, optional
         The linear solver of an earlier solve of the same stiffness and constraints, set to
-        this system's load (:meth:`ActiveSetSolver.set_loading`): its factorisation and
+        this system's load (:meth:`ActiveSetSolver.set_load_factor`): its factorisation and
         cached columns are reused. The result counts only this solve's factorisations. Any
         object with its ``load``, ``solve``, ``normals``, ``measure``, ``non_finite``,
         ``certify``, ``factorizations`` and ``column_solves`` serves (the distributed
@@ -468,13 +468,14 @@ def solve_path(
 
     The stiffness and the constraints do not change along the path, so one
     :class:`ActiveSetSolver` serves every step: its factorisation and Schur columns carry
-    over, a new load costs one solve with the factor, and each step starts from the
+    over, a new load factor costs no solve (the reference solution is linear in it: see
+    :meth:`ActiveSetSolver.set_load_factor`), and each step starts from the
     step's active set extrapolated (:func:`extrapolated_active`; the first from
     ``initial_active``). ``options`` are those of :func:`solve_contact`. Stops after the
     first step that does not converge; returns the results of the steps solved.
     """
     tolerance = options.get("tolerance", 1e-10)
-    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
+    linear = ActiveSetSolver(system, backend, tolerance=tolerance, scalable=True)
     results: list[KernelResult] = []
     active = initial_active
     c = options.get("c") or default_c(system)
@@ -488,9 +489,9 @@ def solve_path(
         step = dataclasses.replace(system, load=factor * np.asarray(system.load, dtype=float),
                                    fixed_values=factor * np.asarray(system.fixed_values, dtype=float))
         solves_before = linear.column_solves
-        linear.set_loading(step.load, step.fixed_values)
+        linear.set_load_factor(factor)
         result = solve_contact(step, backend=backend, initial_active=active, linear=linear, **options)
-        # The step's solves with the factor: its new load's and its Schur columns.
+        # The step's solves with the factor: its Schur columns (a new load costs none).
         result.column_solves = linear.column_solves - solves_before
         results.append(result)
         if on_step is not None:
@@ -598,8 +599,12 @@ class ActiveSetSolver:
     """
 
     def __init__(self, system: ContactSystem, backend: str, max_changes: int | None = None,
-                 tolerance: float = 1e-10) -> None:
+                 tolerance: float = 1e-10, scalable: bool = False) -> None:
         self.tolerance = tolerance
+        #: Whether the load and prescribed values will be scaled (:meth:`set_load_factor`):
+        #: each factorisation then solves for the load and for the gaps separately.
+        self.scalable = scalable
+        self.load_factor = 1.0
         self.stiffness = sp.csr_matrix(system.stiffness)
         self.stiffness.sort_indices()
         self.load = np.asarray(system.load, dtype=float)
@@ -613,6 +618,7 @@ class ActiveSetSolver:
         self.supported[self.fixed_dofs] = True
         self.support_values = np.zeros(n)
         self.support_values[self.fixed_dofs] = system.fixed_values
+        self.unit_load, self.unit_support_values = self.load, self.support_values
         k = self.stiffness
         self.entry_rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
         self.diagonal = np.flatnonzero(self.entry_rows == k.indices)
@@ -633,22 +639,22 @@ class ActiveSetSolver:
         self.absolute = sp.csr_matrix((np.abs(k.data), k.indices, k.indptr), shape=k.shape)
         self.gamma = roundoff_bound(int(np.diff(k.indptr).max(initial=0)) + 2)
 
-    def set_loading(self, load: np.ndarray, fixed_values: np.ndarray) -> None:
-        """Another load and other values of the same fixed unknowns: the factorisation and
-        the cached columns (K00⁻¹ K0j, K00⁻¹ e_j) depend on neither and are kept; only the
-        factor's solution for the reference set is recomputed (one solve)."""
-        self.load = np.asarray(load, dtype=float)
-        self.support_values = np.zeros(len(self.load))
-        self.support_values[self.fixed_dofs] = fixed_values
+    def set_load_factor(self, factor: float) -> None:
+        """Multiply the system's load and prescribed values by ``factor`` (a step of a load
+        path; the solver must be built with ``scalable=True``). The factorisation and the
+        cached columns (K00⁻¹ K0j, K00⁻¹ e_j) depend on neither, and the factor's solution
+        for the reference set is linear in the factor, f b_load + b_gap, both parts kept
+        from the factorisation: a new factor costs no solve."""
+        if not self.scalable:
+            raise ValueError("set_load_factor needs an ActiveSetSolver built with scalable=True")
+        self.load_factor = float(factor)
+        self.load = self.load_factor * self.unit_load
+        self.support_values = self.load_factor * self.unit_support_values
         self._solved = self._internal = None
-        if self.factor is None:
-            return
-        self.values = self.support_values.copy()
-        self.values[self.normal_dofs[self.reference]] = self.gap[self.reference]
-        rhs = self.load - self.stiffness @ self.values
-        rhs[~self.free] = self.values[~self.free]
-        self.base = np.ascontiguousarray(np.asarray(self.factor.solve(rhs)).reshape(-1))
-        self.column_solves += 1
+        if self.factor is not None:
+            self.values = self.support_values.copy()
+            self.values[self.normal_dofs[self.reference]] = self.gap[self.reference]
+            self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
 
     @property
     def free_rows(self) -> np.ndarray:
@@ -777,15 +783,28 @@ class ActiveSetSolver:
         self.factor = None  # a CHOLMOD refactorisation overwrites the previous factor
         self.factor = self.factorizer.factorize(masked, check=False)
         self.factorizations += 1
-        rhs = self.load - k @ self.values
-        rhs[fixed] = self.values[fixed]
+        if self.scalable:
+            # The right-hand side is f (F − K s) + (−K g) on the equations and f s + g on the
+            # fixed unknowns (s the unit prescribed values, g the gaps of the reference set).
+            gaps = self.values - self.support_values
+            parts = [self.unit_load - k @ self.unit_support_values, -(k @ gaps)]
+            parts[0][fixed] = self.unit_support_values[fixed]
+            parts[1][fixed] = gaps[fixed]
+        else:
+            parts = [self.load - k @ self.values]
+            parts[0][fixed] = self.values[fixed]
         # The singularity probe's solve rides along with the first solve of the factor.
-        probe = probe_vector(len(rhs), self.free)
+        probe = probe_vector(len(parts[0]), self.free)
         started = time.perf_counter()
-        both = np.asarray(self.factor.solve(np.column_stack([rhs, probe]))).reshape(len(rhs), 2)
+        solved = np.asarray(self.factor.solve(np.column_stack([*parts, probe]))).reshape(len(probe), -1)
         if self.column_seconds is None:
-            self.column_seconds = (time.perf_counter() - started) / 2
-        self.base = np.ascontiguousarray(both[:, 0])
+            self.column_seconds = (time.perf_counter() - started) / solved.shape[1]
+        if self.scalable:
+            self.base_parts = (np.ascontiguousarray(solved[:, 0]), np.ascontiguousarray(solved[:, 1]))
+            self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
+        else:
+            self.base = np.ascontiguousarray(solved[:, 0])
+        both = solved[:, [0, -1]]
         # ‖K00‖∞ over its equations: the masked rows keep only their free columns.
         norm = float((self.absolute @ self.free.astype(float))[self.free].max(initial=0.0))
         self.checks.append(check_factorization(masked, self.factor, equations=self.free, probe=probe,
