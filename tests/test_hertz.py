@@ -30,3 +30,16 @@ def test_hertz_within_two_percent_and_converging(method):
         coarse, fine = abs(figures[0][key]), abs(figures[1][key])
         assert coarse <= 0.02 and fine <= 0.02, (key, coarse, fine)
         assert fine < coarse, (key, coarse, fine)
+
+
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_the_quarter_disk_against_the_same_closed_form(method):
+    """The quarter disk models half the cylinder (symmetry axis at s = 0): its zone runs from
+    the axis to one end and Hertz's P is twice its contact force. Its figures match the
+    closed form within the half-disk's 2% (its graded mesh is the same)."""
+    case = shipped_case("hertz_quarter")
+    outcome = solve_case(case, method=method)
+    figures = hertz_comparison(outcome, radius=1.0, symmetry_axis=0.0)
+    assert figures["load_per_thickness"] == pytest.approx(2 * outcome.solution.contact.nodal_force.sum())
+    for key in KEYS:
+        assert abs(figures[key]) <= 0.02, (key, figures[key])
