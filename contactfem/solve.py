@@ -212,6 +212,7 @@ def solve_load_path(
     factors = case.load_path.factors
     timings: dict[str, float] = {}
     problem = prepare(case, refine=refine, progress=say, timings=timings)
+    _refuse_oversized_path(case, problem)
     clock = time.perf_counter()
     say(f"solving {len(factors)} load steps with method {contact_method.equation} ({method_name}), "
         f"backend {backend}")
@@ -247,6 +248,27 @@ def solve_load_path(
                       factorizations=sum(k.factorizations for k in kernels),
                       timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess},
                       sequencing=sequencing)
+
+
+#: The share of this machine's memory a load path's steps may hold (every step's fields are
+#: kept until the path's files are written).
+PATH_MEMORY_SHARE = 0.25
+
+
+def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
+    """Refuse, before solving, a path whose steps' fields (displacement, stresses, von Mises,
+    contact fields; kept for the series and path.h5) would not fit in a quarter of memory."""
+    from contactfem.estimate import machine_memory
+
+    mesh = problem.mesh
+    per_step = 8 * (2 * mesh.n_points + 5 * mesh.n_triangles + 6 * len(problem.contact.nodes))
+    steps = len(case.load_path.factors)
+    allowed = PATH_MEMORY_SHARE * machine_memory()
+    if steps * per_step > allowed:
+        raise CaseError(
+            f"{case.source.name}: load_path: {steps} steps of this mesh ({problem.n_unknowns} unknowns) would hold "
+            f"about {steps * per_step / 2**30:.3g} GiB of fields, more than a quarter of this machine's memory "
+            f"({allowed / 2**30:.3g} GiB); use at most {max(1, int(allowed // per_step))} steps or a coarser mesh")
 
 
 def _serial_backend(case: Case) -> str:

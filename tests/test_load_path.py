@@ -162,3 +162,13 @@ def test_the_problem_scaled_by_a_factor_scales_every_load():
     assert half.platens[0].value == 0.5 * problem.platens[0].value
     assert half.stiffness is problem.stiffness
     assert np.allclose(half.loads.load_vector(problem.mesh), 0.5 * problem.loads.load_vector(problem.mesh))
+
+
+def test_a_path_whose_steps_would_not_fit_in_memory_is_refused_before_solving(monkeypatch):
+    import contactfem.estimate as estimate
+
+    data = square_path([0.5, 1.0])
+    data["load_path"] = {"steps": 1000}
+    monkeypatch.setattr(estimate, "machine_memory", lambda: 64 * 2**20)  # 64 MiB
+    with pytest.raises(CaseError, match=r"load_path: 1000 steps of this mesh .* use at most \d+ steps"):
+        solve_load_path(case_of(data))
