@@ -42,7 +42,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from contactfem.errors import SolverError
-from contactfem.linalg import FactorCheck, Factorizer, check_factorization, probe_vector
+from contactfem.linalg import (
+    FactorCheck,
+    Factorizer,
+    check_factorization,
+    probe_vector,
+    solve_sparse_columns,
+)
 
 EPS = float(np.finfo(float).eps)
 #: Iterative refinement of each linear solve: at most this many corrections, stopping once
@@ -823,17 +829,18 @@ class ActiveSetSolver:
         n = self.stiffness.shape[0]
         missing = np.unique(nodes[self.slot_of[nodes] < 0])
         if len(missing):
-            rhs = np.zeros((n, len(missing)))
-            for k, j in enumerate(missing):
-                dof = self.normal_dofs[j]
-                if self.reference[j]:
-                    row = self.stiffness[dof]  # = column dof, K being symmetric
-                    rhs[row.indices, k] = row.data
-                    rhs[~self.free, k] = 0.0
-                else:
-                    rhs[dof, k] = 1.0
+            # The right-hand sides are sparse: K0j (the row of a released normal, K being
+            # symmetric, restricted to the free unknowns) or e_j (an added one).
+            dofs = self.normal_dofs[missing]
+            released = self.reference[missing]
+            rows_k = self.stiffness[dofs[released]].tocoo()
+            keep = self.free[rows_k.col]
+            columns = np.concatenate([np.flatnonzero(released)[rows_k.row[keep]], np.flatnonzero(~released)])
+            entries = np.concatenate([rows_k.col[keep], dofs[~released]])
+            values = np.concatenate([rows_k.data[keep], np.ones(int((~released).sum()))])
+            rhs = sp.csc_matrix((values, (entries, columns)), shape=(n, len(missing)))
             started = time.perf_counter()
-            solved = np.asarray(self.factor.solve(rhs)).reshape(n, len(missing))
+            solved = solve_sparse_columns(self.factor, rhs)
             self.column_seconds = (time.perf_counter() - started) / len(missing)
             self.column_solves += len(missing)
             count = self.column_count
