@@ -267,9 +267,10 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       mpiexec -n 4 contactfem solve cases/square.yaml --backend petsc   # across 4 MPI ranks
     """
     from contactfem.io.atomic import claimed_directory
+    from contactfem.io.path import PathWriter
     from contactfem.io.registry import PATH_PNG
     from contactfem.plots import plot_load_path
-    from contactfem.report import build_report, load_path_figures
+    from contactfem.report import build_report, load_path_figures, path_step_figures
     from contactfem.solve import solve_case, solve_load_path
 
     progress = _progress(quiet)
@@ -283,18 +284,33 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
                                progress)
             return
         with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
-            path, extras = None, {}
-            if case.load_path is not None:
-                path = solve_load_path(case, method=method, refine=refine, progress=progress,
-                                       accept_uncertified=True)
-                result, extras = path.final, {"load_path": load_path_figures(path)}
-            else:
-                result = solve_case(case, method=method, refine=refine, progress=progress, accept_uncertified=True)
             with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+                writer = None
+                if case.load_path is not None:
+                    # Each step's files go into the staging area as it is solved: a path
+                    # holds one step in memory, and a failed one leaves nothing behind.
+                    writer = PathWriter(staging, case.load_path.factors, case.text)
+                    steps: list[dict] = []
+
+                    def write_step(index: int, factor: float, step) -> None:
+                        steps.append(path_step_figures(factor, step))
+                        writer.add(index, step.solution)
+
+                    try:
+                        path = solve_load_path(case, method=method, refine=refine, progress=progress,
+                                               accept_uncertified=True, on_step=write_step, keep_steps=False)
+                    except BaseException:
+                        writer.close()  # its half-written files go with the staging area
+                        raise
+                    result, extras = path.final, {"load_path": load_path_figures(path, steps)}
+                else:
+                    result = solve_case(case, method=method, refine=refine, progress=progress,
+                                        accept_uncertified=True)
+                    extras = {}
                 report = _write_solution(staging, case, result, build_report(case, result, extras), progress,
-                                         path=path)
+                                         path_writer=writer)
                 names = _files_of(case.output.files)
-                if path is not None:
+                if writer is not None:
                     names.append(plot_load_path(staging / PATH_PNG, report["load_path"]["curves"],
                                                 case.units.to_dict(), title=case.title).name)
                 if make_plot:
@@ -400,18 +416,17 @@ def _files_of(formats: tuple[str, ...]) -> list[str]:
     return [name for format in formats for name in FORMATS[format].files]
 
 
-def _write_solution(staging: Path, case, result, report: dict, progress, path=None) -> dict:
-    """Write one result's files (the case's formats) into a staging directory, and the steps of
-    the load ``path`` (a :class:`contactfem.solve.PathResult`) that ended in it. Returns the
-    report as written (its timings include the writing)."""
+def _write_solution(staging: Path, case, result, report: dict, progress, path_writer=None) -> dict:
+    """Write one result's files (the case's formats) into a staging directory, and finish the
+    files of the load path that ended in it (``path_writer``, which wrote its steps there).
+    Returns the report as written (its timings include the writing)."""
     from contactfem.io.registry import PathData, result_data, write_result
 
     _refuse_non_finite(case, result.solution, report)
-    steps = None
-    if path is not None:
-        steps = PathData(factors=path.factors, solutions=tuple(step.solution for step in path.steps),
-                         curves=report["load_path"]["curves"])
-    _, written_report = write_result(result_data(case, result, report, steps), staging, case.output.files,
+    path = None
+    if path_writer is not None:
+        path = PathData(writer=path_writer, curves=report["load_path"]["curves"])
+    _, written_report = write_result(result_data(case, result, report, path), staging, case.output.files,
                                      progress=progress)
     return written_report
 

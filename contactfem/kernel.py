@@ -35,7 +35,7 @@ import dataclasses
 import enum
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -467,22 +467,22 @@ def solve_path(
     *,
     backend: str = "auto",
     initial_active: np.ndarray | None = None,
-    on_step: Callable[[int, float, KernelResult], None] | None = None,
     **options,
-) -> list[KernelResult]:
-    """Solve ``system`` with its load and prescribed values multiplied by each of ``factors`` in turn.
+) -> Iterator[KernelResult]:
+    """Solve ``system`` with its load and prescribed values multiplied by each of ``factors``
+    in turn, yielding each step's result as it is solved (the caller keeps what it needs: a
+    long path need not hold every step).
 
     The stiffness and the constraints do not change along the path, so one
     :class:`ActiveSetSolver` serves every step: its factorisation and Schur columns carry
     over, a new load factor costs no solve (the reference solution is linear in it: see
-    :meth:`ActiveSetSolver.set_load_factor`), and each step starts from the
-    step's active set extrapolated (:func:`extrapolated_active`; the first from
-    ``initial_active``). ``options`` are those of :func:`solve_contact`. Stops after the
-    first step that does not converge; returns the results of the steps solved.
+    :meth:`ActiveSetSolver.set_load_factor`), and each step starts from the active set of
+    the steps before it extrapolated in the factor (:func:`extrapolated_active`; the first
+    from ``initial_active``). ``options`` are those of :func:`solve_contact`. Stops after
+    the first step that does not converge.
     """
     tolerance = options.get("tolerance", 1e-10)
     linear = ActiveSetSolver(system, backend, tolerance=tolerance, scalable=True)
-    results: list[KernelResult] = []
     active = initial_active
     c = options.get("c") or default_c(system)
     normal_dofs = np.asarray(system.normal_dofs, dtype=np.int64)
@@ -499,14 +499,11 @@ def solve_path(
         result = solve_contact(step, backend=backend, initial_active=active, linear=linear, **options)
         # The step's solves with the factor: its Schur columns (a new load costs none).
         result.column_solves = linear.column_solves - solves_before
-        results.append(result)
-        if on_step is not None:
-            on_step(index, factor, result)
+        yield result
         if result.status is not Status.CONVERGED:
-            break
+            return
         active = result.active
-        history.append((factor, result.nodal_force, result.displacement[normal_dofs] - gap))
-    return results
+        history = [*history[-1:], (factor, result.nodal_force, result.displacement[normal_dofs] - gap)]
 
 
 def extrapolated_active(states: list[tuple[float, np.ndarray, np.ndarray]], factor: float, c: float) -> np.ndarray:

@@ -251,31 +251,38 @@ def contact_and_reactions(problem: DiscreteProblem, displacement: np.ndarray,
     return push, reactions
 
 
-def load_path_figures(path: "PathResult") -> dict:
+def load_path_figures(path: "PathResult", steps: list[dict] | None = None) -> dict:
     """report.json's ``load_path``: per step its factor, the solve's account and the curves a
     user plots against the factor (total contact force, contact width along the obstacle,
-    active nodes, each platen's advance and force); ``curves`` holds the same as columns."""
-    steps = []
-    for factor, step in zip(path.factors, path.steps):
-        solution, kernel = step.solution, step.kernel
-        zone = contact_zone(step.problem, solution.contact.active)
-        _, reactions = contact_and_reactions(step.problem, solution.displacement, solution.contact.nodal_force)
-        platens = platen_figures(step.problem, solution.displacement, reactions)
-        steps.append({
-            "factor": float(factor),
-            "status": kernel.status.value,
-            "iterations": kernel.iterations,
-            "factorizations": kernel.factorizations,
-            "column_solves": kernel.column_solves,
-            "seconds": float(step.timings["solve"]),
-            "active_nodes": zone["active_nodes"],
-            "contact_patches": len(zone["intervals"]),
-            "contact_force": float(solution.contact.nodal_force.sum()),
-            "contact_width": float(sum(i["abscissa"][1] - i["abscissa"][0] for i in zone["intervals"])),
-            "platens": {name: {"advance": entry["advance"], "force": entry["force"]} for name, entry in platens.items()},
-        })
+    active nodes, each platen's advance and force); ``curves`` holds the same as columns.
+
+    ``steps`` are the steps' :func:`path_step_figures`, when they were taken as the path
+    was solved (``path`` then holds only its last step)."""
+    if steps is None:
+        steps = [path_step_figures(factor, step) for factor, step in zip(path.factors, path.steps)]
     return {"steps": steps, "curves": path_curves(steps), "factorizations": path.factorizations,
             "seconds": path.seconds}
+
+
+def path_step_figures(factor: float, step: "SolveResult") -> dict:
+    """One step of a load path in report.json's ``load_path.steps``."""
+    solution, kernel = step.solution, step.kernel
+    zone = contact_zone(step.problem, solution.contact.active)
+    _, reactions = contact_and_reactions(step.problem, solution.displacement, solution.contact.nodal_force)
+    platens = platen_figures(step.problem, solution.displacement, reactions)
+    return {
+        "factor": float(factor),
+        "status": kernel.status.value,
+        "iterations": kernel.iterations,
+        "factorizations": kernel.factorizations,
+        "column_solves": kernel.column_solves,
+        "seconds": float(step.timings["solve"]),
+        "active_nodes": zone["active_nodes"],
+        "contact_patches": len(zone["intervals"]),
+        "contact_force": float(solution.contact.nodal_force.sum()),
+        "contact_width": float(sum(i["abscissa"][1] - i["abscissa"][0] for i in zone["intervals"])),
+        "platens": {name: {"advance": entry["advance"], "force": entry["force"]} for name, entry in platens.items()},
+    }
 
 
 def path_curves(steps: list[dict]) -> dict[str, list[float]]:

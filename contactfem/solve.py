@@ -172,7 +172,8 @@ def solve_case(
 @dataclass(frozen=True, eq=False)
 class PathResult:
     """A load path solved step by step: ``steps[i]`` is the solve at ``factors[i]`` (its
-    problem scaled by that factor, its timings its own). ``seconds`` is the contact solve
+    problem scaled by that factor, its timings its own), or ``steps`` holds the last step
+    only when the caller took them one by one (``keep_steps=False``). ``seconds`` is the contact solve
     of the whole path, ``factorizations`` its factorisations, ``timings`` and
     ``sequencing`` those of the whole path (as a single solve reports them)."""
 
@@ -196,8 +197,14 @@ def solve_load_path(
     refine: int | None = None,
     progress: Progress | None = None,
     accept_uncertified: bool = False,
+    on_step: Callable[[int, float, SolveResult], None] | None = None,
+    keep_steps: bool = True,
 ) -> PathResult:
     """Solve ``case`` at each factor of its load path (``case.load_path``) with one linear solver.
+
+    ``on_step(index, factor, step)`` receives each step as it is solved (to write it out);
+    with ``keep_steps`` false the result holds only the last step, so that a long path
+    needs the memory of one step, not of all.
 
     Raises
     ------
@@ -212,7 +219,8 @@ def solve_load_path(
     factors = case.load_path.factors
     timings: dict[str, float] = {}
     problem = prepare(case, refine=refine, progress=say, timings=timings)
-    _refuse_oversized_path(case, problem)
+    if keep_steps:
+        _refuse_oversized_path(case, problem)
     clock = time.perf_counter()
     say(f"solving {len(factors)} load steps with method {contact_method.equation} ({method_name}), "
         f"backend {backend}")
@@ -221,43 +229,45 @@ def solve_load_path(
     initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), c, say, factors[0])
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
-    started = [clock]
-
-    def on_step(index: int, factor: float, kernel: KernelResult) -> None:
-        seconds = time.perf_counter() - started[0]
+    solved = factorizations = 0
+    postprocess = 0.0
+    last: KernelResult | None = None
+    started = clock
+    path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
+                      max_iterations=case.solver.max_iterations, backend=backend, initial_active=initial_active)
+    for index, (factor, kernel) in enumerate(zip(factors, path)):
+        seconds = time.perf_counter() - started
+        solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
         say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
             f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
         scaled = problem.scaled(factor)
         post = time.perf_counter()
         solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel, gradients)
-        steps.append(SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel,
-                                 backend=backend, timings={"solve": seconds, "postprocess": time.perf_counter() - post}))
-        started[0] = time.perf_counter()
-
-    kernels = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
-                         max_iterations=case.solver.max_iterations, backend=backend, on_step=on_step,
-                         initial_active=initial_active)
+        step = SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel, backend=backend,
+                           timings={"solve": seconds, "postprocess": time.perf_counter() - post})
+        postprocess += step.timings["postprocess"]
+        if on_step is not None:
+            on_step(index, factor, step)
+        steps = [*steps, step] if keep_steps else [step]
+        started = time.perf_counter()
     seconds = time.perf_counter() - clock
-    last = kernels[-1]
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
-    if len(kernels) < len(factors) or last.status not in accepted:
-        raise SolverError(f"{case.source.name}: method {method_name}: load step {len(kernels)} of {len(factors)} "
-                          f"(factor {factors[len(kernels) - 1]:g}): {last.message}")
-    postprocess = sum(step.timings["postprocess"] for step in steps)
-    return PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds,
-                      factorizations=sum(k.factorizations for k in kernels),
+    if solved < len(factors) or last.status not in accepted:
+        raise SolverError(f"{case.source.name}: method {method_name}: load step {solved} of {len(factors)} "
+                          f"(factor {factors[solved - 1]:g}): {last.message}")
+    return PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds, factorizations=factorizations,
                       timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess},
                       sequencing=sequencing)
 
 
-#: The share of this machine's memory a load path's steps may hold (every step's fields are
-#: kept until the path's files are written).
+#: The share of this machine's memory the steps of a load path kept whole may hold.
 PATH_MEMORY_SHARE = 0.25
 
 
 def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
     """Refuse, before solving, a path whose steps' fields (displacement, stresses, von Mises,
-    contact fields; kept for the series and path.h5) would not fit in a quarter of memory."""
+    contact fields), all kept, would not fit in a quarter of memory (``contactfem solve``
+    writes each step as it is solved and keeps none)."""
     from contactfem.estimate import machine_memory
 
     mesh = problem.mesh

@@ -172,3 +172,24 @@ def test_a_path_whose_steps_would_not_fit_in_memory_is_refused_before_solving(mo
     monkeypatch.setattr(estimate, "machine_memory", lambda: 64 * 2**20)  # 64 MiB
     with pytest.raises(CaseError, match=r"load_path: 1000 steps of this mesh .* use at most \d+ steps"):
         solve_load_path(case_of(data))
+
+
+def test_steps_taken_one_by_one_leave_one_step_in_the_result():
+    data = square_path([0.5, 1.0])
+    seen = []
+    path = solve_load_path(case_of(data), on_step=lambda index, factor, step: seen.append((index, factor)),
+                           keep_steps=False)
+    assert seen == [(0, 0.5), (1, 1.0)] and len(path.steps) == 1 and path.final.solution is path.steps[0].solution
+
+
+def test_a_path_that_fails_writes_nothing(tmp_path):
+    data = hertz_pressed({"force": FORCE})
+    data["load_path"] = {"steps": 3}
+    data["solver"] = {"max_iterations": 1}
+    case_file = tmp_path / "fails.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    result = make_runner().invoke(main, ["solve", str(case_file), "--out", str(out)])
+    assert result.exit_code == 1, result.stderr
+    assert "load step 1 of 3" in result.stderr
+    assert not out.exists() or not [p for p in out.iterdir() if not p.name.startswith(".")]

@@ -100,7 +100,7 @@ def supports(case: Case, mesh: Mesh) -> Supports:
             values[dofs] = prescribed
             owner[dofs] = index
     prescribed = owner.reshape(-1, 2) >= 0
-    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh, np.zeros_like(prescribed))
+    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh)
     # A symmetry node with one component prescribed is held completely when the line is not
     # along that component: u · n_s = 0 then gives the other one.
     one = prescribed[symmetry_nodes].sum(axis=1) == 1
@@ -129,7 +129,7 @@ def supports(case: Case, mesh: Mesh) -> Supports:
 
 
 def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """The outward unit normal of a straight part and its edges; refuses a part that is not straight."""
+    """The outward unit normal of a straight part and its nodes; refuses a part that is not straight."""
     edges = mesh.edges_of(name)
     if len(edges) == 0:
         raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
@@ -144,24 +144,21 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.n
             f"{case.source.name}: boundary.{name} = {kind}: the part is not straight; "
             f"a {kind} {'support' if kind == 'symmetry' else 'part'} needs all its edges on one line"
         )
-    return normal, edges
+    return normal, np.unique(edges)
 
 
-def _symmetry_lines(case: Case, mesh: Mesh, prescribed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes of the symmetry parts (without prescribed components) and their line's normal.
+def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes of the symmetry parts and their line's normal.
 
     A symmetry part must be straight: all its edges on one line, whose outward unit normal
     n_s is the direction held (u · n_s = 0).
     """
     nodes, normals = [], []
     for part in case.parts:
-        if part.kind != "symmetry":
-            continue
-        normal, edges = _straight_normal(case, mesh, part.name, "symmetry")
-        part_nodes = np.unique(edges)
-        part_nodes = part_nodes[~prescribed[part_nodes].any(axis=1)]
-        nodes.append(part_nodes)
-        normals.append(np.tile(normal, (len(part_nodes), 1)))
+        if part.kind == "symmetry":
+            normal, part_nodes = _straight_normal(case, mesh, part.name, "symmetry")
+            nodes.append(part_nodes)
+            normals.append(np.tile(normal, (len(part_nodes), 1)))
     if not nodes:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
     return np.concatenate(nodes), np.concatenate(normals)
@@ -178,8 +175,7 @@ def _platens(case: Case, mesh: Mesh, prescribed: np.ndarray, symmetry_nodes: np.
     for part in case.parts:
         if part.kind != "platen":
             continue
-        normal, edges = _straight_normal(case, mesh, part.name, "platen")
-        nodes = np.unique(edges)
+        normal, nodes = _straight_normal(case, mesh, part.name, "platen")
         nodes = nodes[~prescribed[nodes].any(axis=1)]
         if len(nodes) == 0:
             raise CaseError(f"{case.source.name}: boundary.{part.name} = platen: every node of the part has a "

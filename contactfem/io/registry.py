@@ -19,15 +19,7 @@ import numpy as np
 
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.hdf5 import SOLUTION_H5, write_hdf5
-from contactfem.io.path import (
-    PATH_CSV,
-    PATH_H5,
-    PATH_PVD,
-    PATH_STEP_FILES,
-    write_path_csv,
-    write_path_h5,
-    write_path_series,
-)
+from contactfem.io.path import PATH_CSV, PATH_H5, PATH_PVD, PATH_STEP_FILES, PathWriter
 from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, SOLUTION_VTU, write_vtu
 from contactfem.io.xdmf import COMPANION_H5, XDMF_FILE, write_xdmf
 from contactfem.result import Solution
@@ -61,11 +53,10 @@ def schema_path(file_name: str) -> Path:
 
 @dataclass(frozen=True, eq=False)
 class PathData:
-    """A load path's steps for its writers: the factors, each step's solution, and the curves
-    (report.json's ``load_path.curves``)."""
+    """A load path for its writer: the :class:`~contactfem.io.path.PathWriter` that wrote its
+    steps as they were solved, and the curves (report.json's ``load_path.curves``)."""
 
-    factors: tuple[float, ...]
-    solutions: tuple[Solution, ...]
+    writer: PathWriter
     curves: dict[str, list[float]]
 
 
@@ -160,14 +151,12 @@ def _write_csv(data: ResultData, directory: Path) -> list[Path]:
 
 
 def _write_path(data: ResultData, directory: Path) -> list[Path]:
-    path = data.path
-    if path is None:
+    # The steps are written as they are solved, into the same staging directory.
+    if data.path is None:
         return []
-    written = write_path_series(directory, path.factors, path.solutions)
-    written.append(write_path_h5(directory, path.factors, path.solutions, path.curves, case_text=data.case_text,
-                                 attributes=data.attributes))
-    written.append(write_path_csv(directory, path.curves))
-    return written
+    if data.path.writer.directory != Path(directory):
+        raise ValueError("a load path's files are finished where its steps were written")
+    return data.path.writer.finish(data.path.curves, data.attributes)
 
 
 def _write_json(data: ResultData, directory: Path) -> list[Path]:

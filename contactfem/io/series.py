@@ -19,10 +19,11 @@ from contactfem.io.atomic import atomic_write_text, ensure_directory
 from contactfem.io.vtu import solution_grids, write_grid
 from contactfem.result import Solution
 
-__all__ = ["write_series", "series_xml"]
+__all__ = ["series_files", "series_xml", "write_series"]
 
 
-def _files(stem: str, label: str) -> tuple[str, str]:
+def series_files(stem: str, label: str) -> tuple[str, str]:
+    """The body and contact VTU files of entry ``label`` of the series ``stem``."""
     return f"{stem}-{label}.vtu", f"{stem}-{label}-contact.vtu"
 
 
@@ -32,7 +33,7 @@ def series_xml(stem: str, labels: Sequence[str], times: Sequence[float] | None =
     collection = ET.SubElement(root, "Collection")
     times = range(len(labels)) if times is None else times
     for time, label in zip(times, labels):
-        for part, file in enumerate(_files(stem, label)):
+        for part, file in enumerate(series_files(stem, label)):
             ET.SubElement(collection, "DataSet", timestep=str(time) if isinstance(time, int) else repr(float(time)), group="", part=str(part),
                           file=file, name=f"{label} {('body', 'contact')[part]}")
     ET.indent(root)
@@ -54,7 +55,7 @@ def write_series(directory: Path | str, stem: str, entries: Sequence[tuple[str, 
             raise ValueError(f"series label {label!r} is not a plain name")
     written = []
     for label, solution in entries:
-        for grid, file in zip(solution_grids(solution), _files(stem, label)):
+        for grid, file in zip(solution_grids(solution), series_files(stem, label)):
             written.append(write_grid(directory / file, grid))
     written.append(atomic_write_text(directory / f"{stem}.pvd", series_xml(stem, labels, times)))
     return written
