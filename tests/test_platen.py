@@ -155,3 +155,33 @@ def test_a_platen_in_line_with_a_symmetry_part_is_refused():
     data["boundary"].update({"mirror": "symmetry", "top": {"platen": {"force": FORCE}}})
     with pytest.raises(CaseError, match=r"shares the node \(0.5, 1\) with a symmetry line parallel to it"):
         prepare(case_of(data))
+
+
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_a_block_between_a_platen_and_the_floor_is_in_uniform_compression(method):
+    """A patch test. A W x H block on a frictionless floor, pressed by a frictionless platen
+    with force P, held sideways by a symmetry line: the exact solution is uniaxial stress
+    σ_yy = −P/W (plane strain: ε_yy = −(1 − ν²) P/(E W), ε_xx = ν (1 + ν) P/(E W)), linear in
+    x and y, so P1 on any mesh reproduces it: the platen advances (1 − ν²) P H/(E W) and the
+    contact pressure is P/W at every node (the multiplier of either method), to round-off."""
+    width, height, young, nu = 2.0, 1.0, 1.0e6, 0.3
+    data = {
+        "title": "block in uniform compression",
+        "geometry": {"polygon": {"vertices": [[0, 0], [width, 0], [width, height], [0, height]],
+                                 "edges": ["floor", "right", "top", "left"]}},
+        "mesh": {"size": 0.17},
+        "material": {"E": young, "nu": nu},
+        "boundary": {"floor": "contact", "right": "free", "top": {"platen": {"force": FORCE}}, "left": "symmetry"},
+        "obstacle": {"point": [0, 0], "normal": [0, -1]},
+    }
+    outcome = solved(data, method=method)
+    pressure = FORCE / width
+    advance = (1 - nu**2) * FORCE * height / (young * width)
+    assert platen_of(outcome)["advance"] == pytest.approx(advance, rel=1e-10)
+    contact = outcome.solution.contact
+    assert contact.active.all()
+    assert np.abs(contact.multiplier - pressure).max() <= 1e-10 * pressure
+    points = outcome.problem.mesh.points
+    exact = np.stack([nu * (1 + nu) * pressure / young * points[:, 0],
+                      -(1 - nu**2) * pressure / young * points[:, 1]], axis=1)
+    assert np.abs(outcome.solution.displacement - exact).max() <= 1e-10 * np.abs(exact).max()
