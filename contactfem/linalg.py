@@ -119,37 +119,64 @@ class _Cholmod:
         return self._factor(rhs)
 
 
+@dataclass
+class _CvxoptAnalysis:
+    """What a later matrix of the same pattern reuses: CHOLMOD's symbolic analysis, cvxopt's
+    copy of the lower triangle (whose values are overwritten), and where its entries sit in
+    the CSR matrix's data, for the pattern (indptr, indices) they were computed from."""
+
+    symbolic: object
+    stored: object
+    positions: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+
+    def matches(self, matrix: sp.csr_matrix) -> bool:
+        return (np.array_equal(self.indptr, matrix.indptr) and np.array_equal(self.indices, matrix.indices))
+
+
 class _CvxoptCholmod:
     """CHOLMOD through cvxopt (a pip wheel that bundles SuiteSparse and OpenBLAS).
 
-    cvxopt takes its own sparse matrix, built from the lower triangle's triplets; the
-    temporaries are released before the numeric factorisation, so that the peak is the
-    factor's. A non-positive pivot raises ArithmeticError, reported as a SolverError.
+    cvxopt takes its own sparse matrix of the lower triangle, built from triplets in its
+    column order. A refactorisation of the same pattern (the kernel's, masked differently
+    for each active set) only gathers the new values into that matrix: rebuilding it took
+    0.5 s of each refactorisation at 694 000 unknowns. Keeping it costs no peak memory: it
+    exists during every numeric factorisation anyway. A non-positive pivot raises
+    ArithmeticError, reported as a SolverError.
     """
 
-    def __init__(self, matrix: sp.spmatrix, name: str, analysis: object | None = None) -> None:
+    def __init__(self, matrix: sp.spmatrix, name: str, analysis: "_CvxoptAnalysis | None" = None) -> None:
         import cvxopt
         from cvxopt import cholmod
 
-        lower = sp.tril(matrix, format="csc")
-        n = lower.shape[0]
-        columns = np.repeat(np.arange(n, dtype=np.int64), np.diff(lower.indptr))
-        values = cvxopt.matrix(np.ascontiguousarray(lower.data, dtype=float))
-        rows = cvxopt.matrix(lower.indices.astype(np.int64))
-        del lower
-        cols = cvxopt.matrix(columns)
-        del columns
-        stored = cvxopt.spmatrix(values, rows, cols, (n, n))
-        del values, rows, cols
-        _release_freed_memory()
+        csr = sp.csr_matrix(matrix)
+        if not csr.has_canonical_format:
+            csr = csr.copy()
+            csr.sum_duplicates()
+        if analysis is not None and analysis.matches(csr):
+            stored, symbolic, positions = analysis.stored, analysis.symbolic, analysis.positions
+            # ``stored.V`` reads a copy; assigning the attribute replaces the values in place.
+            stored.V = cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float))
+        else:
+            n = csr.shape[0]
+            rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(csr.indptr))
+            lower = np.flatnonzero(csr.indices <= rows)
+            # cvxopt stores by column, then row: the lower triangle's entries in that order.
+            positions = lower[np.lexsort((rows[lower], csr.indices[lower]))]
+            stored = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float)),
+                                     cvxopt.matrix(rows[positions]),
+                                     cvxopt.matrix(csr.indices[positions].astype(np.int64)), (n, n))
+            del rows, lower
+            _release_freed_memory()
+            symbolic = cholmod.symbolic(stored, uplo="L")
         try:
-            symbolic = cholmod.symbolic(stored, uplo="L") if analysis is None else analysis
             cholmod.numeric(stored, symbolic)
         except ArithmeticError as error:
             raise SolverError(f"{name} is singular or not positive definite (CHOLMOD: pivot {error} is not positive)") from error
         self._cholmod, self._dense = cholmod, cvxopt.matrix
         self._factor = symbolic
-        self.analysis = symbolic
+        self.analysis = _CvxoptAnalysis(symbolic, stored, positions, csr.indptr, csr.indices)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         rhs = np.asarray(rhs, dtype=float)

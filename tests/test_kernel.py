@@ -379,3 +379,26 @@ def test_the_safeguard_holds_oscillating_nodes_and_says_how_it_resolved_the_cycl
     assert result.status is Status.CONVERGED
     assert result.cycle_detected_at is not None
     assert "resolved by" in result.message and "least-index" in result.message
+
+
+@pytest.mark.parametrize("backend", available_backends())
+def test_a_refactorisation_of_the_same_pattern_solves_its_own_matrix(backend):
+    """The kernel refactorises matrices of one pattern with different values (each active
+    set masks other rows); a backend that keeps its analysis (CHOLMOD) must take the new
+    values: each factorisation solves its own matrix to round-off."""
+    from contactfem.linalg import Factorizer
+
+    rng = np.random.default_rng(7)
+    n = 60
+    base = sp.random(n, n, density=0.08, random_state=rng, format="csr")
+    pattern = (base + base.T + sp.identity(n)).tocsr()
+    factorizer = Factorizer(backend, name="the test matrix")
+    for scale in (1.0, 3.0, 0.25):
+        matrix = pattern.copy()
+        matrix.data = rng.uniform(-1, 1, matrix.nnz)
+        matrix = (matrix + matrix.T).tocsr()
+        matrix = (matrix + sp.identity(n) * (np.abs(matrix).sum(axis=1).max() + scale)).tocsr()
+        matrix.sort_indices()
+        rhs = rng.uniform(size=n)
+        solution = np.asarray(factorizer.factorize(matrix, check=False).solve(rhs)).ravel()
+        assert np.abs(matrix @ solution - rhs).max() <= 1e-12 * np.abs(rhs).max()
