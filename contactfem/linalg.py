@@ -160,14 +160,17 @@ class _CvxoptCholmod:
             stored.V = cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float))
         else:
             n = csr.shape[0]
-            rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(csr.indptr))
-            lower = np.flatnonzero(csr.indices <= rows)
-            # cvxopt stores by column, then row: the lower triangle's entries in that order.
-            positions = lower[np.lexsort((rows[lower], csr.indices[lower]))]
+            # cvxopt stores by column, then row: the lower triangle in CSC order, with each
+            # entry's position in the CSR data carried through the conversion (plus one, so
+            # that no entry is a zero the conversion could drop).
+            numbered = sp.csr_matrix((np.arange(1, csr.nnz + 1, dtype=float), csr.indices, csr.indptr),
+                                     shape=csr.shape)
+            lower = sp.tril(numbered, format="csc")
+            positions = lower.data.astype(np.int64) - 1
+            columns = np.repeat(np.arange(n, dtype=np.int64), np.diff(lower.indptr))
             stored = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float)),
-                                     cvxopt.matrix(rows[positions]),
-                                     cvxopt.matrix(csr.indices[positions].astype(np.int64)), (n, n))
-            del rows, lower
+                                     cvxopt.matrix(lower.indices.astype(np.int64)), cvxopt.matrix(columns), (n, n))
+            del numbered, lower, columns
             _release_freed_memory()
             symbolic = cholmod.symbolic(stored, uplo="L")
         try:
