@@ -623,10 +623,25 @@ class ActiveSetSolver:
         self.support_values[self.fixed_dofs] = system.fixed_values
         self.unit_load, self.unit_support_values = self.load, self.support_values
         k = self.stiffness
-        self.entry_rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
-        self.diagonal = np.flatnonzero(self.entry_rows == k.indices)
-        if len(self.diagonal) != n:
+        rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
+        if int(np.count_nonzero(rows == k.indices)) != n:
             raise ValueError("the stiffness matrix must store its whole diagonal")
+        # What is factorised for an active set lives in one pattern, so that CHOLMOD's
+        # analysis serves every set: K's without the couplings of the supports, which are
+        # fixed for good (the contact normals are masked inside it). Kept as stored zeros,
+        # those couplings stay edges of the graph the ordering sees, and the square's
+        # factorisation took 1.2-1.5x as long (525k and 2.1M unknowns, CHOLMOD).
+        coupling = (self.supported[rows] | self.supported[k.indices]) & (rows != k.indices)
+        if coupling.any():
+            kept = ~coupling
+            rows = rows[kept]
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
+            self.pattern = sp.csr_matrix((k.data[kept], k.indices[kept], indptr), shape=k.shape)
+        else:
+            self.pattern = k
+        del coupling
+        self.entry_rows = rows
+        self.diagonal = np.flatnonzero(rows == self.pattern.indices)
         self.factorizations = 0
         self.column_solves = 0
         self.factorizer = Factorizer(
@@ -772,16 +787,17 @@ class ActiveSetSolver:
 
     def _factorize(self, active: np.ndarray) -> None:
         k = self.stiffness
+        pattern = self.pattern
         fixed = self.supported.copy()
         fixed[self.normal_dofs[active]] = True
         self.reference = active.copy()
         self.free = ~fixed
         self.values = self.support_values.copy()
         self.values[self.normal_dofs[active]] = self.gap[active]
-        keep = self.free[self.entry_rows] & self.free[k.indices]
-        data = np.where(keep, k.data, 0.0)
+        keep = self.free[self.entry_rows] & self.free[pattern.indices]
+        data = np.where(keep, pattern.data, 0.0)
         data[self.diagonal[fixed]] = 1.0
-        masked = sp.csr_matrix((data, k.indices, k.indptr), shape=k.shape)
+        masked = sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=k.shape)
         name = self.factorizer.name
         self.factor = None  # a CHOLMOD refactorisation overwrites the previous factor
         self.factor = self.factorizer.factorize(masked, check=False)
