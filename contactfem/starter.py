@@ -37,7 +37,8 @@ boundary:                    # part name -> condition
   left: free
   right: free
   bottom: contact            # may touch the obstacle
-  # other conditions: clamped, {{traction: [gx, gy]}}, {{pressure: p}}
+  # other conditions: clamped, symmetry, {{traction: [gx, gy]}}, {{pressure: p}},
+  # {{platen: {{force: P}}}} (a rigid frictionless platen pressing with P per unit thickness)
 
 obstacle:                    # the rigid half-plane below y = 0
   point: [0.0, 0.0]
@@ -51,6 +52,8 @@ solver:
 output:
   directory: results/{stem}  # relative to the working directory
   files: [vtu, h5, json]
+
+# load_path: {{steps: 10}}     # solve at 10 load factors up to 1 (a PVD series, curves)
 """
 
 
