@@ -380,37 +380,19 @@ def _peak_rss() -> int:
 
 
 def _problem_without_stiffness(case: Case, mesh, refinements: int) -> DiscreteProblem:
-    """The discrete problem as :func:`contactfem.discretize.build_problem` makes it, but for
-    the stiffness, which no rank assembles whole (``stiffness`` is None until rank 0 gets
-    a :class:`SolutionProduct`)."""
-    from contactfem.discretize.contact import contact_boundary
-    from contactfem.discretize.exact_checks import check_exact_contact
-    from contactfem.discretize.loads import compile_loads
-    from contactfem.discretize.supports import free_rigid_modes, supports
+    """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
+    is None until rank 0 gets a :class:`SolutionProduct`); refuses what this backend does
+    not handle yet."""
+    from contactfem.discretize import build_problem
 
-    material = case.material
-    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
-    loads = compile_loads(case, mesh)
-    held = supports(case, mesh)
-    contact = contact_boundary(case, mesh, held)
-    load = loads.load_vector(mesh)
-    platens = tuple(getattr(held, "platens", ()))
-    if platens:
+    problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False)
+    if problem.platens:
         raise SolverError(f"{case.source.name}: the petsc backend does not handle platens yet "
-                          f"({', '.join(p.name for p in platens)}); solve without --backend petsc")
-    free_modes = free_rigid_modes(case, mesh, held, contact, load)
-    if free_modes.shape[1]:
-        raise SolverError(f"{case.source.name}: the body is held only by contact along {free_modes.shape[1]} "
+                          f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")
+    if problem.free_modes is not None:
+        raise SolverError(f"{case.source.name}: the body is held only by contact along {problem.free_modes.shape[1]} "
                           "rigid motion(s); the petsc backend does not handle that yet, solve without it")
-    exact = case.exact.solution if case.exact is not None else None
-    if exact is not None:
-        check_exact_contact(case, mesh, contact.edges)
-    return DiscreteProblem(
-        mesh=mesh, law=law, stiffness=None, load=load, dirichlet_dofs=held.dirichlet_dofs,
-        dirichlet_values=held.dirichlet_values, contact=contact, loads=loads, exact=exact,
-        refinements=refinements, symmetry_nodes=held.symmetry_nodes, symmetry_normals=held.symmetry_normals,
-        free_modes=None,
-    )
+    return problem
 
 
 def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:

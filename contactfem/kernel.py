@@ -823,11 +823,10 @@ class ActiveSetSolver:
             self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
         else:
             self.base = np.ascontiguousarray(solved[:, 0])
-        both = solved[:, [0, -1]]
         # ‖K00‖∞ over its equations: the masked rows keep only their free columns.
         norm = float((self.absolute @ self.free.astype(float))[self.free].max(initial=0.0))
         self.checks.append(check_factorization(masked, self.factor, equations=self.free, probe=probe,
-                                               solution=both[:, 1], norm=norm, name=name))
+                                               solution=solved[:, -1], norm=norm, name=name))
         # The cached columns, side by side in one Fortran-ordered block (n, capacity), so
         # that products with any subset of them run over contiguous memory without copying
         # the columns out: slot_of[j] is node j's column, −1 when not computed yet.
@@ -846,11 +845,10 @@ class ActiveSetSolver:
             # symmetric, restricted to the free unknowns) or e_j (an added one).
             dofs = self.normal_dofs[missing]
             released = self.reference[missing]
-            rows_k = self.stiffness[dofs[released]].tocoo()
-            keep = self.free[rows_k.col]
-            columns = np.concatenate([np.flatnonzero(released)[rows_k.row[keep]], np.flatnonzero(~released)])
-            entries = np.concatenate([rows_k.col[keep], dofs[~released]])
-            values = np.concatenate([rows_k.data[keep], np.ones(int((~released).sum()))])
+            rows_k = self._free_part(self.stiffness[dofs[released]]).tocoo()
+            columns = np.concatenate([np.flatnonzero(released)[rows_k.row], np.flatnonzero(~released)])
+            entries = np.concatenate([rows_k.col, dofs[~released]])
+            values = np.concatenate([rows_k.data, np.ones(int((~released).sum()))])
             rhs = sp.csc_matrix((values, (entries, columns)), shape=(n, len(missing)))
             started = time.perf_counter()
             solved = solve_sparse_columns(self.factor, rhs)
@@ -865,6 +863,12 @@ class ActiveSetSolver:
             self.slot_of[missing] = np.arange(count, count + len(missing))
             self.column_count = count + len(missing)
         return self.slot_of[nodes]
+
+    def _free_part(self, rows: sp.csr_matrix) -> sp.csr_matrix:
+        """Rows of K restricted to the reference set's free columns (K_r0), without stored zeros."""
+        part = rows.multiply(self.free[None, :]).tocsr()
+        part.eliminate_zeros()
+        return part
 
     def _combine(self, slots: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Σ_k weights[k] · column(slots[k]) (n,), one matrix-vector product over the block."""
@@ -896,8 +900,7 @@ class ActiveSetSolver:
         values = fixed_values.copy()
         values[dofs_r] = 0.0
         rows_r = self.stiffness[dofs_r]
-        k_r0 = rows_r.multiply(self.free[None, :]).tocsr()
-        k_r0.eliminate_zeros()
+        k_r0 = self._free_part(rows_r)
         # K_r0 Z touches only the rows of Z where K_r0 has entries: a few per released node.
         touched = np.unique(k_r0.indices)
         k_touched = k_r0[:, touched]

@@ -147,9 +147,15 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
     sx, sy = supported[2 * c], supported[2 * c + 1]
     sym_index = np.full(n_points, -1)
     sym_index[problem.symmetry_nodes] = np.arange(len(problem.symmetry_nodes))
-    platen_of = np.full(n_points, -1)
-    for index, platen in enumerate(problem.platens):
-        platen_of[platen.nodes] = index
+    # Per node: its platen's first node (−1 off platens), its motion per unit advance, the
+    # platen's tangent.
+    master_of = np.full(n_points, -1)
+    motion_of = np.zeros((n_points, 2))
+    tangent_of = np.zeros((n_points, 2))
+    for platen in problem.platens:
+        master_of[platen.nodes] = platen.master
+        motion_of[platen.nodes] = platen.motion
+        tangent_of[platen.nodes] = platen.tangent
     on_symmetry = sym_index[c] >= 0
     m = len(c)
     a = np.tile(n_o, (m, 1))
@@ -165,51 +171,37 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
     a[on_symmetry] = problem.symmetry_normals[sym_index[c[on_symmetry]]]
     b[on_symmetry] = n_o
     slot = np.where(on_symmetry, 2 * c + 1, slot)
-    fixed = [2 * c[on_symmetry]]
     # Contact nodes on a platen (the contact boundary keeps them only with n along it).
-    platen_contact = platen_of[c] >= 0
-    for index, platen in enumerate(problem.platens):
-        here = platen_of[c] == index
-        a[here] = -platen.normal
-        b[here] = n_o
+    platen_contact = master_of[c] >= 0
+    a[platen_contact] = motion_of[c[platen_contact]]
+    b[platen_contact] = n_o
     slot = np.where(platen_contact, 2 * c + 1, slot)
     # Symmetry nodes that are not contact nodes: a = n_s, b = t_s (or the platen's frame).
     others = np.setdiff1d(problem.symmetry_nodes, c)
     normals = problem.symmetry_normals[sym_index[others]]
     sym_a = normals.copy()
     sym_b = np.stack([-normals[:, 1], normals[:, 0]], axis=1)
-    sym_platen = platen_of[others] >= 0
-    plain = others[~sym_platen]
-    fixed.append(2 * plain)
-    for platen in problem.platens:
-        here = platen_of[others] == platen_of[platen.master]
-        position = np.searchsorted(platen.nodes, others[here])
-        sym_a[here] = platen.motion[position]
-        sym_b[here] = normals[here]
-    fixed.append(2 * others[sym_platen] + 1)
+    sym_platen = master_of[others] >= 0
+    sym_a[sym_platen] = motion_of[others[sym_platen]]
+    sym_b[sym_platen] = normals[sym_platen]
     # Platen nodes on neither: a = −n_p, b = t_p.
-    platen_nodes = np.concatenate([p.nodes for p in problem.platens]) if problem.platens else np.zeros(0, int)
+    platen_nodes = np.flatnonzero(master_of >= 0)
     rest = np.setdiff1d(platen_nodes, np.concatenate([c, others]))
-    rest_a = np.zeros((len(rest), 2))
-    rest_b = np.zeros((len(rest), 2))
-    for index, platen in enumerate(problem.platens):
-        here = platen_of[rest] == index
-        rest_a[here] = -platen.normal
-        rest_b[here] = platen.tangent
     nodes = np.concatenate([c, others, rest])
-    masters = platen_of[nodes]
-    masters = np.where(masters >= 0, np.array([p.master for p in problem.platens] + [-1])[masters], -1)
-    # Every platen node but the first has its x slot fixed to 0; the first's x slot is δ.
-    on_platen = masters >= 0
-    slaves = nodes[on_platen & (nodes != masters)]
-    fixed_values = [np.zeros(sum(len(f) for f in fixed) + len(slaves))]
-    fixed.append(2 * slaves)
+    masters = master_of[nodes]
+    # Fixed slots, all to 0 but a displacement-driven platen's advance: the x slot of a
+    # symmetry node (its normal), the y slot of a symmetry node on a platen, and the x slot
+    # of every platen node but the first (the first's x slot is δ).
+    slaves = nodes[(masters >= 0) & (nodes != masters)]
+    fixed = [2 * c[on_symmetry], 2 * others[~sym_platen], 2 * others[sym_platen] + 1, 2 * slaves]
+    fixed_values = [np.zeros(sum(len(f) for f in fixed))]
     driven = [p for p in problem.platens if p.control == "displacement"]
     pushed = [p for p in problem.platens if p.control == "force"]
     fixed.append(np.array([2 * p.master for p in driven], dtype=np.int64))
     fixed_values.append(np.array([p.value for p in driven]))
     return _Frames(
-        nodes=nodes, a=np.concatenate([a, sym_a, rest_a]), b=np.concatenate([b, sym_b, rest_b]), masters=masters,
+        nodes=nodes, a=np.concatenate([a, sym_a, motion_of[rest]]), b=np.concatenate([b, sym_b, tangent_of[rest]]),
+        masters=masters,
         normal_slot=slot, fixed_dofs=np.concatenate(fixed).astype(np.int64), fixed_values=np.concatenate(fixed_values),
         force_dofs=np.array([2 * p.master for p in pushed], dtype=np.int64),
         forces=np.array([p.value for p in pushed], dtype=float),

@@ -70,11 +70,15 @@ class DiscreteProblem:
         return ReducedSystem.build(self, method)
 
 
-def build_problem(case: Case, mesh: Mesh, refinements: int = 0) -> DiscreteProblem:
-    """Assemble stiffness and loads, impose the supports and find the contact nodes."""
+def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffness: bool = True) -> DiscreteProblem:
+    """Assemble stiffness and loads, impose the supports and find the contact nodes.
+
+    Without ``assemble_stiffness`` the problem's ``stiffness`` is None: a caller that
+    assembles it in parts (each MPI rank its own, :mod:`contactfem.distributed`) gets the rest."""
     material = case.material
     law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
-    stiffness = stiffness_matrix(mesh.points, mesh.triangles, law, topology=mesh.topology)
+    stiffness = (stiffness_matrix(mesh.points, mesh.triangles, law, topology=mesh.topology)
+                 if assemble_stiffness else None)
     loads = compile_loads(case, mesh)
     held = supports(case, mesh)
     contact = contact_boundary(case, mesh, held)
