@@ -22,6 +22,7 @@ from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.estimator import Estimate, estimate
 from contactfem.mesh import Mesh
 from contactfem.mesh.adapt import bisect, dorfler_mark, label_longest_edge, min_angle
+from contactfem.mesh.transfer import interpolate_p1
 from contactfem.norms import exact_errors
 from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, solve_case
@@ -234,25 +235,3 @@ def common_refinement(mesh: Mesh, other: Mesh, *, max_rounds: int = 200) -> Mesh
         marked[found] = True
         mesh = bisect(mesh, marked, check=False)
     raise ValueError("no common refinement found: the meshes are not NVB refinements of one mesh")
-
-
-def interpolate_p1(mesh: Mesh, values: np.ndarray, where: np.ndarray) -> np.ndarray:
-    """The P1 field ``values`` (n_points, k) of ``mesh`` at the points ``where`` (q, 2)."""
-    from matplotlib.tri import Triangulation
-
-    triangulation = Triangulation(mesh.points[:, 0], mesh.points[:, 1], mesh.triangles)
-    found = np.asarray(triangulation.get_trifinder()(where[:, 0], where[:, 1]))
-    outside = found < 0
-    if outside.any():
-        from scipy.spatial import cKDTree
-
-        centroids = mesh.points[mesh.triangles].mean(axis=1)
-        found[outside] = cKDTree(centroids).query(where[outside])[1]
-    corners = mesh.points[mesh.triangles[found]]  # (q, 3, 2)
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    d = where - corners[:, 0]
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    b1 = (d[:, 0] * e2[:, 1] - d[:, 1] * e2[:, 0]) / det
-    b2 = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
-    bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
-    return np.einsum("qi,qi...->q...", bary, values[mesh.triangles[found]])

@@ -22,6 +22,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
+from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
 
@@ -42,6 +43,18 @@ GROWTH = 1.1
 #: Candidate edge pairs the simplicity check of a decimated polygon may test; beyond it the
 #: polygon is kept as it is (an outline with many long, overlapping edges).
 MAX_EDGE_PAIRS = 5_000_000
+#: Depth of the layer along ΓC in which a fragmented prediction is corrected on the fine
+#: mesh, in median fine triangle diameters (four coarse ones). Rough base of 16 000
+#: segments: the coarse prediction missed 776 of 16 001 nodes; corrected in a layer 4, 8
+#: and 16 diameters deep, 39, 25 and 14.
+LAYER_DEPTH = 16
+#: The largest share of the fine unknowns the layer may hold (a mesh graded onto ΓC puts
+#: most of its nodes near it, and the layer then costs as much as the fine solve).
+LAYER_MAX_FRACTION = 0.3
+#: Below this many fine unknowns a refactorisation costs less than the layer's set-up.
+LAYER_THRESHOLD = 50_000
+#: Schur columns costing about one refactorisation (CHOLMOD; see :mod:`contactfem.kernel`).
+COLUMNS_PER_FACTORIZATION = 20
 
 
 def worth_sequencing(n_unknowns: int) -> bool:
@@ -218,3 +231,51 @@ def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -
     pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)
     normal = np.interp(fine.abscissa, coarse.abscissa, coarse.normal_displacement)
     return pressure * fine.masses.lumped + c * (normal - fine.gap) > 0
+
+
+def contact_layer(mesh: Mesh, contact_nodes: np.ndarray, depth: float) -> np.ndarray:
+    """The nodes (bool, n_points) within ``depth`` of a contact node: the layer along ΓC
+    in which a coarse prediction is corrected on the fine mesh (see :func:`layer_depth`)."""
+    from scipy.spatial import cKDTree
+
+    boundary = mesh.points[contact_nodes]
+    # Only points in the contact nodes' bounding box grown by ``depth`` can be near them.
+    low, high = boundary.min(axis=0) - depth, boundary.max(axis=0) + depth
+    candidates = np.flatnonzero(((mesh.points >= low) & (mesh.points <= high)).all(axis=1))
+    distance, _ = cKDTree(boundary).query(mesh.points[candidates], distance_upper_bound=depth)
+    layer = np.zeros(mesh.n_points, dtype=bool)
+    layer[candidates[np.isfinite(distance)]] = True
+    return layer
+
+
+def layer_depth(mesh: Mesh) -> float:
+    """How deep the correcting layer reaches: :data:`LAYER_DEPTH` of the fine mesh's typical
+    (median) triangle diameters, that is :data:`LAYER_DEPTH` / :data:`COARSENING` of the
+    coarse level's, beyond which the coarse solution is taken as right."""
+    return LAYER_DEPTH * float(np.median(mesh.triangle_diameters()))
+
+
+def layer_pays(fine_unknowns: int, layer_unknowns: int, patches: int) -> bool:
+    """Whether correcting the prediction in a layer of ``layer_unknowns`` is expected to
+    save more than it costs, for a predicted zone of ``patches`` runs of active nodes.
+
+    The kernel's Schur columns absorb a node or two mispredicted at each end of a patch
+    (about :data:`COLUMNS_PER_FACTORIZATION` columns cost a refactorisation), so a zone of
+    few patches gains nothing. A fragmented one (hundreds of patches on a rough profile)
+    is mispredicted at asperity scale, a node in four, and costs two or three fine
+    factorisations from the coarse prediction alone, one once corrected in the layer.
+    The layer is solved like a coarse level (:data:`COARSE_LEVEL_SOLVES` of its own linear
+    solves, each (layer / fine) ** :data:`GROWTH` of a fine one) and must not take more than
+    :data:`LAYER_MAX_FRACTION` of the unknowns.
+    """
+    if (fine_unknowns < LAYER_THRESHOLD or patches * 2 < COLUMNS_PER_FACTORIZATION
+            or layer_unknowns > LAYER_MAX_FRACTION * fine_unknowns):
+        return False
+    q = (layer_unknowns / fine_unknowns) ** GROWTH
+    return COARSE_LEVEL_SOLVES * q < EXPECTED_SAVING_SOLVES
+
+
+def patch_count(active: np.ndarray) -> int:
+    """Runs of consecutive active nodes (the contact nodes are numbered along ΓC)."""
+    a = np.asarray(active, dtype=bool)
+    return int(a[0]) + int(np.count_nonzero(a[1:] & ~a[:-1])) if len(a) else 0

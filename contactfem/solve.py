@@ -18,6 +18,7 @@ import numpy as np
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
+from contactfem.discretize.frames import ReducedSystem
 from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
     Iteration,
@@ -28,11 +29,17 @@ from contactfem.kernel import (
     solve_path,
 )
 from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
+from contactfem.mesh import Mesh
+from contactfem.mesh.transfer import interpolate_p1
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
 from contactfem.sequencing import (
     coarse_level_pays,
     coarser,
+    contact_layer,
+    layer_depth,
+    layer_pays,
+    patch_count,
     predict_active_set,
     worth_sequencing,
 )
@@ -138,7 +145,7 @@ def solve_case(
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    initial_active, sequencing = _predict_from_coarser(case, problem, c, say, load_factor)
+    initial_active, sequencing = _predict_from_coarser(case, problem, reduced, c, say, load_factor)
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
@@ -226,7 +233,8 @@ def solve_load_path(
         f"backend {backend}")
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), c, say, factors[0])
+    first = dataclasses.replace(reduced, system=reduced.system.scaled(factors[0]))
+    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), first, c, say, factors[0])
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     solved = factorizations = 0
@@ -293,35 +301,95 @@ def _serial_backend(case: Case) -> str:
 
 @dataclass(frozen=True, eq=False)
 class CoarseSolve:
-    """What a coarse level hands the prediction: its contact fields and its solve's account."""
+    """What a coarse level hands the prediction: its contact fields and its solve's account,
+    and its mesh and displacement where the fine level corrects the prediction in a layer
+    along ΓC (a serial solve; None across MPI ranks)."""
 
     contact: ContactFields
     kernel: KernelResult
     sequencing: Mapping
+    mesh: Mesh | None = None
+    displacement: np.ndarray | None = None
 
 
-def _predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
+def _predict_from_coarser(case: Case, problem: DiscreteProblem, reduced: ReducedSystem, c: float, say: Progress,
                           factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
-    """The initial active set from the same case solved on a coarser mesh (recursively), and its cost.
+    """The initial active set from the same case solved on a coarser mesh (recursively),
+    corrected in a layer along ΓC of ``reduced`` (the fine kernel's system), and its cost.
 
     ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
     """
     def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
         outcome = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem, load_factor=factor)
-        return CoarseSolve(outcome.solution.contact, outcome.kernel, outcome.sequencing)
+        return CoarseSolve(outcome.solution.contact, outcome.kernel, outcome.sequencing,
+                           outcome.problem.mesh, outcome.solution.displacement)
 
     def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
         coarse_problem = prepare(coarse_case, refine=refine)
         return coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
 
-    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse)
+    def correct(coarse: CoarseSolve, active: np.ndarray) -> tuple[np.ndarray, dict]:
+        return correct_in_layer(reduced, coarse, active, c, case.solver.tolerance, case.solver.max_iterations,
+                                _serial_backend(case))
+
+    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse, correct)
+
+
+def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
+                     max_iterations: int, backend: str) -> tuple[np.ndarray, dict]:
+    """The predicted ``active`` set corrected on the fine mesh in a layer along ΓC, and what
+    that cost; ``active`` itself (and an empty record) when the layer is not expected to
+    pay (:func:`contactfem.sequencing.layer_pays`) or its solve fails.
+
+    A coarse level that decimated a rough profile, or whose elements are wider than the
+    asperities, misplaces the fine zone at asperity scale, while further from ΓC its
+    solution is right. So the fine system is solved, with contact, on the nodes within
+    :func:`contactfem.sequencing.layer_depth` of ΓC, every unknown outside fixed at the
+    coarse displacement; its active set is the fine prediction.
+    """
+    started = time.perf_counter()
+    problem = reduced.problem
+    fine_unknowns = problem.n_unknowns
+    patches = patch_count(active)
+    if coarse.mesh is None or coarse.displacement is None or not layer_pays(fine_unknowns, 0, patches):
+        return active, {}
+    nodes = contact_layer(problem.mesh, problem.contact.nodes, layer_depth(problem.mesh))
+    keep = np.repeat(nodes, 2)
+    if not layer_pays(fine_unknowns, int(keep.sum()), patches):
+        return active, {}
+    system = reduced.system
+    outside = system.coupled_outside(keep)
+    if len(outside) == 0:
+        return active, {}  # the layer is the whole body: nothing to gain
+    rim = np.unique(outside // 2)
+    displacement = np.zeros((problem.mesh.n_points, 2))
+    displacement[rim] = interpolate_p1(coarse.mesh, coarse.displacement, problem.mesh.points[rim])
+    layer = system.restricted(keep, reduced.reduce(displacement.ravel()))
+    try:
+        result = solve_contact(layer, c=c, initial_active=active, tolerance=tolerance,
+                               max_iterations=max_iterations, backend=backend)
+    except SolverError:
+        return active, {}
+    # A set that settled is a prediction whether or not its iterate passes the certificate.
+    if result.status not in (Status.CONVERGED, Status.NOT_CERTIFIED):
+        return active, {}
+    return result.active, {
+        "layer_unknowns": int(keep.sum()),
+        "layer_iterations": result.iterations,
+        "layer_factorizations": result.factorizations,
+        "layer_changes": int(np.count_nonzero(result.active != active)),
+        "layer_seconds": time.perf_counter() - started,
+    }
 
 
 def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
                          prepare_coarse: Callable[[Case, int], DiscreteProblem],
-                         solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve]) -> tuple[np.ndarray | None, dict]:
+                         solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
+                         correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
+                         ) -> tuple[np.ndarray | None, dict]:
     """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
-    process, or across MPI ranks): the predicted active set and what it cost.
+    process, or across MPI ranks), and optionally to ``correct`` its prediction on the
+    fine mesh: the predicted active set and what it cost.
 
     (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
@@ -349,12 +417,19 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Pr
         return None, {}
     active = predict_active_set(problem.contact, coarse_result.contact, c)
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
+    corrected: dict = {}
+    if correct is not None:
+        active, corrected = correct(coarse_result, active)
+        if corrected:
+            say(f"  corrected {corrected['layer_changes']} of them in a layer of {corrected['layer_unknowns']} "
+                "unknowns along the contact boundary")
     return active, {
         "coarse_unknowns": coarse_problem.n_unknowns,
         "coarse_iterations": coarse_result.kernel.iterations,
         "coarse_factorizations": coarse_result.kernel.factorizations,
         "predicted_active": int(active.sum()),
         "levels": 1 + coarse_result.sequencing.get("levels", 0),
+        **corrected,
         "seconds": time.perf_counter() - started,
     }
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import CASES, shipped_case
 
-from contactfem.adaptive import Reference, adapt, common_refinement, interpolate_p1
+from contactfem.adaptive import Reference, adapt, common_refinement
 from contactfem.discretize import build_mesh, build_problem
 from contactfem.mesh import check_mesh
 from contactfem.mesh.adapt import (
@@ -18,6 +18,7 @@ from contactfem.mesh.adapt import (
     label_longest_edge,
     min_angle,
 )
+from contactfem.mesh.transfer import interpolate_p1
 from contactfem.solve import solve_case
 
 

@@ -123,3 +123,94 @@ def test_a_square_is_still_coarsened_by_four():
     case = case_from(square_case_dict(64))
     coarse, _ = coarser(case, 0)
     assert coarse.mesh.divisions == (16, 16)
+
+
+def test_a_restricted_system_with_the_solutions_outer_values_has_the_solution():
+    """K_kk u_k = F_k − K_ko u_o with u_o the converged solution's outer values is the same
+    contact problem: its answer is the solution's, on every kept unknown (to round-off)."""
+    from contactfem.kernel import Status, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.sequencing import contact_layer, layer_depth
+    from contactfem.solve import prepare
+
+    problem = prepare(rough_polygon_case(400))
+    system = problem.contact_system(get_method("standard")).system
+    full = solve_contact(system)
+    assert full.status is Status.CONVERGED
+    nodes = contact_layer(problem.mesh, problem.contact.nodes, layer_depth(problem.mesh) / 4)
+    keep = np.repeat(nodes, 2)
+    assert 0 < keep.sum() < 0.9 * len(keep)
+    layer = system.restricted(keep, full.displacement)
+    part = solve_contact(layer)
+    assert part.status is Status.CONVERGED
+    np.testing.assert_array_equal(part.active, full.active)
+    scale = np.abs(full.displacement).max()
+    assert np.abs(part.displacement - full.displacement[keep]).max() < 1e-10 * scale
+    assert np.abs(part.nodal_force - full.nodal_force).max() < 1e-8 * np.abs(full.nodal_force).max()
+    # Only the outer unknowns a kept equation couples to are read.
+    outside = system.coupled_outside(keep)
+    scrambled = full.displacement.copy()
+    untouched = np.ones(len(keep), dtype=bool)
+    untouched[outside] = False
+    untouched[keep] = False
+    scrambled[untouched] = 1e3
+    again = solve_contact(system.restricted(keep, scrambled))
+    np.testing.assert_array_equal(again.active, full.active)
+
+
+def test_the_layer_corrects_a_fragmented_prediction_at_asperity_scale(monkeypatch):
+    """A rough base of 2 000 segments: the decimated coarse level mispredicts the fine zone
+    at asperity scale; solved again in a layer along ΓC on the fine mesh (outer unknowns at
+    the coarse displacement) the prediction misses at most half as many nodes."""
+    import contactfem.sequencing as sequencing
+    from contactfem.kernel import Status, default_c, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import CoarseSolve, correct_in_layer, prepare, solve_case
+
+    # The size threshold and share bound are the cost model's (tested below), not the mechanism's.
+    monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
+    monkeypatch.setattr(sequencing, "LAYER_MAX_FRACTION", 1.0)
+    case = rough_polygon_case(2000)
+    problem = prepare(case)
+    reduced = problem.contact_system(get_method("positive"))
+    c = default_c(reduced.system)
+    coarse_case, refine = coarser(case, 0)
+    coarse = solve_case(coarse_case, problem=prepare(coarse_case, refine=refine))
+    level = CoarseSolve(coarse.solution.contact, coarse.kernel, coarse.sequencing, coarse.problem.mesh,
+                        coarse.solution.displacement)
+    predicted = sequencing.predict_active_set(problem.contact, level.contact, c)
+    corrected, record = correct_in_layer(reduced, level, predicted, c, 1e-10, 50, "auto")
+    truth = solve_contact(reduced.system, c=c, initial_active=corrected)
+    assert truth.status is Status.CONVERGED
+    missed_before = int(np.count_nonzero(predicted != truth.active))
+    missed_after = int(np.count_nonzero(corrected != truth.active))
+    assert sequencing.patch_count(truth.active) > 50
+    assert missed_after <= missed_before / 2, (missed_before, missed_after)
+    assert record["layer_changes"] == int(np.count_nonzero(corrected != predicted))
+    assert 0 < record["layer_unknowns"] < problem.n_unknowns
+
+
+def test_the_layer_pays_only_on_a_fragmented_zone_of_a_large_mesh_with_an_interior():
+    from contactfem.sequencing import layer_pays
+
+    assert layer_pays(694_000, 128_000, 834)       # rough base of 16 000 segments, uniform interior
+    assert not layer_pays(694_000, 128_000, 1)     # one zone: Schur columns absorb its ends
+    assert not layer_pays(104_000, 64_000, 390)    # a mesh graded onto the profile: the layer is most of it
+    assert not layer_pays(8_000, 1_000, 90)        # small: a refactorisation is cheaper than the layer's set-up
+
+
+def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
+    """Points in large triangles next to many small ones (a mesh graded onto a rough base)
+    are located, and a linear field is reproduced to round-off."""
+    from contactfem.mesh.transfer import interpolate_p1
+    from contactfem.solve import prepare
+
+    mesh = prepare(rough_polygon_case(1000)).mesh
+    rng = np.random.default_rng(3)
+    triangles = rng.integers(0, mesh.n_triangles, 4000)
+    weights = rng.dirichlet(np.ones(3), len(triangles))
+    points = np.einsum("qi,qij->qj", weights, mesh.points[mesh.triangles[triangles]])
+    field = np.column_stack([2.0 + 3.0 * mesh.points[:, 0] - mesh.points[:, 1], mesh.points[:, 1]])
+    values = interpolate_p1(mesh, field, points)
+    expected = np.column_stack([2.0 + 3.0 * points[:, 0] - points[:, 1], points[:, 1]])
+    assert np.abs(values - expected).max() < 1e-12

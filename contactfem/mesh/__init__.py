@@ -15,6 +15,7 @@ _WHERE = {
     "check_mesh": "quality",
     "boundary_edges": "refine", "prolongation": "refine", "refine_uniform": "refine",
     "structured_rectangle": "structured",
+    "interpolate_p1": "transfer",
 }
 
 __all__ = sorted(_WHERE)
