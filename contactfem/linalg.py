@@ -134,6 +134,8 @@ class _CvxoptAnalysis:
     indices: np.ndarray
 
     def matches(self, matrix: sp.csr_matrix) -> bool:
+        if self.indptr is matrix.indptr and self.indices is matrix.indices:
+            return True  # the kernel's masked matrices share their pattern's arrays
         return (np.array_equal(self.indptr, matrix.indptr) and np.array_equal(self.indices, matrix.indices))
 
 
@@ -163,17 +165,15 @@ class _CvxoptCholmod:
             stored.V = cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float))
         else:
             n = csr.shape[0]
-            # cvxopt stores by column, then row: the lower triangle in CSC order, with each
-            # entry's position in the CSR data carried through the conversion (plus one, so
-            # that no entry is a zero the conversion could drop).
-            numbered = sp.csr_matrix((np.arange(1, csr.nnz + 1, dtype=float), csr.indices, csr.indptr),
-                                     shape=csr.shape)
-            lower = sp.tril(numbered, format="csc")
-            positions = lower.data.astype(np.int64) - 1
-            columns = np.repeat(np.arange(n, dtype=np.int64), np.diff(lower.indptr))
+            # cvxopt stores by column, then row: the lower triangle in CSC order. The matrix
+            # is symmetric, so column j of its lower triangle is row j of the CSR matrix from
+            # the diagonal on: the entries with column index ≥ row index, already in order.
+            rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(csr.indptr))
+            positions = np.flatnonzero(csr.indices >= rows)
             stored = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float)),
-                                     cvxopt.matrix(lower.indices.astype(np.int64)), cvxopt.matrix(columns), (n, n))
-            del numbered, lower, columns
+                                     cvxopt.matrix(csr.indices[positions].astype(np.int64)),
+                                     cvxopt.matrix(rows[positions]), (n, n))
+            del rows
             _release_freed_memory()
             symbolic = cholmod.symbolic(stored, uplo="L")
         self.analysis_seconds = time.perf_counter() - started

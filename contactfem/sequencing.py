@@ -124,29 +124,31 @@ def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Lo
     vertices = loop.vertices
     k = len(vertices)
     lengths = np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)
-    short = np.array([loop.edge_arcs[i] is None and lengths[i] < coarse_edge.get(loop.edge_names[i], np.inf)
-                      for i in range(k)])
+    _, part = np.unique(np.asarray(loop.edge_names, dtype=object).astype(str), return_inverse=True)
+    straight = np.array([arc is None for arc in loop.edge_arcs], dtype=bool)
+    coarse_length = np.array([coarse_edge.get(name, np.inf) for name in loop.edge_names], dtype=float)
+    short = straight & (lengths < coarse_length)
     if short.sum() < 2:
         return None
-    keep = np.ones(k, dtype=bool)
     # A run starts at an edge that is short while the previous edge is not short or belongs
     # to another part; a loop that is one single run starts at vertex 0.
-    same = np.array([loop.edge_names[i] == loop.edge_names[i - 1] for i in range(k)])
+    same = part == np.roll(part, 1)
     starts = np.flatnonzero(short & ~(np.roll(short, 1) & same))
-    if len(starts) == 0:
-        starts = np.array([0])
-    for start in starts:
-        run = [start]
-        while len(run) < k:
-            nxt = (run[-1] + 1) % k
-            if not short[nxt] or loop.edge_names[nxt] != loop.edge_names[start] or nxt == start:
-                break
-            run.append(nxt)
-        # Vertices strictly inside the run: run[1:], its last edge's end vertex is kept.
-        inner = np.asarray(run[1:], dtype=np.int64)
-        drop = np.ones(len(inner), dtype=bool)
-        drop[factor - 1::factor] = False
-        keep[inner[drop]] = False
+    first = int(starts[0]) if len(starts) else 0
+    # In the loop's order from the first start, every short edge continues the run of the
+    # latest start; its place in that run decides whether its start vertex is kept.
+    order = (np.arange(k) + first) % k
+    is_start = np.zeros(k, dtype=bool)
+    is_start[starts] = True
+    is_start[first] = True
+    begun = np.flatnonzero(is_start[order])
+    run_start = begun[np.searchsorted(begun, np.arange(k), side="right") - 1]
+    place = np.arange(k) - run_start
+    # Vertices strictly inside a run (places 1, 2, ...): every ``factor``-th is kept; its
+    # last edge's end vertex is not inside it and stays.
+    drop = short[order] & (place >= 1) & (place % factor != 0)
+    keep = np.ones(k, dtype=bool)
+    keep[order[drop]] = False
     if keep.all() or keep.sum() < 3:
         return None
     new = vertices[keep]
@@ -233,26 +235,30 @@ def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -
     return pressure * fine.masses.lumped + c * (normal - fine.gap) > 0
 
 
-def contact_layer(mesh: Mesh, contact_nodes: np.ndarray, depth: float) -> np.ndarray:
-    """The nodes (bool, n_points) within ``depth`` of a contact node: the layer along ΓC
-    in which a coarse prediction is corrected on the fine mesh (see :func:`layer_depth`)."""
+def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.ndarray:
+    """Which of ``points`` (q, 2) lie within ``depth`` of one of the ``boundary`` points
+    (the contact nodes): the layer along ΓC in which a coarse prediction is corrected on
+    the fine mesh (see :func:`layer_depth`)."""
     from scipy.spatial import cKDTree
 
-    boundary = mesh.points[contact_nodes]
     # Only points in the contact nodes' bounding box grown by ``depth`` can be near them.
     low, high = boundary.min(axis=0) - depth, boundary.max(axis=0) + depth
-    candidates = np.flatnonzero(((mesh.points >= low) & (mesh.points <= high)).all(axis=1))
-    distance, _ = cKDTree(boundary).query(mesh.points[candidates], distance_upper_bound=depth)
-    layer = np.zeros(mesh.n_points, dtype=bool)
+    candidates = np.flatnonzero(((points >= low) & (points <= high)).all(axis=1))
+    distance, _ = cKDTree(boundary).query(points[candidates], distance_upper_bound=depth)
+    layer = np.zeros(len(points), dtype=bool)
     layer[candidates[np.isfinite(distance)]] = True
     return layer
 
 
-def layer_depth(mesh: Mesh) -> float:
+def layer_depth(mesh: Mesh, samples: int = 20_000) -> float:
     """How deep the correcting layer reaches: :data:`LAYER_DEPTH` of the fine mesh's typical
     (median) triangle diameters, that is :data:`LAYER_DEPTH` / :data:`COARSENING` of the
-    coarse level's, beyond which the coarse solution is taken as right."""
-    return LAYER_DEPTH * float(np.median(mesh.triangle_diameters()))
+    coarse level's, beyond which the coarse solution is taken as right. The median is
+    taken over an even sample of at most ``samples`` triangles."""
+    step = max(1, mesh.n_triangles // samples)
+    corners = mesh.points[mesh.triangles[::step]]
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    return LAYER_DEPTH * float(np.median(sides.max(axis=1)))
 
 
 def layer_pays(fine_unknowns: int, layer_unknowns: int, patches: int) -> bool:

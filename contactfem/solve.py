@@ -46,6 +46,8 @@ from contactfem.sequencing import (
 
 Progress = Callable[[str], None]
 
+#: Nodes sampled to estimate the share of the mesh a correcting layer would hold.
+LAYER_SAMPLES = 4_000
 #: The method mesh sequencing solves its coarse levels with: its λ ≥ 0 is the pressure
 #: the fine indicator needs, whichever method the fine level uses.
 SEQUENCING_METHOD = "positive"
@@ -143,6 +145,23 @@ def solve_case(
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, load_factor)
+    timings["solve"] = time.perf_counter() - clock
+    accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
+    if kernel.status not in accepted:
+        raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
+
+    clock = time.perf_counter()
+    solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
+    timings["postprocess"] = time.perf_counter() - clock
+    return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
+                       timings=timings, sequencing=sequencing)
+
+
+def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
+                   load_factor: float = 1.0) -> tuple[ReducedSystem, KernelResult, dict]:
+    """The kernel's view of ``problem``, its contact solve (the active set predicted from
+    coarser meshes) and what the prediction cost: what a fine solve and a coarse level share."""
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     initial_active, sequencing = _predict_from_coarser(case, problem, reduced, c, say, load_factor)
@@ -164,16 +183,7 @@ def solve_case(
         backend=backend,
         on_iteration=on_iteration,
     )
-    timings["solve"] = time.perf_counter() - clock
-    accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
-    if kernel.status not in accepted:
-        raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
-
-    clock = time.perf_counter()
-    solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
-    timings["postprocess"] = time.perf_counter() - clock
-    return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
-                       timings=timings, sequencing=sequencing)
+    return reduced, kernel, sequencing
 
 
 @dataclass(frozen=True, eq=False)
@@ -320,9 +330,12 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, reduced: Reduced
     ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
     """
     def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
-        outcome = solve_case(coarse_case, method=SEQUENCING_METHOD, problem=coarse_problem, load_factor=factor)
-        return CoarseSolve(outcome.solution.contact, outcome.kernel, outcome.sequencing,
-                           outcome.problem.mesh, outcome.solution.displacement)
+        # Only the contact fields and the displacement are read: no stresses.
+        coarse, kernel, sequencing = _contact_solve(coarse_case, coarse_problem, get_method(SEQUENCING_METHOD),
+                                                    _serial_backend(coarse_case), lambda message: None, factor)
+        displacement = coarse.displacement(kernel.displacement)
+        return CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
+                           coarse_problem.mesh, displacement)
 
     def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
         coarse_problem = prepare(coarse_case, refine=refine)
@@ -353,7 +366,15 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     patches = patch_count(active)
     if coarse.mesh is None or coarse.displacement is None or not layer_pays(fine_unknowns, 0, patches):
         return active, {}
-    nodes = contact_layer(problem.mesh, problem.contact.nodes, layer_depth(problem.mesh))
+    points, boundary = problem.mesh.points, problem.mesh.points[problem.contact.nodes]
+    depth = layer_depth(problem.mesh)
+    # The layer's share from an even sample of the nodes first: on a mesh graded onto ΓC
+    # it is most of the mesh, and finding every node of it would be wasted.
+    step = max(1, len(points) // LAYER_SAMPLES)
+    share = float(contact_layer(points[::step], boundary, depth).mean())
+    if not layer_pays(fine_unknowns, int(0.9 * share * fine_unknowns), patches):
+        return active, {}
+    nodes = contact_layer(points, boundary, depth)
     keep = np.repeat(nodes, 2)
     if not layer_pays(fine_unknowns, int(keep.sum()), patches):
         return active, {}
@@ -440,27 +461,31 @@ def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, k
     (``gradients``: the mesh's shape gradients, when the caller keeps them)."""
     mesh = problem.mesh
     stress = stresses(mesh.points, mesh.triangles, displacement, problem.law, gradients)
-    contact = problem.contact
     return Solution(
         method=method,
         mesh=mesh,
         displacement=displacement,
         stress=stress,
         von_mises=von_mises(stress),
-        contact=ContactFields(
-            nodes=contact.nodes,
-            edges=contact.edges,
-            multiplier=kernel.multiplier,
-            nodal_force=kernel.nodal_force,
-            normal_displacement=displacement[contact.nodes] @ contact.normal,
-            gap=contact.gap,
-            active=kernel.active,
-            abscissa=contact.abscissa,
-            obstacle_point=contact.obstacle.point,
-            obstacle_normal=contact.obstacle.normal,
-            obstacle_ends=contact.obstacle.ends,
-        ),
+        contact=_contact_fields(problem, displacement, kernel),
         newton=_history_arrays(kernel.history),
+    )
+
+
+def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult) -> ContactFields:
+    contact = problem.contact
+    return ContactFields(
+        nodes=contact.nodes,
+        edges=contact.edges,
+        multiplier=kernel.multiplier,
+        nodal_force=kernel.nodal_force,
+        normal_displacement=displacement[contact.nodes] @ contact.normal,
+        gap=contact.gap,
+        active=kernel.active,
+        abscissa=contact.abscissa,
+        obstacle_point=contact.obstacle.point,
+        obstacle_normal=contact.obstacle.normal,
+        obstacle_ends=contact.obstacle.ends,
     )
 
 

@@ -137,7 +137,7 @@ def test_a_restricted_system_with_the_solutions_outer_values_has_the_solution():
     system = problem.contact_system(get_method("standard")).system
     full = solve_contact(system)
     assert full.status is Status.CONVERGED
-    nodes = contact_layer(problem.mesh, problem.contact.nodes, layer_depth(problem.mesh) / 4)
+    nodes = contact_layer(problem.mesh.points, problem.mesh.points[problem.contact.nodes], layer_depth(problem.mesh) / 4)
     keep = np.repeat(nodes, 2)
     assert 0 < keep.sum() < 0.9 * len(keep)
     layer = system.restricted(keep, full.displacement)

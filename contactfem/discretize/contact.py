@@ -162,17 +162,22 @@ FACING_TOLERANCE = 1e-9
 
 def facing_problem(case: Case, name: str, mesh: Mesh, part_edges: np.ndarray, normal: np.ndarray) -> str | None:
     """Why contact part ``name`` does not face the obstacle of unit normal ``normal``, or None."""
-    for start, end, arc, body_on_left in _geometry_edges(case, name):
-        if arc is None:
-            d = end - start
-            outward = np.array([d[1], -d[0]]) / np.hypot(*d) * (1.0 if body_on_left else -1.0)
-            low = high = float(outward @ normal)
-        else:
-            low, high = _arc_facing(start, end, arc, body_on_left, normal)
-        if low < -FACING_TOLERANCE or high <= FACING_TOLERANCE:
+    for starts, ends, arcs, body_on_left in _geometry_edges(case, name):
+        # Straight edges at once (a rough profile has 10^5 of them), arcs one by one.
+        d = ends - starts
+        side = 1.0 if body_on_left else -1.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            low = side * (d[:, 1] * normal[0] - d[:, 0] * normal[1]) / np.hypot(d[:, 0], d[:, 1])
+        high = low.copy()
+        for i in np.flatnonzero([arc is not None for arc in arcs]):
+            low[i], high[i] = _arc_facing(starts[i], ends[i], arcs[i], body_on_left, normal)
+        failing = np.flatnonzero((low < -FACING_TOLERANCE) | (high <= FACING_TOLERANCE))
+        if len(failing):
+            i = failing[0]
+            start, end, arc = starts[i], ends[i], arcs[i]
             what = ("edge" if arc is None else
                     f"arc around ({arc.center[0]:g}, {arc.center[1]:g})")
-            shown = f"{low:.3g}" if low == high else f"between {low:.3g} and {high:.3g}"
+            shown = f"{low[i]:.3g}" if low[i] == high[i] else f"between {low[i]:.3g} and {high[i]:.3g}"
             return (f"the {what} from ({start[0]:g}, {start[1]:g}) to ({end[0]:g}, {end[1]:g}) faces away "
                     f"from the obstacle (outward normal · obstacle normal {shown})")
     if isinstance(case.geometry, (RectangleGeometry, PolygonGeometry)):
@@ -188,24 +193,26 @@ def facing_problem(case: Case, name: str, mesh: Mesh, part_edges: np.ndarray, no
 
 
 def _geometry_edges(case: Case, name: str):
-    """(start, end, arc or None, body on the left) of every edge of the case's geometry on part ``name``."""
+    """The case's geometry edges on part ``name``, a batch per loop: starts (e, 2), ends
+    (e, 2), each edge's arc or None, and whether the body lies on the edges' left."""
     geometry = case.geometry
     if isinstance(geometry, RectangleGeometry):
         (x0, y0), (x1, y1) = geometry.lower, geometry.upper
         corners = {"bottom": ((x0, y0), (x1, y0)), "right": ((x1, y0), (x1, y1)),
                    "top": ((x1, y1), (x0, y1)), "left": ((x0, y1), (x0, y0))}
-        for side, part in geometry.side_names.items():
-            if part == name:
-                start, end = corners[side]
-                yield np.array(start, dtype=float), np.array(end, dtype=float), None, True
+        sides = [corners[side] for side, part in geometry.side_names.items() if part == name]
+        if sides:
+            edges = np.array(sides, dtype=float)
+            yield edges[:, 0], edges[:, 1], [None] * len(sides), True
     elif isinstance(geometry, PolygonGeometry):
         for index, loop in enumerate((geometry.outer, *geometry.holes)):
             area = loop_signed_area(loop)
             body_on_left = area > 0 if index == 0 else area < 0
-            k = len(loop.vertices)
-            for i, part in enumerate(loop.edge_names):
-                if part == name:
-                    yield loop.vertices[i], loop.vertices[(i + 1) % k], loop.edge_arcs[i], body_on_left
+            on_part = np.flatnonzero([part == name for part in loop.edge_names])
+            if len(on_part):
+                vertices = np.asarray(loop.vertices, dtype=float)
+                yield (vertices[on_part], vertices[(on_part + 1) % len(vertices)],
+                       [loop.edge_arcs[i] for i in on_part], body_on_left)
 
 
 def _arc_facing(start: np.ndarray, end: np.ndarray, arc, body_on_left: bool, normal: np.ndarray) -> tuple[float, float]:
