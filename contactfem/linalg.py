@@ -170,6 +170,8 @@ class _CvxoptCholmod:
             # the diagonal on: the entries with column index ≥ row index, already in order.
             rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(csr.indptr))
             positions = np.flatnonzero(csr.indices >= rows)
+            if csr.nnz < 2**31:
+                positions = positions.astype(np.int32)  # kept for every refactorisation: half the bytes
             stored = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float)),
                                      cvxopt.matrix(csr.indices[positions].astype(np.int64)),
                                      cvxopt.matrix(rows[positions]), (n, n))
