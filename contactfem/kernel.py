@@ -89,9 +89,6 @@ class Status(enum.Enum):
     CYCLING = "cycling"
     #: The active set settled but the iterate fails its certificate (see :class:`Certificate`).
     NOT_CERTIFIED = "not_certified"
-    #: Stopped, as asked, once an update would change few nodes: a prediction, not an answer
-    #: (what mesh sequencing's coarse levels need; never certified, never reported).
-    SETTLED = "settled"
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,7 +314,6 @@ def solve_contact(
     on_iteration: Callable[[Iteration], None] | None = None,
     safeguard: bool = True,
     linear: "ActiveSetSolver | None" = None,
-    settled: int = 0,
 ) -> KernelResult:
     """Run the primal–dual active set iteration until the active set repeats, then certify.
 
@@ -356,10 +352,6 @@ def solve_contact(
     SolverError
         If the stiffness (with its supports and an active set fixed) is singular or
         numerically singular: there is no answer to certify.
-    settled : int
-        Stop with status SETTLED (uncertified) once an update would change at most this
-        many nodes, but not none: enough for a prediction (a coarse level of mesh
-        sequencing), and the last steps of a fragmented zone are not paid for. 0: never.
     """
     gap = np.asarray(system.gap, dtype=float)
     mass = sp.csc_matrix(system.multiplier_mass)
@@ -452,11 +444,6 @@ def solve_contact(
                     f"active set settled after {iteration} iterations ({int(active.sum())} active nodes) "
                     f"but the result is not certified: {certificate.message}"
                 )
-            break
-        if 0 < int(np.count_nonzero(new_active != active)) <= settled:
-            status = Status.SETTLED
-            message = (f"stopped after {iteration} iterations, the next update changing "
-                       f"{int(np.count_nonzero(new_active != active))} nodes (at most {settled} asked)")
             break
         key = np.packbits(new_active).tobytes()
         if key in seen and not safeguard:

@@ -12,6 +12,12 @@ A polygon whose boundary is finer than the coarse mesh (a rough profile of thous
 short edges) would force the coarse mesh to keep every vertex, and cost nearly as much as
 the fine one: its runs of short straight edges are decimated with the mesh, keeping every
 ``factor``-th vertex, as long as the polygon stays simple and counter-clockwise.
+
+A decimated profile, or a coarse mesh wider than the asperities, misplaces a fragmented
+fine zone at asperity scale (a quarter of its active nodes on a rough base), while away
+from ΓC the coarse solution is right: the prediction is then corrected on the fine mesh
+in a layer along ΓC (:func:`contact_layer`, :func:`layer_depth`), solved with contact and
+the coarse displacement outside, when :func:`layer_pays`.
 """
 
 from __future__ import annotations

@@ -46,10 +46,6 @@ from contactfem.sequencing import (
 
 Progress = Callable[[str], None]
 
-#: A coarse level stops once an update would change at most this share of its contact
-#: nodes: its zone is then right to within the asperity-scale errors of any coarse level,
-#: and on a fragmented zone its last one or two factorisations are saved.
-SETTLED_SHARE = 0.01
 #: Nodes sampled to estimate the share of the mesh a correcting layer would hold.
 LAYER_SAMPLES = 4_000
 #: The method mesh sequencing solves its coarse levels with: its λ ≥ 0 is the pressure
@@ -163,10 +159,9 @@ def solve_case(
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
-                   load_factor: float = 1.0, settled: int = 0) -> tuple[ReducedSystem, KernelResult, dict]:
+                   load_factor: float = 1.0) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
-    coarser meshes) and what the prediction cost: what a fine solve and a coarse level
-    share (a coarse level stops once ``settled`` nodes or fewer would change)."""
+    coarser meshes) and what the prediction cost: what a fine solve and a coarse level share."""
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     initial_active, sequencing = _predict_from_coarser(case, problem, reduced, c, say, load_factor)
@@ -187,7 +182,6 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         max_iterations=case.solver.max_iterations,
         backend=backend,
         on_iteration=on_iteration,
-        settled=settled,
     )
     return reduced, kernel, sequencing
 
@@ -337,10 +331,8 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, reduced: Reduced
     """
     def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
         # Only the contact fields and the displacement are read: no stresses.
-        settled = int(SETTLED_SHARE * len(coarse_problem.contact.nodes))
         coarse, kernel, sequencing = _contact_solve(coarse_case, coarse_problem, get_method(SEQUENCING_METHOD),
-                                                    _serial_backend(coarse_case), lambda message: None, factor,
-                                                    settled)
+                                                    _serial_backend(coarse_case), lambda message: None, factor)
         displacement = coarse.displacement(kernel.displacement)
         return CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
                            coarse_problem.mesh, displacement)
@@ -442,7 +434,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Pr
         coarse_result = solve_coarse(coarse_case, coarse_problem)
     except SolverError:
         return None, {}
-    if coarse_result.kernel.status not in (Status.CONVERGED, Status.SETTLED):
+    if coarse_result.kernel.status is not Status.CONVERGED:
         return None, {}
     active = predict_active_set(problem.contact, coarse_result.contact, c)
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")

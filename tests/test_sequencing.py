@@ -215,22 +215,3 @@ def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
     expected = np.column_stack([2.0 + 3.0 * points[:, 0] - points[:, 1], points[:, 1]])
     assert np.abs(values - expected).max() < 1e-12
 
-
-def test_a_coarse_level_may_stop_once_few_nodes_would_change():
-    """``settled``: the kernel stops (status SETTLED, not certified) once an update would
-    change at most that many nodes, and never before the changes are that few: restarted
-    from the set it stopped at, the first update changes between 1 and ``settled`` nodes."""
-    from contactfem.kernel import Status, solve_contact
-    from contactfem.methods import get_method
-    from contactfem.solve import prepare
-
-    system = prepare(rough_polygon_case(1000)).contact_system(get_method("positive")).system
-    full = solve_contact(system)
-    settled = max(1, len(system.gap) // 100)
-    early = solve_contact(system, settled=settled)
-    assert full.status is Status.CONVERGED and early.status is Status.SETTLED
-    assert early.iterations < full.iterations
-    again = solve_contact(system, initial_active=early.active)
-    first = again.history[0]
-    assert 1 <= first.added + first.removed <= settled
-    np.testing.assert_array_equal(again.active, full.active)
