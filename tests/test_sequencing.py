@@ -215,3 +215,32 @@ def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
     expected = np.column_stack([2.0 + 3.0 * points[:, 0] - points[:, 1], points[:, 1]])
     assert np.abs(values - expected).max() < 1e-12
 
+
+
+@pytest.mark.parametrize("name", ["flat_punch", "hertz", "hertz_platen", "hertz_quarter", "hole", "punch", "square"])
+def test_a_layer_forced_on_every_shipped_geometry_leaves_the_answer_unchanged(name, monkeypatch):
+    """Curved boundaries (rim points outside the coarse mesh), holes, symmetry lines,
+    force-driven platens (frames whose unknowns span nodes in and out of the layer), bodies
+    held by contact alone: with the cost model overruled so that the layer always runs,
+    the solve is certified and has the cold start's active set and displacement."""
+    from conftest import shipped_case
+
+    import contactfem.sequencing as sequencing
+    from contactfem.kernel import Status, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare, solve_case
+
+    monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
+    monkeypatch.setattr(sequencing, "LAYER_MAX_FRACTION", 1.0)
+    monkeypatch.setattr(sequencing, "COLUMNS_PER_FACTORIZATION", 0)
+    monkeypatch.setattr(sequencing, "EXPECTED_SAVING_SOLVES", 1e9)
+    case = shipped_case(name)
+    problem = prepare(case, refine=1)
+    sequenced = solve_case(case, problem=problem, method="standard")
+    assert sequenced.kernel.status is Status.CONVERGED
+    assert "layer_unknowns" in sequenced.sequencing, sequenced.sequencing
+    reduced = problem.contact_system(get_method("standard"))
+    cold = solve_contact(reduced.system)
+    np.testing.assert_array_equal(sequenced.kernel.active, cold.active)
+    scale = np.abs(cold.displacement).max()
+    assert np.abs(reduced.displacement(cold.displacement) - sequenced.solution.displacement).max() < 1e-8 * scale
