@@ -57,6 +57,8 @@ LAYER_DEPTH = 16
 #: The largest share of the fine unknowns the layer may hold (a mesh graded onto ΓC puts
 #: most of its nodes near it, and the layer then costs as much as the fine solve).
 LAYER_MAX_FRACTION = 0.3
+#: Nodes sampled to estimate the share of the mesh a layer would hold before it is built.
+LAYER_SAMPLES = 4_000
 #: Below this many fine unknowns a refactorisation costs less than the layer's set-up.
 LAYER_THRESHOLD = 50_000
 #: Schur columns costing about one refactorisation (CHOLMOD; see :mod:`contactfem.kernel`).

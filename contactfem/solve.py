@@ -34,6 +34,7 @@ from contactfem.mesh.transfer import interpolate_p1
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
 from contactfem.sequencing import (
+    LAYER_SAMPLES,
     coarse_level_pays,
     coarser,
     contact_layer,
@@ -46,8 +47,6 @@ from contactfem.sequencing import (
 
 Progress = Callable[[str], None]
 
-#: Nodes sampled to estimate the share of the mesh a correcting layer would hold.
-LAYER_SAMPLES = 4_000
 #: The method mesh sequencing solves its coarse levels with: its λ ≥ 0 is the pressure
 #: the fine indicator needs, whichever method the fine level uses.
 SEQUENCING_METHOD = "positive"
@@ -473,6 +472,7 @@ def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, k
 
 
 def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult) -> ContactFields:
+    """The contact fields of a solve (a fine one's output, a coarse level's prediction)."""
     contact = problem.contact
     return ContactFields(
         nodes=contact.nodes,
