@@ -787,10 +787,12 @@ class ActiveSetSolver:
         if self.max_changes is not None:
             return len(changed) > self.max_changes
         missing = int((self.slot_of[changed] < 0).sum())
-        if (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
+        if not self.forward and (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
             return True
         k = len(changed)
         update = missing * (self.column_seconds or 0.0) + k**3 / 3 / DENSE_FLOPS
+        if self.forward:
+            update += self.solve_seconds  # u itself: one full solve
         return update > self.refactorization_seconds
 
     def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -874,8 +876,15 @@ class ActiveSetSolver:
         probe = probe_vector(len(parts[0]), self.free)
         started = time.perf_counter()
         solved = np.asarray(self.factor.solve(np.column_stack([*parts, probe]))).reshape(len(probe), -1)
+        #: Seconds of one full solve with the factor (per right-hand side).
+        self.solve_seconds = (time.perf_counter() - started) / solved.shape[1]
+        # With a backend that solves with L alone, the Schur complement comes from sparse
+        # forward columns (see _slots): until one is measured, a column is taken to cost a
+        # quarter of a full solve (0.24 measured on the square and on rough profiles, 132 000
+        # to 526 000 unknowns, against 0.5 for a full sparse column), and they are not capped.
+        self.forward = callable(getattr(self.factor, "forward_sparse", None))
         if self.column_seconds is None:
-            self.column_seconds = (time.perf_counter() - started) / solved.shape[1]
+            self.column_seconds = self.solve_seconds / (4.0 if self.forward else 1.0)
         if self.scalable:
             self.base_parts = (np.ascontiguousarray(solved[:, 0]), np.ascontiguousarray(solved[:, 1]))
             self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
@@ -892,7 +901,10 @@ class ActiveSetSolver:
         # the columns out: slot_of[j] is node j's column, −1 when not computed yet.
         self.slot_of = np.full(len(self.normal_dofs), -1)
         self.column_count = 0
-        if getattr(self, "column_store", None) is None:
+        if self.forward:
+            self.forward_store = sp.csc_matrix((k.shape[0], 0))
+            self.scaled_store = sp.csc_matrix((k.shape[0], 0))
+        elif getattr(self, "column_store", None) is None:
             self.column_store = np.empty((k.shape[0], 0), order="F")
 
     def _masked(self, fixed: np.ndarray) -> sp.csr_matrix:
@@ -950,15 +962,20 @@ class ActiveSetSolver:
             values = np.concatenate([rows_k.data, np.ones(int((~released).sum()))])
             rhs = sp.csc_matrix((values, (entries, columns)), shape=(n, len(missing)))
             started = time.perf_counter()
-            solved = solve_sparse_columns(self.factor, rhs)
+            count = self.column_count
+            if self.forward:
+                forward, scaled = self.factor.forward_sparse(rhs)
+                self.forward_store = sp.hstack([self.forward_store, forward], format="csc")
+                self.scaled_store = sp.hstack([self.scaled_store, scaled], format="csc")
+            else:
+                solved = solve_sparse_columns(self.factor, rhs)
+                if count + len(missing) > self.column_store.shape[1]:
+                    grown = np.empty((n, max(16, 2 * (count + len(missing)))), order="F")
+                    grown[:, :count] = self.column_store[:, :count]
+                    self.column_store = grown
+                self.column_store[:, count:count + len(missing)] = solved
             self.column_seconds = (time.perf_counter() - started) / len(missing)
             self.column_solves += len(missing)
-            count = self.column_count
-            if count + len(missing) > self.column_store.shape[1]:
-                grown = np.empty((n, max(16, 2 * (count + len(missing)))), order="F")
-                grown[:, :count] = self.column_store[:, :count]
-                self.column_store = grown
-            self.column_store[:, count:count + len(missing)] = solved
             self.slot_of[missing] = np.arange(count, count + len(missing))
             self.column_count = count + len(missing)
         return self.slot_of[nodes]
@@ -991,6 +1008,8 @@ class ActiveSetSolver:
         if len(released) == 0 and len(added) == 0:
             return base.copy()
         slots = self._slots(np.concatenate([released, added]))
+        if self.forward:
+            return self._solve_changed_forward(released, added, slots, base, load, fixed_values, added_values)
         s_r, s_d = slots[:len(released)], slots[len(released):]
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
@@ -1017,6 +1036,45 @@ class ActiveSetSolver:
             ) from error
         u_r, mu = solution[: len(released)], solution[len(released):]
         u = z0 - self._combine(slots, np.concatenate([u_r, mu]))
+        u[dofs_r] = u_r
+        return u
+
+
+    def _solve_changed_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
+                               load: np.ndarray, fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
+        """:meth:`_solve_changed` from sparse forward columns: with C = [K0r, E_d] (the
+        released nodes' columns of K on the free unknowns, the added nodes' unit vectors)
+        and K00 = Pᵀ L D Lᵀ P, Cᵀ K00⁻¹ C = Wᵀ D⁻¹ W for W = L⁻¹ P C, whose columns are
+        sparse; the Schur system is the same, and u = z0 − K00⁻¹ C [u_r; μ] costs one full
+        solve instead of a product with full-length columns."""
+        r = len(released)
+        dofs_r = self.normal_dofs[released]
+        dofs_d = self.normal_dofs[added]
+        gram = (self.forward_store[:, slots].T @ self.scaled_store[:, slots]).toarray()
+        gram = 0.5 * (gram + gram.T)  # Cᵀ K00⁻¹ C is symmetric; round-off made it not quite
+        released_values = fixed_values[dofs_r]
+        values = fixed_values.copy()
+        values[dofs_r] = 0.0
+        rows_r = self.stiffness[dofs_r]
+        k_r0 = self._free_part(rows_r)
+        k_rr = rows_r[:, dofs_r].toarray()
+        b_r = load[dofs_r] - rows_r @ values
+        # z0 = base + K00⁻¹ K0r G_r: the released normals lose their fixed values.
+        top = np.hstack([k_rr - gram[:r, :r], -gram[:r, r:]])
+        bottom = np.hstack([-gram[r:, :r], -gram[r:, r:]])
+        rhs = np.concatenate([b_r - (k_r0 @ base + gram[:r, :r] @ released_values),
+                              added_values - (base[dofs_d] + gram[r:, :r] @ released_values)])
+        try:
+            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+        except np.linalg.LinAlgError as error:
+            raise SolverError(
+                f"the stiffness matrix is singular once {r} contact nodes are released and "
+                f"{len(added)} added (Schur complement: {error}); is part of the body held only by contact?"
+            ) from error
+        u_r, mu = solution[:r], solution[r:]
+        combined = k_r0.T @ (released_values - u_r)
+        combined[dofs_d] -= mu
+        u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
         u[dofs_r] = u_r
         return u
 

@@ -194,6 +194,28 @@ class _CvxoptCholmod:
         self._cholmod.solve(self._factor, block)
         return np.array(block).reshape(shape)
 
+    def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W = L⁻¹ P B and D⁻¹ W for a sparse B (n, k), both sparse, so that
+        Bᵀ A⁻¹ B = Wᵀ D⁻¹ W (D = I for CHOLMOD's supernodal LLᵀ, the diagonal of a
+        simplicial LDLᵀ). L⁻¹ P e_j has nonzeros only on the elimination tree's path from
+        j: about 600 of 418 000 on a rough profile's mesh, 9 000 of 526 000 on the square;
+        a column costs 0.24 of a full solve (CHOLMOD solves in small dense blocks), against
+        0.5–0.7 for a full sparse column."""
+        import cvxopt
+
+        n, k = rhs.shape
+        block = rhs.tocoo()
+        matrix = cvxopt.spmatrix(cvxopt.matrix(block.data.astype(float)), cvxopt.matrix(block.row.astype(np.int64)),
+                                 cvxopt.matrix(block.col.astype(np.int64)), (n, k))
+        forward = self._cholmod.spsolve(self._factor, self._cholmod.spsolve(self._factor, matrix, sys=7), sys=4)
+        scaled = self._cholmod.spsolve(self._factor, forward, sys=6)
+
+        def csc(m) -> sp.csc_matrix:
+            return sp.csc_matrix((np.array(m.V).ravel(), (np.array(m.I).ravel(), np.array(m.J).ravel())),
+                                 shape=(n, k))
+
+        return csc(forward), csc(scaled)
+
     #: Columns per call of CHOLMOD's sparse solve: cvxopt's dense solve takes a block one
     #: column at a time, its sparse one in small dense blocks, measured 2x faster per column
     #: at 4 (247k unknowns: 26 against 51 ms); more columns cost more to convert back.
