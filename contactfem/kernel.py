@@ -69,6 +69,7 @@ FORCE_RESOLUTION_LIMIT = 1e-3
 DENSE_FLOPS = 5e9
 #: The most bytes the cached Schur columns (one full-length vector each) may hold: beyond
 #: it the kernel refactorises, whatever the cost model says (at 2.1M unknowns: 32 columns).
+#: Sparse forward columns are not capped; their dense blocks in a Schur product are.
 COLUMN_BYTES = 2**29
 
 
@@ -630,7 +631,10 @@ class ActiveSetSolver:
         [   −Eᵀ Z_r          −Eᵀ Z_d ] [ μ ] = [G_d − Eᵀ z0 ],   z0 = K00⁻¹ b0,
 
     then u = z0 − Z_r u_r − Z_d μ. Each column of Z costs one solve with the factor and
-    is kept for later iterations (the missing ones are solved as one block). The matrix is
+    is kept for later iterations (the missing ones are solved as one block). A backend
+    that solves with L alone (CHOLMOD through cvxopt) keeps W = L⁻¹ P [K0r, E] instead,
+    sparse (the elimination tree's paths), forms the Schur blocks as Wᵀ D⁻¹ W and u with one
+    full solve: a column then costs a quarter of a solve instead of a half or more. The matrix is
     factorised anew, with the current set as reference, when that is cheaper than the
     missing columns: a cost model compares their number times the measured seconds per
     column (plus the dense solve, k³/3 flops at :data:`DENSE_FLOPS`) with the measured
@@ -1050,7 +1054,15 @@ class ActiveSetSolver:
         r = len(released)
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
-        gram = (self.forward_store[:, slots].T @ self.scaled_store[:, slots]).toarray()
+        forward, scaled = self.forward_store[:, slots], self.scaled_store[:, slots]
+        # The columns share the rows near the elimination tree's root: as dense blocks over
+        # the rows any of them touches, the product runs in BLAS (256 columns on the square
+        # at 526 000 unknowns: 14 000 rows, 0.04 s against 0.66 s as a sparse product).
+        rows = np.unique(forward.indices)
+        if 16 * len(rows) * len(slots) <= COLUMN_BYTES:
+            gram = forward[rows].toarray().T @ scaled[rows].toarray()
+        else:
+            gram = (forward.T @ scaled).toarray()
         gram = 0.5 * (gram + gram.T)  # Cᵀ K00⁻¹ C is symmetric; round-off made it not quite
         released_values = fixed_values[dofs_r]
         values = fixed_values.copy()
