@@ -71,6 +71,11 @@ DENSE_FLOPS = 5e9
 #: it the kernel refactorises, whatever the cost model says (at 2.1M unknowns: 32 columns).
 #: Sparse forward columns are not capped; their dense blocks in a Schur product are.
 COLUMN_BYTES = 2**29
+#: Unknowns from which Schur columns come from forward solves when the backend has them:
+#: below, a full solve takes milliseconds and the forward route's fixed cost per update
+#: (its Schur product, one more full solve) outweighs it (a wavy strip of 5 120 unknowns
+#: took 0.135 s that way against 0.059 s with full columns).
+FORWARD_COLUMNS_FROM = 100_000
 
 
 def roundoff_bound(terms: int) -> float:
@@ -886,7 +891,8 @@ class ActiveSetSolver:
         # forward columns (see _slots): until one is measured, a column is taken to cost a
         # quarter of a full solve (0.24 measured on the square and on rough profiles, 132 000
         # to 526 000 unknowns, against 0.5 for a full sparse column), and they are not capped.
-        self.forward = callable(getattr(self.factor, "forward_sparse", None))
+        self.forward = (callable(getattr(self.factor, "forward_sparse", None))
+                        and k.shape[0] >= FORWARD_COLUMNS_FROM)
         if self.column_seconds is None:
             self.column_seconds = self.solve_seconds / (4.0 if self.forward else 1.0)
         if self.scalable:

@@ -433,7 +433,7 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh():
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
-def test_schur_updates_from_forward_columns_match_a_fresh_factorisation():
+def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypatch):
     """With CHOLMOD through cvxopt the Schur complement over the changed nodes comes from
     sparse forward columns W = L⁻¹ P C (Cᵀ K⁻¹ C = Wᵀ D⁻¹ W) and u from one full solve: on
     a rough base, a set that releases some nodes of the reference and adds others gives
@@ -448,6 +448,9 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation():
 
     if backend_provider("cholmod") != "cvxopt":
         pytest.skip("the forward columns are cvxopt's")
+    import contactfem.kernel as kernel
+
+    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # a small mesh, to keep the test quick
     contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
     converged = solve_contact(contact, backend="cholmod")
     rng = np.random.default_rng(5)
