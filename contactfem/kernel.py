@@ -891,8 +891,11 @@ class ActiveSetSolver:
         # forward columns (see _slots): until one is measured, a column is taken to cost a
         # quarter of a full solve (0.24 measured on the square and on rough profiles, 132 000
         # to 526 000 unknowns, against 0.5 for a full sparse column), and they are not capped.
+        # Not along a load path: there the same columns serve every step, and full ones
+        # make each reuse a product, where forward ones cost a full solve every time (the
+        # Hertz platen's 20 steps at 247 000 unknowns: 9.2 s against 7.7 s).
         self.forward = (callable(getattr(self.factor, "forward_sparse", None))
-                        and k.shape[0] >= FORWARD_COLUMNS_FROM)
+                        and k.shape[0] >= FORWARD_COLUMNS_FROM and not self.scalable)
         if self.column_seconds is None:
             self.column_seconds = self.solve_seconds / (4.0 if self.forward else 1.0)
         if self.scalable:

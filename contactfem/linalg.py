@@ -55,8 +55,11 @@ class Factorization(Protocol):
 
 def solve_sparse_columns(factor: Factorization, rhs: sp.spmatrix) -> np.ndarray:
     """X (n, k), Fortran-ordered, with A X = ``rhs`` for a sparse block of right-hand sides
-    (unit vectors, rows of the stiffness), solved as one dense block. (CHOLMOD through
-    cvxopt solves such blocks with L alone instead: ``forward_sparse``.)"""
+    (unit vectors, rows of the stiffness): through the backend's sparse solve when it has
+    one (CHOLMOD through cvxopt), else densely."""
+    sparse_solve = getattr(factor, "solve_sparse", None)
+    if sparse_solve is not None:
+        return sparse_solve(sp.csc_matrix(rhs))
     return np.asfortranarray(np.asarray(factor.solve(rhs.toarray())).reshape(rhs.shape))
 
 
@@ -212,6 +215,28 @@ class _CvxoptCholmod:
                                  shape=(n, k))
 
         return csc(forward), csc(scaled)
+
+    #: Columns per call of CHOLMOD's sparse solve: cvxopt's dense solve takes a block one
+    #: column at a time, its sparse one in small dense blocks, measured 2x faster per column
+    #: at 4 (247k unknowns: 26 against 51 ms); more columns cost more to convert back.
+    SPARSE_BLOCK = 4
+
+    def solve_sparse(self, rhs: sp.csc_matrix) -> np.ndarray:
+        import cvxopt
+
+        n, k = rhs.shape
+        out = np.zeros((n, k), order="F")
+        for start in range(0, k, self.SPARSE_BLOCK):
+            block = rhs[:, start:start + self.SPARSE_BLOCK].tocoo()
+            width = block.shape[1]
+            matrix = cvxopt.spmatrix(cvxopt.matrix(block.data.astype(float)),
+                                     cvxopt.matrix(block.row.astype(np.int64)),
+                                     cvxopt.matrix(block.col.astype(np.int64)), (n, width))
+            solved = self._cholmod.spsolve(self._factor, matrix)
+            rows = np.array(solved.I, dtype=np.int64).ravel()
+            columns = np.array(solved.J, dtype=np.int64).ravel()
+            out[rows, start + columns] = np.array(solved.V).ravel()
+        return out
 
 
 class _Pardiso:
