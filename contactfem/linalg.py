@@ -124,7 +124,7 @@ class _Cholmod:
 @dataclass
 class _CvxoptAnalysis:
     """What a later matrix of the same pattern reuses: CHOLMOD's symbolic analysis, cvxopt's
-    copy of the lower triangle (whose values are overwritten), and where its entries sit in
+    copy of the upper triangle (whose values are overwritten), and where its entries sit in
     the CSR matrix's data, for the pattern (indptr, indices) they were computed from."""
 
     symbolic: object
@@ -142,8 +142,10 @@ class _CvxoptAnalysis:
 class _CvxoptCholmod:
     """CHOLMOD through cvxopt (a pip wheel that bundles SuiteSparse and OpenBLAS).
 
-    cvxopt takes its own sparse matrix of the lower triangle, built from triplets in its
-    column order. A refactorisation of the same pattern (the kernel's, masked differently
+    cvxopt takes its own sparse matrix of one triangle, built from triplets in its column
+    order: the upper one, which CHOLMOD's supernodal factorisation reads as it is, where
+    the lower one is transposed first at every factorisation (the numeric factorisation
+    took 1.1 s against 2.2-2.4 s at 526 000 unknowns, and 48 MB less at its peak). A refactorisation of the same pattern (the kernel's, masked differently
     for each active set) only gathers the new values into that matrix: rebuilding it took
     0.5 s of each refactorisation at 694 000 unknowns. Keeping it costs no peak memory: it
     exists during every numeric factorisation anyway. A non-positive pivot raises
@@ -165,11 +167,11 @@ class _CvxoptCholmod:
             stored.V = cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float))
         else:
             n = csr.shape[0]
-            # cvxopt stores by column, then row: the lower triangle in CSC order. The matrix
-            # is symmetric, so column j of its lower triangle is row j of the CSR matrix from
-            # the diagonal on: the entries with column index ≥ row index, already in order.
+            # cvxopt stores by column, then row: the upper triangle in CSC order. The matrix
+            # is symmetric, so column j of its upper triangle is row j of the CSR matrix up
+            # to the diagonal: the entries with column index ≤ row index, already in order.
             rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(csr.indptr))
-            positions = np.flatnonzero(csr.indices >= rows)
+            positions = np.flatnonzero(csr.indices <= rows)
             if csr.nnz < 2**31:
                 positions = positions.astype(np.int32)  # kept for every refactorisation: half the bytes
             stored = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float)),
@@ -177,7 +179,7 @@ class _CvxoptCholmod:
                                      cvxopt.matrix(rows[positions]), (n, n))
             del rows
             _release_freed_memory()
-            symbolic = cholmod.symbolic(stored, uplo="L")
+            symbolic = cholmod.symbolic(stored, uplo="U")
         self.analysis_seconds = time.perf_counter() - started
         try:
             cholmod.numeric(stored, symbolic)
