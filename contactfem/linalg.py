@@ -8,8 +8,8 @@ COLAMD is an order of magnitude slower and heavier on these matrices.
 
 Matrices that share one sparsity pattern (the contact kernel's, masked differently for
 each active set) are factorised through a :class:`Factorizer`, which keeps CHOLMOD's
-ordering and symbolic analysis and redoes only the numeric factorisation: about 0.7 of a
-first factorisation at 525 000 unknowns. SuperLU and Pardiso factorise afresh.
+ordering and symbolic analysis and redoes only the numeric factorisation: about 0.4 of a
+first factorisation at 525 000 unknowns through cvxopt. SuperLU and Pardiso factorise afresh.
 
 None of the backends can be trusted to notice a singular matrix: SuperLU in symmetric
 mode without pivoting (``diag_pivot_thresh=0``) and CHOLMOD both complete with a tiny
