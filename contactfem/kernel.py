@@ -320,6 +320,7 @@ def solve_contact(
     on_iteration: Callable[[Iteration], None] | None = None,
     safeguard: bool = True,
     linear: "ActiveSetSolver | None" = None,
+    second_guess: Callable[[], np.ndarray | None] | None = None,
 ) -> KernelResult:
     """Run the primal–dual active set iteration until the active set repeats, then certify.
 
@@ -352,6 +353,11 @@ def solve_contact(
         object with its ``load``, ``solve``, ``normals``, ``measure``, ``non_finite``,
         ``certify``, ``factorizations`` and ``column_solves`` serves (the distributed
         solver of :mod:`contactfem.distributed`, whose vectors are each rank's part).
+    second_guess : callable, optional
+        Asked once, only if the first iterate's set does not settle: a better set to go on
+        from (a prediction from a coarser mesh, which costs a coarse solve and is not paid
+        for when the starting set was already the answer), or None to go on with Newton's
+        update. It replaces that update for the second iteration.
 
     Raises
     ------
@@ -411,6 +417,13 @@ def solve_contact(
             indicator = np.where(active, reaction_at_contact, c * slack)
             new_active = holder.hold(new_active, indicator)
         finite = linear.non_finite(displacement) == 0 and bool(np.isfinite(nodal_force).all())
+        seconds = time.perf_counter() - started  # this step's own, without the guess's cost
+        if iteration == 1 and second_guess is not None and finite and not np.array_equal(new_active, active):
+            guess = second_guess()
+            if guess is not None:
+                guess = np.asarray(guess, dtype=bool).copy()
+                if not np.array_equal(guess, active):
+                    new_active = guess
 
         with np.errstate(invalid="ignore", over="ignore"):
             complementarity = np.abs(
@@ -422,7 +435,7 @@ def solve_contact(
             removed=int((active & ~new_active).sum()),
             equilibrium_residual=float(scales.equilibrium),
             complementarity_residual=float(complementarity),
-            seconds=time.perf_counter() - started,
+            seconds=seconds,
         )
         history.append(record)
         if on_iteration is not None:

@@ -236,6 +236,14 @@ def _part_names(geometry: PolygonGeometry) -> set[str]:
     return names
 
 
+def overlapped(gap: np.ndarray, tolerance: float) -> np.ndarray:
+    """The contact nodes that start inside the obstacle by more than round-off: gap below
+    −``tolerance`` times the largest gap (a curved body resting on the obstacle has its
+    lowest node's gap at round-off, of either sign)."""
+    gap = np.asarray(gap, dtype=float)
+    return gap < -tolerance * np.abs(gap).max(initial=0.0)
+
+
 def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:
     """Initial active set (m,) of the fine contact nodes from a coarse solution's contact fields."""
     pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)

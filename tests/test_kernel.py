@@ -308,6 +308,42 @@ def test_hundreds_of_patches_are_solved_exactly_in_a_few_factorisations(backend,
     assert result.certificate.passed
 
 
+def test_a_second_guess_is_asked_only_when_the_first_step_does_not_settle():
+    """The alternating chain (101 one-node patches). Started from its answer, the first step
+    settles and the guess is never asked. Started cold, the guess (the answer with two
+    nodes wrong) replaces Newton's update: the first record counts the guess's changes,
+    the second step starts from it and Newton corrects the two nodes, to the hand solution.
+    A guess of None leaves Newton's own iteration, step for step."""
+    n = 201
+    k, f, g, u, force = alternating_chain(n)
+    answer = np.arange(n) % 2 == 0
+    guess = answer.copy()
+    guess[[10, 101]] = ~guess[[10, 101]]
+    asked: list[int] = []
+
+    def second_guess():
+        asked.append(1)
+        return guess
+
+    settled = solve_contact(system(k, f, g), initial_active=answer, second_guess=second_guess)
+    assert settled.status is Status.CONVERGED and settled.iterations == 1 and not asked
+
+    cold = np.zeros(n, dtype=bool)
+    guessed = solve_contact(system(k, f, g), initial_active=cold, second_guess=second_guess)
+    assert asked == [1]
+    assert guessed.status is Status.CONVERGED, guessed.message
+    assert (guessed.history[0].added, guessed.history[0].removed) == (int(guess.sum()), 0)
+    assert guessed.history[1].active == int(guess.sum())
+    np.testing.assert_array_equal(guessed.active, answer)
+    np.testing.assert_allclose(guessed.displacement, u, atol=1e-12)
+    np.testing.assert_allclose(guessed.nodal_force, force, atol=1e-12)
+
+    plain = solve_contact(system(k, f, g), initial_active=cold)
+    unguessed = solve_contact(system(k, f, g), initial_active=cold, second_guess=lambda: None)
+    assert [step.active for step in unguessed.history] == [step.active for step in plain.history]
+    np.testing.assert_array_equal(unguessed.active, plain.active)
+
+
 def test_a_start_a_few_nodes_off_costs_columns_not_factorisations():
     """Started from the answer with 3 nodes flipped (6 transitions moved), the kernel solves
     the 3 changes through the Schur complement of its first factorisation (one column each)
