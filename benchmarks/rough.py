@@ -223,10 +223,20 @@ def fit_exponent(sizes: list[float], values: list[float]) -> float | None:
     return float(np.polyfit(np.log(s), np.log(v), 1)[0])
 
 
+#: Memory increments below this are the allocator's arenas and page granularity, not the
+#: stage (validation adds 0 to 2 MB up to 8 000 points): they are left out of the fits.
+MEMORY_FLOOR_GB = 0.004
+
+
 def scaling(records: list[dict]) -> dict:
     good = sorted((r for r in records if "error" not in r), key=lambda r: r["points"])
     sizes = [r["points"] for r in good]
-    return {stage: fit_exponent(sizes, [r.get(stage) for r in good]) for stage in STAGES}
+
+    def values(stage: str) -> list:
+        floor = MEMORY_FLOOR_GB if stage.endswith("_gb") else 0.0
+        return [r.get(stage) if (r.get(stage) or 0.0) >= floor else None for r in good]
+
+    return {stage: fit_exponent(sizes, values(stage)) for stage in STAGES}
 
 
 def table(records: list[dict]) -> str:
