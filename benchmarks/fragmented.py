@@ -7,7 +7,7 @@ Usage:
     python benchmarks/fragmented.py --scenes square --sizes 256 1024
 
 Scenes (``--sizes`` means segments for rough, wavenumbers for wavy, divisions for square,
-refinements for shipped):
+refinements for shipped and overlap):
 
 - ``rough``: a 1 x 0.5 block whose base is a self-affine profile y = h(x) (Hurst 0.8,
   rms 2e-4, a seeded random-phase spectrum over 1 … segments/2 waves, one polygon vertex
@@ -21,6 +21,8 @@ refinements for shipped):
   precision: the probe refuses its stiffness).
 - ``square``: cases/square.yaml at N x N (one contact zone, for comparison).
 - ``shipped``: every case of cases/ refined the given number of times.
+- ``overlap``: bodies that start inside the obstacle (:func:`overlap_cases`), refined the
+  given number of times: where the overlap is the answer, partly it, or no prediction.
 
 Per scene, size and method, with mesh sequencing on (the pipeline's ``solve_case``) and
 off (the same reduction and kernel from a cold start): unknowns, active nodes, patches
@@ -47,8 +49,8 @@ from performance import linear_system, machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
-DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "wavy": [200], "square": [256, 1024], "shipped": [3]}
-QUICK_SIZES = {"rough": [1000, 4000], "wavy": [200], "square": [256], "shipped": [2]}
+DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "wavy": [200], "square": [256, 1024], "shipped": [3], "overlap": [2]}
+QUICK_SIZES = {"rough": [1000, 4000], "wavy": [200], "square": [256], "shipped": [2], "overlap": [1]}
 SEED = 20050101
 
 
@@ -114,8 +116,33 @@ def square_case(divisions: int):
     return parse_case(yaml.safe_dump(data), source=ROOT / "cases" / "square.yaml")
 
 
+def overlap_cases() -> list[tuple[str, object]]:
+    """Bodies that start inside the obstacle: a tilted flat face pressed into the block over
+    part of its width (cases/flat_punch.yaml, the face from 3e-3 in at x = 1 to 1e-3 out at
+    x = −1), the same face pressed in over all of it (4e-3 to 2e-4, about half of it
+    releases), and the Hertz half-disk with its top held and the plane moved 4e-3 into it
+    (the overlap twice as wide as the contact zone)."""
+    from contactfem.case import parse_case
+
+    punch_file = ROOT / "cases" / "flat_punch.yaml"
+    cases = []
+    for label, segment in (("tilted-partly-in", [[1.0, -3e-3], [-1.0, 1e-3]]),
+                           ("tilted-all-in", [[1.05, -4e-3], [-1.05, -2e-4]])):
+        data = yaml.safe_load(punch_file.read_text())
+        data["obstacle"] = {"segment": segment}
+        cases.append((label, parse_case(yaml.safe_dump(data), source=punch_file)))
+    hertz_file = ROOT / "cases" / "hertz.yaml"
+    data = yaml.safe_load(hertz_file.read_text())
+    data["boundary"]["top"] = "clamped"
+    data["obstacle"]["point"] = [0, 4e-3]
+    cases.append(("hertz-pressed-in", parse_case(yaml.safe_dump(data), source=hertz_file)))
+    return cases
+
+
 def scenes(name: str, size: int) -> list[tuple[str, object, int | None]]:
     """(label, case, refine) of one scene at one size."""
+    if name == "overlap":
+        return [(f"{label}-refine{size}", case, size) for label, case in overlap_cases()]
     if name == "rough":
         return [(f"rough-{size}", rough_case(size), None)]
     if name == "wavy":
