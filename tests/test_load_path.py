@@ -40,7 +40,15 @@ def square_path(factors) -> dict:
 
 
 @pytest.mark.parametrize("method", ["positive", "standard"])
-def test_each_step_is_the_solve_of_the_scaled_load(method):
+def test_each_step_is_the_solve_of_the_scaled_load(method, monkeypatch):
+    """Each step equals the direct solve of its load. And the first step's factorisation
+    serves the path: with the cost model, which weighs measured seconds (a machine under
+    load chose 2 or 3 factorisations on this path), replaced by a fixed bound of 20 changed
+    nodes (about what a CHOLMOD factorisation is worth), no later step refactorises."""
+    from contactfem.kernel import ActiveSetSolver
+
+    monkeypatch.setattr(ActiveSetSolver, "_refactorize_first",
+                        lambda self, active: int(np.count_nonzero(active != self.reference)) > 20)
     factors = [0.25, 0.5, 0.8, 1.0]
     data = hertz_pressed({"force": FORCE})
     data["load_path"] = {"factors": factors}
@@ -57,8 +65,7 @@ def test_each_step_is_the_solve_of_the_scaled_load(method):
         assert np.abs(step.solution.contact.multiplier - direct.solution.contact.multiplier).max() <= 1e-8 * pressure
         assert abs(step.solution.contact.nodal_force.sum() - factor * FORCE) <= 1e-10 * FORCE
     # One factorisation serves the path (the first step's); later steps reuse it.
-    assert path.steps[0].kernel.factorizations >= 1
-    assert path.factorizations <= 2
+    assert path.steps[0].kernel.factorizations == path.factorizations == 1
 
 
 def test_a_proportional_path_is_homogeneous_and_needs_one_factorisation():
