@@ -890,11 +890,11 @@ def _certificate_line(certificate: dict | None) -> str:
 
 
 def _summary(report: dict, written: list[Path]) -> str:
+    from contactfem.plots import zone_text
+
     zone = report["contact_zone"]
     signs = report["sign_conditions"]
-    intervals = ", ".join(
-        f"[{i['abscissa'][0]:.4g}, {i['abscissa'][1]:.4g}]" for i in zone["intervals"]
-    ) or "none"
+    intervals = zone_text(tuple(i["abscissa"]) for i in zone["intervals"])
     timings = report["timings"]
     lines = [
         f"{report['case']['title']} — method {report['method']['equation']} {report['method']['name']}",

@@ -91,9 +91,26 @@ def _shade(axis, intervals, label: str | None = None) -> None:
             axis.axvline(low, color="tab:red", alpha=0.4, lw=1.5, label=label if k == 0 else None)
 
 
+#: Contact intervals listed one by one up to this many; a zone of more patches (a rough
+#: profile touches in thousands) is told by its count, extent and widest patch.
+ZONE_INTERVALS_LISTED = 6
+
+
+def zone_text(intervals, unit: str = "") -> str:
+    """The contact zone in a line: its (low, high) intervals along ΓC, or for many of them
+    their count, extent and widest one."""
+    intervals = list(intervals)
+    suffix = f" {unit}" if unit and intervals else ""
+    if len(intervals) <= ZONE_INTERVALS_LISTED:
+        return (", ".join(f"[{low:.4g}, {high:.4g}]" for low, high in intervals) or "none") + suffix
+    low, high = min(a for a, _ in intervals), max(b for _, b in intervals)
+    wide_low, wide_high = max(intervals, key=lambda pair: pair[1] - pair[0])
+    return (f"{len(intervals)} patches over [{low:.4g}, {high:.4g}]{suffix}, "
+            f"the widest [{wide_low:.4g}, {wide_high:.4g}]")
+
+
 def _zone_text(intervals, unit: str) -> str:
-    shown = ", ".join(f"[{low:.4g}, {high:.4g}]" for low, high in intervals) or "none"
-    return f"contact zone along the obstacle: {shown}" + (f" {unit}" if unit and intervals else "")
+    return "contact zone along the obstacle: " + zone_text(intervals, unit)
 
 
 # --------------------------------------------------------------------------- one result

@@ -307,3 +307,17 @@ def test_contact_zone_intervals_of_the_pictures_are_the_reports(shipped_results)
         if report is not None:
             assert shaded == [tuple(i["abscissa"]) for i in report["contact_zone"]["intervals"]], name
         assert shaded, name
+
+
+def test_a_zone_of_many_patches_is_told_by_its_count_extent_and_widest_patch():
+    """The summary line and the pictures' titles list up to six intervals; a rough profile's
+    thousands of patches would make a line of tens of kilobytes."""
+    from contactfem.plots import ZONE_INTERVALS_LISTED, zone_text
+
+    few = [(0.5, 1.0), (1.25, 1.5)]
+    assert zone_text(few, "mm") == "[0.5, 1], [1.25, 1.5] mm"
+    assert zone_text([]) == "none"
+    many = [(0.01 * k, 0.01 * k + 0.001) for k in range(1, 1690)]
+    many[700] = (7.01, 7.015)
+    assert len(many) > ZONE_INTERVALS_LISTED
+    assert zone_text(many, "m") == "1689 patches over [0.01, 16.89] m, the widest [7.01, 7.015]"
