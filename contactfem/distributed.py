@@ -60,6 +60,7 @@ from contactfem.kernel import (
 )
 from contactfem.linalg import SINGULARITY_LIMIT, FactorCheck, probe_vector
 from contactfem.methods import get_method
+from contactfem.sequencing import starting_set
 
 if TYPE_CHECKING:
     from contactfem.solve import SolveResult
@@ -319,8 +320,12 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), petsc {solver}")
     c = case.solver.c if case.solver.c is not None else system.default_c()
-    initial_active, predicted = (_predict_from_coarser(PETSc, MPI, comm, case, problem, c, solver, say)
-                                 if sequencing else (None, {}))
+    # Every rank takes the same decision: the gaps are whole on every rank, and the coarse
+    # levels (a second guess included) are solved by all of them together.
+    initial_active, second_guess, predicted = (
+        starting_set(problem.contact.gap, case.solver.tolerance,
+                     lambda: _predict_from_coarser(PETSc, MPI, comm, case, problem, c, solver, say))
+        if sequencing else (None, None, {}))
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
@@ -331,7 +336,7 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     linear = _DistributedSolver(PETSc, MPI, comm, system, solver, tolerance=case.solver.tolerance)
     kernel, normal_displacement = _active_set_iteration(
         linear, c=c, tolerance=case.solver.tolerance, max_iterations=case.solver.max_iterations,
-        initial_active=initial_active, on_iteration=on_iteration)
+        initial_active=initial_active, on_iteration=on_iteration, second_guess=second_guess)
     timings["solve"] = time.perf_counter() - clock
     return _Level(kernel=kernel, normal_displacement=normal_displacement, linear=linear, layout=layout,
                   system=system, sequencing=predicted)
@@ -865,7 +870,9 @@ def _reason_name(PETSc, reason: int) -> str:
 
 def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: float, max_iterations: int,
                           initial_active: np.ndarray | None = None,
-                          on_iteration: Callable[[Iteration], None] | None = None) -> tuple[KernelResult, np.ndarray]:
+                          on_iteration: Callable[[Iteration], None] | None = None,
+                          second_guess: Callable[[], np.ndarray | None] | None = None,
+                          ) -> tuple[KernelResult, np.ndarray]:
     """:func:`contactfem.kernel.solve_contact` on the distributed solver: the contact arrays
     are whole on every rank, so every rank takes the same decisions. ``displacement`` of the
     result is this rank's part (PETSc order); the whole iterate is kept in
@@ -874,6 +881,7 @@ def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: fl
     system = ContactSystem(stiffness=None, load=None, normal_dofs=np.arange(len(linear.gap)), gap=linear.gap,
                            multiplier_mass=linear.system.multiplier_mass)
     kernel = solve_contact(system, c=c, tolerance=tolerance, max_iterations=max_iterations,
-                           initial_active=initial_active, on_iteration=on_iteration, linear=linear)
+                           initial_active=initial_active, on_iteration=on_iteration, linear=linear,
+                           second_guess=second_guess)
     linear.keep(kernel.displacement)
     return kernel, linear.normals(kernel.displacement)

@@ -23,6 +23,7 @@ the coarse displacement outside, when :func:`layer_pays`.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 
@@ -242,6 +243,33 @@ def overlapped(gap: np.ndarray, tolerance: float) -> np.ndarray:
     lowest node's gap at round-off, of either sign)."""
     gap = np.asarray(gap, dtype=float)
     return gap < -tolerance * np.abs(gap).max(initial=0.0)
+
+
+def starting_set(gap: np.ndarray, tolerance: float,
+                 predict: Callable[[], tuple[np.ndarray | None, dict]],
+                 ) -> tuple[np.ndarray | None, Callable[[], np.ndarray | None] | None, dict]:
+    """Where the kernel starts: its starting set, the second guess it may ask for
+    (:func:`contactfem.kernel.solve_contact`) and the record of the coarse prediction, filled
+    when ``predict`` (the coarse levels: a set or None, and what they cost) is called.
+
+    When every contact node starts inside the obstacle (a flat punch pressed in over its
+    whole face), Newton can only release nodes from there, and for a face that stays pressed
+    in the overlap is the answer, which the first step tells at the cost of the
+    factorisation any start needs: the coarse prediction is then only the second guess, paid
+    for if that step does not settle. Otherwise it comes first; a partial overlap (a tilted
+    punch, a disk pressed in) is no prediction.
+    """
+    record: dict = {}
+
+    def predicted() -> np.ndarray | None:
+        active, cost = predict()
+        record.update(cost)
+        return active
+
+    inside = overlapped(gap, tolerance)
+    if len(inside) and inside.all():
+        return inside, predicted, record
+    return predicted(), None, record
 
 
 def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:

@@ -40,9 +40,9 @@ from contactfem.sequencing import (
     contact_layer,
     layer_depth,
     layer_pays,
-    overlapped,
     patch_count,
     predict_active_set,
+    starting_set,
     worth_sequencing,
 )
 
@@ -164,24 +164,9 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     coarser meshes) and what the prediction cost: what a fine solve and a coarse level share."""
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    inside = overlapped(reduced.system.gap, case.solver.tolerance)
-    sequencing: dict = {}
-    second_guess = None
-    if len(inside) and inside.all():
-        # Every contact node starts inside the obstacle (a flat punch pressed in over its
-        # whole face): Newton can only release nodes from there, and for a face that stays
-        # pressed in the set is already the answer, which the first step tells at the cost
-        # of the factorisation any start needs. Only if that step does not settle is a coarse
-        # prediction paid for. A partial overlap (a tilted punch, a disk pressed in) is
-        # mispredicted by its overlap, and goes to the coarse level first.
-        initial_active = inside
-
-        def second_guess() -> np.ndarray | None:
-            predicted, record = _predict_from_coarser(case, problem, reduced, c, say, load_factor)
-            sequencing.update(record)
-            return predicted
-    else:
-        initial_active, sequencing = _predict_from_coarser(case, problem, reduced, c, say, load_factor)
+    initial_active, second_guess, sequencing = starting_set(
+        reduced.system.gap, case.solver.tolerance,
+        lambda: _predict_from_coarser(case, problem, reduced, c, say, load_factor))
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:

@@ -1,5 +1,8 @@
 """The petsc backend on 2 MPI ranks agrees with the serial solve: displacements and multipliers
-to 1e-8 relative, the same active set, on the square and the plate with a hole, both methods.
+to 1e-8 relative, the same active set, on the square and the plate with a hole, both methods,
+and on punches pressed into the block over their whole face (the flat punch, which starts
+from its overlap, and a tilted one that releases half of it, which then asks the coarse
+levels solved across the ranks for its second guess).
 
 Skipped unless petsc4py and mpi4py import and an ``mpiexec`` is on the PATH (see README:
 the petsc extra needs PETSc itself, e.g. Debian's petsc-dev, and PETSC_DIR to build).
@@ -23,7 +26,12 @@ from contactfem.solve import solve_case
 CASES = Path(__file__).resolve().parent.parent / "cases"
 RANKS = 2
 AGREEMENT = 1e-8
-SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive", "standard")]
+SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive", "standard")] + [
+    ("flat_punch", "positive"), ("tilted_punch", "standard")]
+#: The tilted punch: cases/flat_punch.yaml pressed in everywhere (4e-3 at x = 1.05, 2e-4 at
+#: x = −1.05) on a mesh fine enough (7 800 unknowns) for a coarse level to pay.
+TILTED_PUNCH = {"obstacle": {"segment": [[1.05, -4e-3], [-1.05, -2e-4]]},
+                "mesh": {"size": 0.5, "contact_size": 0.02, "grading": 0.15}}
 
 _have_petsc = all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
 _mpiexec = shutil.which("mpiexec")
@@ -39,8 +47,8 @@ from contactfem.distributed import distributed_report, solve_distributed
 
 out = sys.argv[1]
 fields = {}
-for name, method in [item.split(":") for item in sys.argv[2:]]:
-    case = load_case(f"{CASES}/{name}.yaml")
+for name, path, method in [item.split(":") for item in sys.argv[2:]]:
+    case = load_case(path)
     outcome = solve_distributed(case, method=method)
     if outcome.result is not None:
         solution = outcome.result.solution
@@ -54,6 +62,8 @@ for name, method in [item.split(":") for item in sys.argv[2:]]:
         fields[key + "_rss"] = np.array([r["peak_rss_bytes"] for r in report["parallel"]["per_rank"]])
         fields[key + "_residual"] = np.array(report["equilibrium"]["relative_force_residual"])
         fields[key + "_status"] = np.array(report["solver"]["status"])
+        fields[key + "_first_active"] = np.array(report["newton"][0]["active"])
+        fields[key + "_levels"] = np.array(report["solver"]["sequencing"].get("levels", 0))
 if fields:
     np.savez(out, **fields)
 """
@@ -68,13 +78,25 @@ def _mpi_environment() -> dict[str, str]:
 
 
 @pytest.fixture(scope="module")
-def distributed(tmp_path_factory) -> dict[str, np.ndarray]:
+def case_files(tmp_path_factory) -> dict[str, Path]:
+    """Each solve's case file: the shipped ones, and the tilted punch written beside them."""
+    import yaml
+
+    data = yaml.safe_load((CASES / "flat_punch.yaml").read_text(encoding="utf-8"))
+    data.update(TILTED_PUNCH)
+    tilted = tmp_path_factory.mktemp("cases") / "tilted_punch.yaml"
+    tilted.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return {name: tilted if name == "tilted_punch" else CASES / f"{name}.yaml" for name, _ in SOLVES}
+
+
+@pytest.fixture(scope="module")
+def distributed(tmp_path_factory, case_files) -> dict[str, np.ndarray]:
     directory = tmp_path_factory.mktemp("distributed")
     script = directory / "solve.py"
     script.write_text(f"CASES = {str(CASES)!r}\n" + SCRIPT)
     out = directory / "fields.npz"
     command = [_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out),
-               *(f"{name}:{method}" for name, method in SOLVES)]
+               *(f"{name}:{case_files[name]}:{method}" for name, method in SOLVES)]
     run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     with np.load(out) as data:
@@ -83,10 +105,15 @@ def distributed(tmp_path_factory) -> dict[str, np.ndarray]:
 
 @needs_mpi
 @pytest.mark.parametrize("name, method", SOLVES)
-def test_two_ranks_agree_with_the_serial_solve(distributed, name, method):
-    case = load_case(CASES / f"{name}.yaml")
-    serial = solve_case(case, method=method).solution
+def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, method):
+    case = load_case(case_files[name])
+    solved = solve_case(case, method=method)
+    serial = solved.solution
     key = f"{name}_{method}"
+    if name in ("flat_punch", "tilted_punch"):  # both start from the whole face pressed in
+        assert solved.kernel.history[0].active == int(distributed[key + "_first_active"]) == len(serial.contact.active)
+    if name == "tilted_punch":  # which releases half of it: the coarse levels give the second guess
+        assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     assert int(distributed[key + "_ranks"]) == RANKS
     assert str(distributed[key + "_status"]) == "converged"
     np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
