@@ -157,12 +157,6 @@ def scenes(name: str, size: int) -> list[tuple[str, object, int | None]]:
 # --------------------------------------------------------------------------- measuring
 
 
-def patches(active: np.ndarray) -> int:
-    """Runs of consecutive active nodes (the contact nodes are sorted along ΓC)."""
-    a = np.asarray(active, dtype=bool)
-    return int(a[0]) + int(np.count_nonzero(a[1:] & ~a[:-1])) if len(a) else 0
-
-
 def contact_solve(case, problem, method: str, sequencing: bool) -> tuple[float, object, dict]:
     """Seconds of the contact solve, the kernel's result and the sequencing record."""
     from contactfem.kernel import default_c, solve_contact
@@ -209,6 +203,7 @@ def one_linear_solve(problem, backend: str) -> float:
 def measure(label: str, case, refine: int | None, method: str, repeat: int) -> list[dict]:
     from contactfem.kernel import Status
     from contactfem.linalg import resolve_backend
+    from contactfem.sequencing import patch_count
     from contactfem.solve import prepare
 
     backend = resolve_backend(case.solver.backend)
@@ -229,7 +224,7 @@ def measure(label: str, case, refine: int | None, method: str, repeat: int) -> l
             "status": kernel.status.value,
             "certified": bool(kernel.status is Status.CONVERGED),
             "active_nodes": int(kernel.active.sum()),
-            "patches": patches(kernel.active),
+            "patches": patch_count(kernel.active),
             "newton_steps": kernel.iterations,
             "factorizations": kernel.factorizations,
             "column_solves": kernel.column_solves,

@@ -113,6 +113,7 @@ def measure(points: int, directory: Path, method: str, repeat: int = 2) -> dict:
     from contactfem.linalg import factorize
     from contactfem.mesh.polygon import polygon_problems
     from contactfem.methods import get_method
+    from contactfem.sequencing import patch_count
     from contactfem.solve import prepare, solve_case
 
     csv = directory / f"surface-{points}.csv"
@@ -158,8 +159,7 @@ def measure(points: int, directory: Path, method: str, repeat: int = 2) -> dict:
     contact = outcome.solution.contact
     active = np.asarray(contact.active, dtype=bool)
     record["active_nodes"] = int(active.sum())
-    # Separate contact patches along ΓC: runs of active nodes.
-    record["contact_patches"] = int(np.sum(active[1:] & ~active[:-1]) + (1 if active.size and active[0] else 0))
+    record["contact_patches"] = patch_count(active)  # runs of active nodes along ΓC
     record["contact_force"] = float(np.sum(contact.nodal_force)) if hasattr(contact, "nodal_force") else None
     del outcome, kernel
 

@@ -131,7 +131,6 @@ class ContactSystem:
     fixed_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     free_modes: np.ndarray | None = None
 
-
     def scaled(self, factor: float) -> "ContactSystem":
         """The system with its load and prescribed values multiplied by ``factor`` (a step
         of a load path; the obstacle stays)."""
@@ -176,6 +175,7 @@ class ContactSystem:
             fixed_dofs=position[fixed_dofs[fixed_inside]],
             fixed_values=np.asarray(self.fixed_values, dtype=float)[fixed_inside],
         )
+
 
 @dataclass
 class Iteration:
@@ -659,7 +659,8 @@ class ActiveSetSolver:
     seconds of the last factorisation step (masking, factorising, probing and the first
     solves), less the ordering and symbolic analysis a refactorisation with CHOLMOD reuses
     (:class:`contactfem.linalg.Factorizer`). With SuperLU a
-    factorisation costs about 50 columns, with CHOLMOD about 20. ``max_changes``, when
+    factorisation costs about 50 columns, with CHOLMOD about 15 full ones (below
+    :data:`FORWARD_COLUMNS_FROM` unknowns) or 50 forward ones. ``max_changes``, when
     given, replaces the cost model by a fixed bound on the changed nodes. The columns never
     hold more than :data:`COLUMN_BYTES`; a Schur solve that cannot meet the certificate's
     equilibrium bound (``tolerance``) even after iterative refinement also refactorises.
@@ -1041,30 +1042,40 @@ class ActiveSetSolver:
         dofs_d = self.normal_dofs[added]
         # Released normals lose their fixed value: b0 gains K_0r G_r, so z0 gains Z_r G_r.
         z0 = base + self._combine(s_r, fixed_values[dofs_r])
-        values = fixed_values.copy()
-        values[dofs_r] = 0.0
-        rows_r = self.stiffness[dofs_r]
-        k_r0 = self._free_part(rows_r)
+        k_r0, k_rr, b_r = self._released_rows(dofs_r, load, fixed_values)
         # K_r0 Z touches only the rows of Z where K_r0 has entries: a few per released node.
         touched = np.unique(k_r0.indices)
         k_touched = k_r0[:, touched]
-        k_rr = rows_r[:, dofs_r].toarray()
-        b_r = load[dofs_r] - rows_r @ values
         top = np.hstack([k_rr - k_touched @ self._rows(touched, s_r), -(k_touched @ self._rows(touched, s_d))])
         bottom = np.hstack([-self._rows(dofs_d, s_r), -self._rows(dofs_d, s_d)])
         rhs = np.concatenate([b_r - k_r0 @ z0, added_values - z0[dofs_d]])
-        try:
-            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
-        except np.linalg.LinAlgError as error:
-            raise SolverError(
-                f"the stiffness matrix is singular once {len(released)} contact nodes are released and "
-                f"{len(added)} added (Schur complement: {error}); is part of the body held only by contact?"
-            ) from error
-        u_r, mu = solution[: len(released)], solution[len(released):]
+        u_r, mu = self._solve_schur(top, bottom, rhs, len(released), len(added))
         u = z0 - self._combine(slots, np.concatenate([u_r, mu]))
         u[dofs_r] = u_r
         return u
 
+    def _released_rows(self, dofs_r: np.ndarray, load: np.ndarray,
+                       fixed_values: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+        """The released normals' equations: K_r0 (their rows on the reference set's free
+        unknowns), K_rr and b_r = F_r − K_r· (fixed values, the released ones now free)."""
+        values = fixed_values.copy()
+        values[dofs_r] = 0.0
+        rows_r = self.stiffness[dofs_r]
+        return self._free_part(rows_r), rows_r[:, dofs_r].toarray(), load[dofs_r] - rows_r @ values
+
+    @staticmethod
+    def _solve_schur(top: np.ndarray, bottom: np.ndarray, rhs: np.ndarray, released: int,
+                     added: int) -> tuple[np.ndarray, np.ndarray]:
+        """The Schur system [top; bottom] [u_r; μ] = rhs of ``released`` freed and ``added``
+        fixed normals, split into u_r and μ."""
+        try:
+            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
+        except np.linalg.LinAlgError as error:
+            raise SolverError(
+                f"the stiffness matrix is singular once {released} contact nodes are released and "
+                f"{added} added (Schur complement: {error}); is part of the body held only by contact?"
+            ) from error
+        return solution[:released], solution[released:]
 
     def _solve_changed_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
                                load: np.ndarray, fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
@@ -1087,25 +1098,13 @@ class ActiveSetSolver:
             gram = (forward.T @ scaled).toarray()
         gram = 0.5 * (gram + gram.T)  # Cᵀ K00⁻¹ C is symmetric; round-off made it not quite
         released_values = fixed_values[dofs_r]
-        values = fixed_values.copy()
-        values[dofs_r] = 0.0
-        rows_r = self.stiffness[dofs_r]
-        k_r0 = self._free_part(rows_r)
-        k_rr = rows_r[:, dofs_r].toarray()
-        b_r = load[dofs_r] - rows_r @ values
+        k_r0, k_rr, b_r = self._released_rows(dofs_r, load, fixed_values)
         # z0 = base + K00⁻¹ K0r G_r: the released normals lose their fixed values.
         top = np.hstack([k_rr - gram[:r, :r], -gram[:r, r:]])
         bottom = np.hstack([-gram[r:, :r], -gram[r:, r:]])
         rhs = np.concatenate([b_r - (k_r0 @ base + gram[:r, :r] @ released_values),
                               added_values - (base[dofs_d] + gram[r:, :r] @ released_values)])
-        try:
-            solution = np.linalg.solve(np.vstack([top, bottom]), rhs)
-        except np.linalg.LinAlgError as error:
-            raise SolverError(
-                f"the stiffness matrix is singular once {r} contact nodes are released and "
-                f"{len(added)} added (Schur complement: {error}); is part of the body held only by contact?"
-            ) from error
-        u_r, mu = solution[:r], solution[r:]
+        u_r, mu = self._solve_schur(top, bottom, rhs, r, len(added))
         combined = k_r0.T @ (released_values - u_r)
         combined[dofs_d] -= mu
         u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
