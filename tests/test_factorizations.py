@@ -1,0 +1,160 @@
+"""The sparse direct factorisations behind the kernel: every installed provider solves the
+kernel's matrices to round-off, reuses its analysis for a new matrix of the same pattern,
+and reports a matrix that is not positive definite as a SolverError; CHOLMOD called
+directly in cvxopt's bundled library gives what cvxopt's own interface gives."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+import contactfem.linalg as linalg
+from contactfem.errors import SolverError
+
+
+def _elasticity_like(size: int, seed: int) -> sp.csr_matrix:
+    """A sparse SPD matrix with the kernel's structure: a 2D grid Laplacian (5-point, so
+    fill-in is real) on two components coupled weakly, plus a random diagonal that keeps it
+    positive definite (κ below 100)."""
+    side = int(np.sqrt(size))
+    grid = sp.diags([-1.0, -1.0, 4.0, -1.0, -1.0], [-side, -1, 0, 1, side], shape=(side * side, side * side))
+    blocks = sp.kron(sp.eye(2), grid) + 0.1 * sp.kron(sp.csr_matrix([[0, 1], [1, 0]]), sp.eye(side * side))
+    rng = np.random.default_rng(seed)
+    return sp.csr_matrix(blocks + sp.diags(rng.uniform(0.2, 0.3, blocks.shape[0])))
+
+
+def _providers() -> list[tuple[str, object]]:
+    found = [("superlu", linalg._SuperLU)]
+    if linalg._installed("cvxopt"):
+        found.append(("cvxopt-interface", linalg._CvxoptCholmod))
+        if linalg._cholmod_library() is not None:
+            found.append(("cholmod-library", linalg._LibraryCholmod))
+    if linalg._installed("sksparse"):
+        found.append(("scikit-sparse", linalg._Cholmod))
+    if linalg._installed("pypardiso"):
+        found.append(("pardiso", linalg._Pardiso))
+    return found
+
+
+PROVIDERS = _providers()
+needs_library = pytest.mark.skipif(not linalg._installed("cvxopt") or linalg._cholmod_library() is None,
+                                   reason="no CHOLMOD library bundled with cvxopt here")
+
+
+@pytest.mark.parametrize("size", [9, 400, 6400])
+@pytest.mark.parametrize(("label", "provider"), PROVIDERS, ids=[label for label, _ in PROVIDERS])
+def test_every_provider_solves_to_round_off_and_reuses_its_analysis(label, provider, size):
+    """A solve agrees with SciPy's to 1e-12 relative (these matrices have κ below 1e3), for
+    one right-hand side and a block; refactorising new values of the same pattern with the
+    kept analysis solves the new matrix, not the old one."""
+    matrix = _elasticity_like(size, seed=1)
+    rng = np.random.default_rng(2)
+    rhs = rng.standard_normal((matrix.shape[0], 3))
+    factor = provider(matrix, "the test matrix")
+    expected = spla.spsolve(sp.csc_matrix(matrix), rhs)
+    scale = np.abs(expected).max()
+    assert np.abs(np.asarray(factor.solve(rhs[:, 0])).ravel() - expected[:, 0]).max() < 1e-12 * scale
+    assert np.abs(np.asarray(factor.solve(rhs)).reshape(rhs.shape) - expected).max() < 1e-12 * scale
+    # New values, still diagonally dominant: off-diagonal entries shrunk, the diagonal grown.
+    rows = np.repeat(np.arange(matrix.shape[0]), np.diff(matrix.indptr))
+    factors = np.where(rows == matrix.indices, rng.uniform(1.0, 2.0, matrix.nnz), rng.uniform(0.5, 1.0, matrix.nnz))
+    changed = sp.csr_matrix((matrix.data * factors, matrix.indices, matrix.indptr), shape=matrix.shape)
+    changed = sp.csr_matrix((changed + changed.T) / 2)
+    refactored = provider(changed, "the test matrix", getattr(factor, "analysis", None))
+    expected = spla.spsolve(sp.csc_matrix(changed), rhs[:, 0])
+    assert np.abs(np.asarray(refactored.solve(rhs[:, 0])).ravel() - expected).max() < 1e-12 * np.abs(expected).max()
+
+
+@pytest.mark.parametrize(("label", "provider"), [p for p in PROVIDERS if p[0] != "superlu"],
+                         ids=[label for label, _ in PROVIDERS if label != "superlu"])
+def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capfd):
+    """A symmetric matrix with a negative eigenvalue is a SolverError saying so, and the
+    library prints nothing (a --json run's stdout stays one document)."""
+    matrix = _elasticity_like(400, seed=3)
+    matrix = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(matrix.shape[0] - 1), 10.0]))
+    with pytest.raises(SolverError, match="not positive definite"):
+        provider(matrix, "the test matrix")
+    assert capfd.readouterr().out == ""
+
+
+@needs_library
+@pytest.mark.parametrize("size", [9, 6400])
+def test_library_sparse_solves_match_dense_ones(size):
+    """The Schur columns from the library: full columns A⁻¹ B in dense blocks equal
+    A⁻¹ B column by column, and the forward ones satisfy Wᵀ D⁻¹ W = Bᵀ A⁻¹ B to 1e-12
+    (the factor is always a supernodal LLᵀ, even for a 2 × 2 grid)."""
+    matrix = _elasticity_like(size, seed=4)
+    n = matrix.shape[0]
+    rng = np.random.default_rng(5)
+    columns = 37 if n > 100 else 3
+    rhs = sp.random(n, columns, density=min(1.0, 4.0 / n), random_state=6, format="csc") + \
+        sp.csc_matrix((np.ones(columns), (rng.choice(n, columns, replace=False), np.arange(columns))), shape=(n, columns))
+    factor = linalg._LibraryCholmod(matrix, "the test matrix")
+    dense = factor.solve(rhs.toarray())
+    full = factor.solve_sparse(sp.csc_matrix(rhs))
+    assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
+    forward, scaled = factor.forward_sparse(sp.csc_matrix(rhs))
+    schur = (forward.T @ scaled).toarray()
+    expected = rhs.T @ dense
+    assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
+
+
+@needs_library
+def test_library_and_cvxopt_interface_give_the_same_factor():
+    """Both routes reach the same CHOLMOD with the same AMD ordering: their solves agree to
+    round-off on the kernel's own matrix (the square's stiffness with its supports masked)."""
+    from conftest import case_from, square_case_dict
+
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    system = prepare(case_from(square_case_dict(24))).contact_system(get_method("positive")).system
+    fixed = np.zeros(system.stiffness.shape[0], dtype=bool)
+    fixed[np.asarray(system.fixed_dofs, dtype=np.int64)] = True
+    kept = sp.diags((~fixed).astype(float))
+    matrix = sp.csr_matrix(kept @ system.stiffness @ kept + sp.diags(fixed.astype(float)))
+    matrix.eliminate_zeros()
+    rhs = np.where(fixed, 0.0, system.load)
+    library = linalg._LibraryCholmod(matrix, "the square")
+    interface = linalg._CvxoptCholmod(matrix, "the square")
+    x, y = library.solve(rhs), np.asarray(interface.solve(rhs)).ravel()
+    assert np.abs(x - y).max() < 1e-12 * np.abs(y).max()
+    assert np.abs(rhs - matrix @ x).max() < 1e-12 * np.abs(rhs).max() * 1e3
+
+
+@needs_library
+def test_library_is_used_only_when_its_layout_is_the_known_one(monkeypatch):
+    """cholmod_common's fields are written only after cholmod_start's defaults read back
+    at the offsets relied on; a library with another layout is left to cvxopt's interface."""
+    library = linalg._cholmod_library()
+    common = library.start()
+    assert common is not None
+    library.library.cholmod_finish(common)
+    offset, kind, value = linalg._COMMON_DEFAULTS[-1]
+    monkeypatch.setattr(linalg, "_COMMON_DEFAULTS", (*linalg._COMMON_DEFAULTS[:-1], (offset, kind, value + 7)))
+    assert library.start() is None
+    monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
+    matrix = _elasticity_like(400, seed=7)
+    assert isinstance(linalg._cvxopt_cholmod(matrix, "m"), linalg._CvxoptCholmod)
+
+
+@needs_library
+def test_library_frees_a_factor_with_its_last_user(monkeypatch):
+    """The symbolic and numeric factor live as long as a factorisation or the Factorizer
+    still holds them, and are freed (cholmod_free_factor, cholmod_finish) after."""
+    freed = []
+    original = linalg._free_analysis
+    monkeypatch.setattr(linalg, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
+    factorizer = linalg.Factorizer("cholmod")
+    first = factorizer.factorize(_elasticity_like(400, seed=8))
+    address = first.analysis.factor
+    factorizer.factorize(_elasticity_like(400, seed=9))  # same pattern: same factor, refactorised
+    assert freed == []
+    factorizer.factorize(_elasticity_like(900, seed=9))  # a new pattern
+    del first
+    gc.collect()
+    assert freed == [address]
