@@ -899,19 +899,19 @@ class ActiveSetSolver:
         probe = probe_vector(len(parts[0]), self.free)
         started = time.perf_counter()
         solved = np.asarray(self.factor.solve(np.column_stack([*parts, probe]))).reshape(len(probe), -1)
-        #: Seconds of one full solve with the factor (per right-hand side).
+        #: Seconds of one full solve with the factor (per right-hand side of this block).
         self.solve_seconds = (time.perf_counter() - started) / solved.shape[1]
         # With a backend that solves with L alone, the Schur complement comes from sparse
         # forward columns (see _slots): until one is measured, a column is taken to cost a
-        # quarter of a full solve (0.24 measured on the square and on rough profiles, 132 000
-        # to 526 000 unknowns, against 0.5 for a full sparse column), and they are not capped.
+        # third of a full solve per right-hand side of this block (0.37 measured on a rough
+        # profile's mesh at 418 000 unknowns: 9 ms against 24 ms), and they are not capped.
         # Not along a load path: there the same columns serve every step, and full ones
         # make each reuse a product, where forward ones cost a full solve every time (the
         # Hertz platen's 20 steps at 247 000 unknowns: 9.2 s against 7.7 s).
         self.forward = (callable(getattr(self.factor, "forward_sparse", None))
                         and k.shape[0] >= FORWARD_COLUMNS_FROM and not self.scalable)
         if self.column_seconds is None:
-            self.column_seconds = self.solve_seconds / (4.0 if self.forward else 1.0)
+            self.column_seconds = self.solve_seconds / (3.0 if self.forward else 1.0)
         if self.scalable:
             self.base_parts = (np.ascontiguousarray(solved[:, 0]), np.ascontiguousarray(solved[:, 1]))
             self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
