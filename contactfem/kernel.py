@@ -76,6 +76,8 @@ COLUMN_BYTES = 2**29
 #: (its Schur product, one more full solve) outweighs it (a wavy strip of 5 120 unknowns
 #: took 0.135 s that way against 0.059 s with full columns).
 FORWARD_COLUMNS_FROM = 100_000
+#: Forward columns computed to measure their cost before the first update that needs more.
+COLUMN_SAMPLE = 8
 
 
 def roundoff_bound(terms: int) -> float:
@@ -634,6 +636,30 @@ def build_certificate(non_finite: int, slack: np.ndarray, multiplier: np.ndarray
     )
 
 
+def _gram(forward: sp.csc_matrix, scaled: sp.csc_matrix | None) -> np.ndarray:
+    """Wᵀ S (Wᵀ W when ``scaled`` is None) for sparse forward columns W, dense (k, k).
+
+    The columns share the rows near the elimination tree's root and little else: the rows
+    that a quarter of the columns or more touch go through BLAS as dense blocks (on the
+    square at 526 000 unknowns, 256 columns share 14 000 rows: 0.04 s against 0.66 s as a
+    sparse product), the others through a sparse product (1 200 columns on a rough
+    profile's mesh at 418 000 unknowns touch 68 000 rows, 1 200 of them shared: 2.4 s as one
+    dense block over all of them, 0.25 s as a sparse product).
+    """
+    k = forward.shape[1]
+    counts = np.bincount(forward.indices, minlength=forward.shape[0])
+    shared = counts >= max(1, k // 4)
+    if 16 * int(shared.sum()) * k > COLUMN_BYTES:
+        shared[:] = False
+    heavy = np.flatnonzero(shared)
+    block = forward[heavy].toarray()
+    gram = block.T @ (block if scaled is None else scaled[heavy].toarray())
+    if len(heavy) < int(np.count_nonzero(counts)):
+        light = sp.diags((~shared).astype(float)) @ forward
+        gram += (light.T @ (light if scaled is None else scaled)).toarray()
+    return gram
+
+
 class ActiveSetSolver:
     """Solves K u = F with supports and the normal unknowns of an active set fixed,
     reusing one factorisation across active sets.
@@ -716,6 +742,8 @@ class ActiveSetSolver:
             backend, name="the stiffness matrix with its supports and active contact normals fixed")
         #: Measured seconds of one column solve within a block (None before any solve).
         self.column_seconds: float | None = None
+        #: Whether column_seconds was measured (not the first estimate from a full solve).
+        self.column_measured = False
         self.reference: np.ndarray | None = None
         self.factor = None
         self.checks: list[FactorCheck] = []
@@ -812,10 +840,22 @@ class ActiveSetSolver:
         missing = int((self.slot_of[changed] < 0).sum())
         if not self.forward and (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
             return True
+        if self.forward and missing > COLUMN_SAMPLE and not self.column_measured:
+            # A forward column costs 0.004 of a full solve on a rough profile's mesh and 0.09
+            # on the square (its elimination-tree path is longer): measure a few of the
+            # columns this update needs before weighing it.
+            self._slots(changed[self.slot_of[changed] < 0][:COLUMN_SAMPLE])
+            missing -= COLUMN_SAMPLE
         k = len(changed)
         update = missing * (self.column_seconds or 0.0) + k**3 / 3 / DENSE_FLOPS
         if self.forward:
-            update += self.solve_seconds  # u itself: one full solve
+            # u itself: one full solve; the Schur blocks Wᵀ W, at most k² times a column's
+            # length (its elimination-tree path: √n until one is stored); and CHOLMOD's first
+            # sparse solve with a factor, which sets it up (about one full solve).
+            path = self.forward_store.nnz / self.column_count if self.column_count else np.sqrt(len(self.free))
+            update += self.solve_seconds + 2.0 * k * k * path / DENSE_FLOPS
+            if missing and self.column_count == 0:
+                update += self.solve_seconds
         return update > self.refactorization_seconds
 
     def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -903,15 +943,17 @@ class ActiveSetSolver:
         self.solve_seconds = (time.perf_counter() - started) / solved.shape[1]
         # With a backend that solves with L alone, the Schur complement comes from sparse
         # forward columns (see _slots): until one is measured, a column is taken to cost a
-        # third of a full solve per right-hand side of this block (0.37 measured on a rough
-        # profile's mesh at 418 000 unknowns: 9 ms against 24 ms), and they are not capped.
+        # thirtieth of a full solve per right-hand side of this block (CHOLMOD with the
+        # column's pattern visits only its elimination-tree path: measured 0.004 of it on a
+        # rough profile's mesh at 418 000 unknowns, 0.09 on the square at 132 000, where
+        # the paths are longer), and they are not capped.
         # Not along a load path: there the same columns serve every step, and full ones
         # make each reuse a product, where forward ones cost a full solve every time (the
         # Hertz platen's 20 steps at 247 000 unknowns: 9.2 s against 7.7 s).
         self.forward = (callable(getattr(self.factor, "forward_sparse", None))
                         and k.shape[0] >= FORWARD_COLUMNS_FROM and not self.scalable)
         if self.column_seconds is None:
-            self.column_seconds = self.solve_seconds / (3.0 if self.forward else 1.0)
+            self.column_seconds = self.solve_seconds / (30.0 if self.forward else 1.0)
         if self.scalable:
             self.base_parts = (np.ascontiguousarray(solved[:, 0]), np.ascontiguousarray(solved[:, 1]))
             self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
@@ -1003,7 +1045,12 @@ class ActiveSetSolver:
                     grown[:, :count] = self.column_store[:, :count]
                     self.column_store = grown
                 self.column_store[:, count:count + len(missing)] = solved
-            self.column_seconds = (time.perf_counter() - started) / len(missing)
+            elapsed = time.perf_counter() - started
+            if self.forward and count == 0:
+                # Less the first sparse solve's set-up, which later batches do not pay.
+                elapsed = max(elapsed - self.solve_seconds, 0.1 * elapsed)
+            self.column_seconds = elapsed / len(missing)
+            self.column_measured = True
             self.column_solves += len(missing)
             self.slot_of[missing] = np.arange(count, count + len(missing))
             self.column_count = count + len(missing)
@@ -1090,15 +1137,7 @@ class ActiveSetSolver:
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
         forward, scaled = self.forward_store[:, slots], self.scaled_store[:, slots]
-        # The columns share the rows near the elimination tree's root: as dense blocks over
-        # the rows any of them touches, the product runs in BLAS (256 columns on the square
-        # at 526 000 unknowns: 14 000 rows, 0.04 s against 0.66 s as a sparse product).
-        rows = np.unique(forward.indices)
-        if 16 * len(rows) * len(slots) <= COLUMN_BYTES:
-            dense = forward[rows].toarray()
-            gram = dense.T @ (dense if self.scaled_store is self.forward_store else scaled[rows].toarray())
-        else:
-            gram = (forward.T @ scaled).toarray()
+        gram = _gram(forward, scaled if self.scaled_store is not self.forward_store else None)
         gram = 0.5 * (gram + gram.T)  # Cᵀ K00⁻¹ C is symmetric; round-off made it not quite
         released_values = fixed_values[dofs_r]
         k_r0, k_rr, b_r = self._released_rows(dofs_r, load, fixed_values)

@@ -151,10 +151,33 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
     monkeypatch.setattr(linalg, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(_elasticity_like(400, seed=8))
-    address = first.analysis.factor
+    address = first.analysis.symbolic
     factorizer.factorize(_elasticity_like(400, seed=9))  # same pattern: same factor, refactorised
     assert freed == []
     factorizer.factorize(_elasticity_like(900, seed=9))  # a new pattern
     del first
     gc.collect()
     assert freed == [address]
+
+
+@needs_library
+def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor():
+    """A solve with sparse right-hand sides converts CHOLMOD's factor to a simplicial one in
+    place; the next factorisation of the pattern starts again from the symbolic analysis,
+    so it is a supernodal LLᵀ again (its forward columns still give Bᵀ A⁻¹ B = Wᵀ W, which
+    an LDLᵀ would not), and the factorisation it replaced refuses to solve."""
+    matrix = _elasticity_like(6400, seed=13)
+    n = matrix.shape[0]
+    rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
+    factorizer = linalg.Factorizer("cholmod")
+    first = factorizer.factorize(matrix)
+    first.forward_sparse(rhs)
+    changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
+    second = factorizer.factorize(changed)
+    forward, scaled = second.forward_sparse(rhs)
+    expected = rhs.T @ second.solve(rhs.toarray())
+    assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
+    assert np.abs(expected - rhs.T @ spla.spsolve(sp.csc_matrix(changed), rhs.toarray())).max() \
+        < 1e-10 * np.abs(expected).max()
+    with pytest.raises(SolverError, match="replaced it"):
+        first.solve(np.ones(n))
