@@ -2,9 +2,9 @@
 
 Measured on the square case at 2.1M unknowns (benchmarks/results/square_sweep.json and
 FINDINGS): CHOLMOD (AMD, OpenBLAS) factorises in about 14 s, Pardiso in 11 s, SuperLU
-(MMD_AT_PLUS_A) in about 50 s; a whole solve peaks near 5 GB with CHOLMOD through
-scikit-sparse and 5.8 GB through cvxopt (the default install, which keeps its own copy of
-the matrix). Sparse
+(MMD_AT_PLUS_A) in about 50 s; a whole solve peaks near 5 GB with CHOLMOD, through
+scikit-sparse or in cvxopt's wheel (the default install: 4.8 GB for the positive method,
+5.0 GB for the standard one, benchmarks/square_sweep.py 1024). Sparse
 factorisation of 2D meshes grows slightly faster than linearly (exponent ≈ 1.1 over
 130k–2.1M unknowns). With mesh sequencing a contact solve costs about 1.3 factorisations;
 assembly and writing add about 25%. Expect ±50% on other machines.
@@ -19,7 +19,7 @@ REFERENCE_UNKNOWNS = 2.1e6
 # The size guard uses the one-rank figure whatever the ranks: it cannot know how many of
 # them share this machine's memory, and on one machine they need about as much in all.
 FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0, "petsc": 26.6}
-PEAK_BYTES = {"cholmod": 5.8e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9}
+PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9}
 GROWTH = 1.1
 
 
