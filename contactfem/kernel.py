@@ -76,8 +76,6 @@ COLUMN_BYTES = 2**29
 #: (its Schur product, one more full solve) outweighs it (a wavy strip of 5 120 unknowns
 #: took 0.135 s that way against 0.059 s with full columns).
 FORWARD_COLUMNS_FROM = 100_000
-#: Forward columns computed to measure their cost before the first update that needs more.
-COLUMN_SAMPLE = 8
 
 
 def roundoff_bound(terms: int) -> float:
@@ -742,8 +740,6 @@ class ActiveSetSolver:
             backend, name="the stiffness matrix with its supports and active contact normals fixed")
         #: Measured seconds of one column solve within a block (None before any solve).
         self.column_seconds: float | None = None
-        #: Whether column_seconds was measured (not the first estimate from a full solve).
-        self.column_measured = False
         self.reference: np.ndarray | None = None
         self.factor = None
         self.checks: list[FactorCheck] = []
@@ -840,22 +836,19 @@ class ActiveSetSolver:
         missing = int((self.slot_of[changed] < 0).sum())
         if not self.forward and (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
             return True
-        if self.forward and missing > COLUMN_SAMPLE and not self.column_measured:
-            # A forward column costs 0.004 of a full solve on a rough profile's mesh and 0.09
-            # on the square (its elimination-tree path is longer): measure a few of the
-            # columns this update needs before weighing it.
-            self._slots(changed[self.slot_of[changed] < 0][:COLUMN_SAMPLE])
-            missing -= COLUMN_SAMPLE
         k = len(changed)
-        update = missing * (self.column_seconds or 0.0) + k**3 / 3 / DENSE_FLOPS
+        if self.forward and callable(getattr(self.factor, "forward_seconds", None)):
+            # The backend knows its routes: a forward column costs 0.004 of a full solve on a
+            # rough profile's mesh once the factor is converted, 0.3 through blocked solves.
+            columns = self.factor.forward_seconds(missing) if missing else 0.0
+        else:
+            columns = missing * (self.column_seconds or 0.0)
+        update = columns + k**3 / 3 / DENSE_FLOPS
         if self.forward:
             # u itself: one full solve; the Schur blocks Wᵀ W, at most k² times a column's
-            # length (its elimination-tree path: √n until one is stored); and CHOLMOD's first
-            # sparse solve with a factor, which sets it up (about one full solve).
+            # length (its elimination-tree path: √n until one is stored).
             path = self.forward_store.nnz / self.column_count if self.column_count else np.sqrt(len(self.free))
             update += self.solve_seconds + 2.0 * k * k * path / DENSE_FLOPS
-            if missing and self.column_count == 0:
-                update += self.solve_seconds
         return update > self.refactorization_seconds
 
     def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -1045,12 +1038,10 @@ class ActiveSetSolver:
                     grown[:, :count] = self.column_store[:, :count]
                     self.column_store = grown
                 self.column_store[:, count:count + len(missing)] = solved
-            elapsed = time.perf_counter() - started
-            if self.forward and count == 0:
-                # Less the first sparse solve's set-up, which later batches do not pay.
-                elapsed = max(elapsed - self.solve_seconds, 0.1 * elapsed)
-            self.column_seconds = elapsed / len(missing)
-            self.column_measured = True
+            # Less what the backend spent once for this factor (a conversion), which later
+            # batches do not pay.
+            elapsed = time.perf_counter() - started - getattr(self.factor, "setup_seconds", 0.0)
+            self.column_seconds = max(elapsed, 0.0) / len(missing)
             self.column_solves += len(missing)
             self.slot_of[missing] = np.arange(count, count + len(missing))
             self.column_count = count + len(missing)

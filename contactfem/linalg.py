@@ -261,9 +261,9 @@ class _DenseStruct(ctypes.Structure):
 
 
 _SPARSE_P, _DENSE_P = ctypes.POINTER(_SparseStruct), ctypes.POINTER(_DenseStruct)
-# CHOLMOD's constants: CHOLMOD_INT, CHOLMOD_REAL, CHOLMOD_DOUBLE; solve systems A and L.
+# CHOLMOD's constants: CHOLMOD_INT, CHOLMOD_REAL, CHOLMOD_DOUBLE; solve systems A, L and P.
 _ITYPE_INT, _XTYPE_REAL, _DTYPE_DOUBLE = 0, 1, 0
-_SYS_A, _SYS_L = 0, 4
+_SYS_A, _SYS_L, _SYS_P = 0, 4, 7
 #: cholmod_common is allocated here (CHOLMOD 3 needs 2 664 bytes) and filled by cholmod_start.
 _COMMON_BYTES = 16384
 #: Fields of cholmod_common read or written here: (offset, C type, the value cholmod_start
@@ -308,6 +308,8 @@ class _CholmodLibrary:
         library.cholmod_factorize.argtypes = [_SPARSE_P, ctypes.c_void_p, ctypes.c_void_p]
         library.cholmod_solve.restype = _DENSE_P
         library.cholmod_solve.argtypes = [ctypes.c_int, ctypes.c_void_p, _DENSE_P, ctypes.c_void_p]
+        library.cholmod_spsolve.restype = _SPARSE_P
+        library.cholmod_spsolve.argtypes = [ctypes.c_int, ctypes.c_void_p, _SPARSE_P, ctypes.c_void_p]
         library.cholmod_solve2.restype = ctypes.c_int
         library.cholmod_solve2.argtypes = [ctypes.c_int, ctypes.c_void_p, _DENSE_P, _SPARSE_P, ctypes.POINTER(_DENSE_P),
                                            ctypes.POINTER(_SPARSE_P), ctypes.POINTER(_DENSE_P),
@@ -393,8 +395,15 @@ class _LibraryAnalysis:
         #: The numeric factor (0 when none) and how many have been made: a factorisation
         #: whose generation is not the latest was freed and may not be used.
         self.numeric, self.generation = ctypes.c_void_p(0), 0
-        #: Whether a sparse solve converted the numeric factor to a simplicial one.
+        #: Whether a sparse solve converted the numeric factor to a simplicial one, and what
+        #: that conversion took (None until measured): 9.5 ms on a rough profile's graded mesh
+        #: at 418 000 unknowns, 0.65 s on a uniform one at 695 000 (its factor has large
+        #: dense supernodes, each entry of which gets its own row index).
         self.simplicial = False
+        self.conversion_seconds: float | None = None
+        #: Measured seconds per forward column through each route (None until measured).
+        self.blocked_column_seconds: float | None = None
+        self.pattern_column_seconds: float | None = None
         weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric)
 
     def matches(self, matrix: sp.csr_matrix) -> bool:
@@ -480,7 +489,9 @@ class _LibraryCholmod:
         view = _DenseStruct(self.size, width, self.size * width, self.size, block.ctypes.data, None,
                             _XTYPE_REAL, _DTYPE_DOUBLE)
         library, common = self.analysis.library, self.analysis.common
+        started = time.perf_counter()
         result = library.library.cholmod_solve(system, self.factor, ctypes.byref(view), common)
+        self.column_solve_seconds = (time.perf_counter() - started) / width
         if not result:
             raise MemoryError("CHOLMOD could not allocate a solve's result")
         values = np.ctypeslib.as_array(ctypes.cast(result.contents.x, ctypes.POINTER(ctypes.c_double)),
@@ -511,20 +522,93 @@ class _LibraryCholmod:
             self._iperm[perm] = np.arange(self.size)
         return self._iperm
 
+    #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
+    #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
+    BLOCKED_COLUMN_SHARE = 0.3
+    #: A column through the pattern solve once the factor is simplicial, in full solves,
+    #: until measured: 0.003 on a rough profile's graded mesh at 418 000 unknowns (80 µs of
+    #: 30 ms), 0.08 on a uniform one at 695 000 (8 ms of 100 ms, longer paths). The guess
+    #: leans to the graded mesh's figure: a refactorisation there is worth a Schur update
+    #: over hundreds of nodes, and a wrong guess on the uniform mesh costs one conversion.
+    PATTERN_COLUMN_SHARE = 0.005
+    #: What the conversion to a simplicial factor is taken to cost, in full solves, until
+    #: it is measured for the pattern: 0.3–0.7 on the graded mesh, 3.5–6.5 on the uniform
+    #: one (about 1.6 and 5 ns per entry of the supernodal factor).
+    CONVERSION_GUESS = 3.0
+
     def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """W = L⁻¹ P B for a sparse B (n, k), sparse, so that Bᵀ A⁻¹ B = Wᵀ W (the factor is
-        a supernodal LLᵀ), returned twice as (W, D⁻¹ W) with D = I.
+        an LLᵀ), returned twice as (W, D⁻¹ W) with D = I.
 
         L⁻¹ P b has nonzeros only on the elimination tree's paths from b's nonzeros (about
-        600 of 418 000 on a rough profile's mesh, 3 000 of 132 000 on the square): CHOLMOD's
+        600 of 418 000 on a rough profile's mesh, 3 000 of 132 000 on the square). CHOLMOD's
         solve with a sparse right-hand side (cholmod_solve2 with its pattern, Bset) visits
-        only those, one column at a time. Measured on the square at 132 000 unknowns:
-        2.7 ms per column against 5.8 ms for its sparse solve in dense blocks of 4, which
-        sweeps the whole factor for each block.
+        only those, one column at a time, but converts a supernodal factor to a simplicial
+        one first; its sparse solve in dense blocks of 4 sweeps the whole factor for each
+        block and converts nothing. The cheaper route for these k columns is taken, with
+        the conversion's measured cost once it is known for the pattern (``setup_seconds``:
+        what this call spent converting).
         """
+        self.setup_seconds = 0.0
+        k = rhs.shape[1]
+        blocked, pattern = self._route_seconds(k)
+        started = time.perf_counter()
+        if blocked < pattern:
+            result = self._blocked_forward(rhs)
+            self.analysis.blocked_column_seconds = (time.perf_counter() - started) / max(k, 1)
+        else:
+            result = self._pattern_forward(rhs)
+            self.analysis.pattern_column_seconds = (time.perf_counter() - started - self.setup_seconds) / max(k, 1)
+        return result
+
+    def _route_seconds(self, k: int) -> tuple[float, float]:
+        """What k forward columns are expected to cost through the blocked sparse solve and
+        through the pattern solve (its conversion included while the factor is supernodal),
+        from the pattern's measured figures, or from one full solve's until measured."""
+        analysis = self.analysis
+        solve = getattr(self, "column_solve_seconds", None) or 0.0
+        blocked = k * (analysis.blocked_column_seconds if analysis.blocked_column_seconds is not None
+                       else self.BLOCKED_COLUMN_SHARE * solve)
+        conversion = 0.0 if analysis.simplicial else (
+            analysis.conversion_seconds if analysis.conversion_seconds is not None else self.CONVERSION_GUESS * solve)
+        pattern = conversion + k * (analysis.pattern_column_seconds if analysis.pattern_column_seconds is not None
+                                    else self.PATTERN_COLUMN_SHARE * solve)
+        return blocked, pattern
+
+    def forward_seconds(self, k: int) -> float:
+        """What k more forward columns are expected to cost (the cheaper route)."""
+        return min(self._route_seconds(k))
+
+    def _blocked_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through CHOLMOD's sparse solve (x = P b, then L x = b in its dense blocks)."""
+        forward = self._sparse_solve(_SYS_L, self._sparse_solve(_SYS_P, rhs))
+        return forward, forward
+
+    def _sparse_solve(self, system: int, rhs: sp.csc_matrix) -> sp.csc_matrix:
+        rhs = sp.csc_matrix(rhs)
+        rhs.sort_indices()
+        indptr, indices = rhs.indptr.astype(np.int32), rhs.indices.astype(np.int32)
+        data = np.ascontiguousarray(rhs.data, dtype=float)
+        view = _CholmodLibrary.sparse(indptr, indices, data, rhs.shape[0], 0)
+        library, common = self.analysis.library.library, self.analysis.common
+        result = library.cholmod_spsolve(system, self.factor, ctypes.byref(view), common)
+        if not result:
+            raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
+        s = result.contents
+        indptr = np.ctypeslib.as_array(ctypes.cast(s.p, ctypes.POINTER(ctypes.c_int32)), (s.ncol + 1,)).copy()
+        count = int(indptr[-1])
+        indices = np.ctypeslib.as_array(ctypes.cast(s.i, ctypes.POINTER(ctypes.c_int32)), (max(count, 1),))[:count].copy()
+        values = np.ctypeslib.as_array(ctypes.cast(s.x, ctypes.POINTER(ctypes.c_double)), (max(count, 1),))[:count].copy()
+        shape = (s.nrow, s.ncol)
+        library.cholmod_free_sparse(ctypes.byref(result), common)
+        return sp.csc_matrix((values, indices, indptr), shape=shape)
+
+    def _pattern_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through CHOLMOD's solve with each column's pattern (converting the factor once)."""
         rhs = sp.csc_matrix(rhs)
         n, k = rhs.shape
         iperm = self._inverse_permutation()
+        converting = not self.analysis.simplicial
         self.analysis.simplicial = True  # what CHOLMOD makes of a supernodal factor here
         library, common = self.analysis.library.library, self.analysis.common
         dense = np.zeros(n)
@@ -545,10 +629,14 @@ class _LibraryCholmod:
                 dense[rows] = values
                 set_pointers[1] = len(rows)
                 given = _CholmodLibrary.sparse(set_pointers, rows, np.ones(len(rows)), n, 0)
+                started = time.perf_counter()
                 if not library.cholmod_solve2(_SYS_L, self.factor, ctypes.byref(right), ctypes.byref(given),
                                               ctypes.byref(solution), ctypes.byref(pattern), ctypes.byref(work_y),
                                               ctypes.byref(work_e), common):
                     raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
+                if converting:  # the first column's solve is the conversion, near enough
+                    self.setup_seconds = self.analysis.conversion_seconds = time.perf_counter() - started
+                    converting = False
                 dense[rows] = 0.0
                 reach = pattern.contents
                 count = int(np.ctypeslib.as_array(ctypes.cast(reach.p, ctypes.POINTER(ctypes.c_int32)), (2,))[1])

@@ -85,8 +85,8 @@ def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capf
 @pytest.mark.parametrize("size", [9, 6400])
 def test_library_sparse_solves_match_dense_ones(size):
     """The Schur columns from the library: full columns A⁻¹ B in dense blocks equal
-    A⁻¹ B column by column, and the forward ones satisfy Wᵀ D⁻¹ W = Bᵀ A⁻¹ B to 1e-12
-    (the factor is always a supernodal LLᵀ, even for a 2 × 2 grid)."""
+    A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B to 1e-12 through
+    either route (the factor is always an LLᵀ, even for a 2 × 2 grid)."""
     matrix = _elasticity_like(size, seed=4)
     n = matrix.shape[0]
     rng = np.random.default_rng(5)
@@ -97,10 +97,14 @@ def test_library_sparse_solves_match_dense_ones(size):
     dense = factor.solve(rhs.toarray())
     full = factor.solve_sparse(sp.csc_matrix(rhs))
     assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
-    forward, scaled = factor.forward_sparse(sp.csc_matrix(rhs))
-    schur = (forward.T @ scaled).toarray()
     expected = rhs.T @ dense
-    assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
+    # Both routes: CHOLMOD's blocked sparse solve, then its solve with each column's pattern
+    # (which converts the factor to a simplicial one), then whichever forward_sparse picks.
+    for route in (factor._blocked_forward, factor._pattern_forward, factor.forward_sparse):
+        forward, scaled = route(sp.csc_matrix(rhs))
+        schur = (forward.T @ scaled).toarray()
+        assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
+    assert factor.analysis.simplicial and factor.analysis.conversion_seconds is not None
 
 
 @needs_library
@@ -171,13 +175,38 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(matrix)
-    first.forward_sparse(rhs)
+    first._pattern_forward(rhs)
+    assert first.analysis.simplicial
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
     second = factorizer.factorize(changed)
-    forward, scaled = second.forward_sparse(rhs)
+    assert not second.analysis.simplicial
+    forward, scaled = second._pattern_forward(rhs)
     expected = rhs.T @ second.solve(rhs.toarray())
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
     assert np.abs(expected - rhs.T @ spla.spsolve(sp.csc_matrix(changed), rhs.toarray())).max() \
         < 1e-10 * np.abs(expected).max()
     with pytest.raises(SolverError, match="replaced it"):
         first.solve(np.ones(n))
+
+
+@needs_library
+def test_library_picks_the_cheaper_forward_route_from_what_it_measured():
+    """A few columns go through the blocked solve while converting the factor is expected to
+    cost more than it saves; once the conversion and both routes are measured, the choice
+    follows the measured figures: many columns through the pattern solve."""
+    matrix = _elasticity_like(6400, seed=14)
+    n = matrix.shape[0]
+    factor = linalg._LibraryCholmod(matrix, "the test matrix")
+    factor.solve(np.ones(n))  # the kernel always solves first: the per-column scale
+    few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
+    factor.forward_sparse(few)
+    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
+    blocked, pattern = factor._route_seconds(2)
+    assert blocked < pattern
+    factor.analysis.conversion_seconds = 0.0  # as if measured: a cheap conversion
+    factor.analysis.blocked_column_seconds = 1.0
+    factor.analysis.pattern_column_seconds = 1e-6
+    many = sp.csc_matrix((np.ones(40), (np.arange(0, 40 * 50, 50), np.arange(40))), shape=(n, 40))
+    factor.forward_sparse(many)
+    assert factor.analysis.simplicial
+    assert factor.forward_seconds(40) == pytest.approx(factor._route_seconds(40)[1])
