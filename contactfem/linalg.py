@@ -293,10 +293,10 @@ class _CholmodLibrary:
     right-hand sides one column at a time. Called directly, CHOLMOD reads the kernel's CSR
     arrays in place as the upper triangle of a symmetric matrix (stype = 1: the entries
     below the diagonal are ignored, and the CSR matrix of a symmetric matrix is its own CSC
-    one) and solves blocks at once. Measured at 526 338 unknowns (square N = 512, 2 cores):
-    0.67 GB added at the peak instead of 0.84 (scikit-sparse's CHOLMOD: 0.70), a first
-    factorisation of 1.47 s instead of 1.56, a block of 4 right-hand sides in 0.047 s per
-    column instead of 0.096.
+    one) and solves blocks at once. Measured at 526 338 unknowns (square N = 512, 2 cores,
+    benchmarks/results/solvers.json): 0.69 GB added at the peak instead of 0.83
+    (scikit-sparse's CHOLMOD: 0.70), a first factorisation of 1.29 s instead of 1.75, a
+    block of 4 right-hand sides in 0.047 s per column instead of 0.097.
     """
 
     def __init__(self, library: ctypes.CDLL) -> None:
