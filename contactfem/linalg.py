@@ -280,8 +280,11 @@ _COMMON_PRINT, _COMMON_SUPERNODAL = 144, 48
 #: picks a simplicial LDLᵀ for small, sparse factors, which passes a negative pivot silently.
 _ALWAYS_SUPERNODAL = 2
 #: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it)
-#: and Perm (the fill-reducing permutation).
+#: and Perm (the fill-reducing permutation); further on, xsize (a supernodal factor's
+#: entries) and is_super, at the offsets of CHOLMOD 3 to 5's layout on 64-bit machines
+#: (read only to guess a cost, and checked: n must match and is_super be 1).
 _FACTOR_MINOR, _FACTOR_PERM = ctypes.sizeof(ctypes.c_size_t), 2 * ctypes.sizeof(ctypes.c_size_t)
+_FACTOR_XSIZE, _FACTOR_IS_SUPER = 120, 184
 
 
 class _CholmodLibrary:
@@ -404,6 +407,8 @@ class _LibraryAnalysis:
         #: Measured seconds per forward column through each route (None until measured).
         self.blocked_column_seconds: float | None = None
         self.pattern_column_seconds: float | None = None
+        #: The pattern solve's cost per column guessed from the supernodal factor's fill.
+        self.pattern_column_guess: float | None = None
         weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric)
 
     def matches(self, matrix: sp.csr_matrix) -> bool:
@@ -525,16 +530,25 @@ class _LibraryCholmod:
     #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
     #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
     BLOCKED_COLUMN_SHARE = 0.3
-    #: A column through the pattern solve once the factor is simplicial, in full solves,
-    #: until measured: 0.003 on a rough profile's graded mesh at 418 000 unknowns (80 µs of
-    #: 30 ms), 0.08 on a uniform one at 695 000 (8 ms of 100 ms, longer paths). The guess
-    #: leans to the graded mesh's figure: a refactorisation there is worth a Schur update
-    #: over hundreds of nodes, and a wrong guess on the uniform mesh costs one conversion.
-    PATTERN_COLUMN_SHARE = 0.005
     #: What the conversion to a simplicial factor is taken to cost, in full solves, until
-    #: it is measured for the pattern: 0.3–0.7 on the graded mesh, 3.5–6.5 on the uniform
-    #: one (about 1.6 and 5 ns per entry of the supernodal factor).
+    #: it is measured for the pattern: 0.3–0.7 on a rough profile's graded mesh at 418 000
+    #: unknowns, 1.0–1.2 on the square (33k–526k), 3.5–6.5 on a uniform mesh under a rough
+    #: base at 695 000.
     CONVERSION_GUESS = 3.0
+
+    def _pattern_column_guess(self) -> float:
+        """A column through the pattern solve, in full solves, until measured: it follows the
+        factor's fill (its entries per column, xsize / n), which sets how long the columns
+        on a path are. Measured: 0.003 at 31 entries per column (a rough profile's graded
+        mesh, 418 000 unknowns), 0.05–0.07 at 98–145 (the square), 0.08 at 105 (a uniform
+        mesh under a rough base): about 0.003 (fill / 31)^2.2, at most 0.1."""
+        address = self.factor
+        size = ctypes.c_size_t.from_address(address).value
+        supernodal = ctypes.c_int.from_address(address + _FACTOR_IS_SUPER).value
+        entries = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
+        if size != self.size or supernodal != 1 or not size <= entries < 2**40:
+            return 0.1  # not the layout these offsets assume: the costly end
+        return min(0.1, 0.003 * (entries / size / 31.0) ** 2.2)
 
     def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """W = L⁻¹ P B for a sparse B (n, k), sparse, so that Bᵀ A⁻¹ B = Wᵀ W (the factor is
@@ -571,8 +585,13 @@ class _LibraryCholmod:
                        else self.BLOCKED_COLUMN_SHARE * solve)
         conversion = 0.0 if analysis.simplicial else (
             analysis.conversion_seconds if analysis.conversion_seconds is not None else self.CONVERSION_GUESS * solve)
-        pattern = conversion + k * (analysis.pattern_column_seconds if analysis.pattern_column_seconds is not None
-                                    else self.PATTERN_COLUMN_SHARE * solve)
+        if analysis.pattern_column_seconds is not None:
+            column = analysis.pattern_column_seconds
+        else:
+            if analysis.pattern_column_guess is None:
+                analysis.pattern_column_guess = self._pattern_column_guess()
+            column = analysis.pattern_column_guess * solve
+        pattern = conversion + k * column
         return blocked, pattern
 
     def forward_seconds(self, k: int) -> float:

@@ -210,3 +210,17 @@ def test_library_picks_the_cheaper_forward_route_from_what_it_measured():
     factor.forward_sparse(many)
     assert factor.analysis.simplicial
     assert factor.forward_seconds(40) == pytest.approx(factor._route_seconds(40)[1])
+
+
+@needs_library
+def test_library_guesses_a_pattern_column_from_the_factors_fill(monkeypatch):
+    """Until measured, a pattern-solve column is guessed from the supernodal factor's entries
+    per column (longer columns on a path cost more): a positive share of a full solve, at
+    most 0.1, larger for a factor with more fill; where the factor's fields do not read
+    back as a supernodal factor of this size, the costly end (0.1)."""
+    sparse_grid = linalg._LibraryCholmod(_elasticity_like(400, seed=15), "m")
+    dense_grid = linalg._LibraryCholmod(_elasticity_like(40000, seed=15), "m")
+    low, high = sparse_grid._pattern_column_guess(), dense_grid._pattern_column_guess()
+    assert 0.0 < low < high <= 0.1
+    monkeypatch.setattr(linalg, "_FACTOR_IS_SUPER", linalg._FACTOR_XSIZE)
+    assert dense_grid._pattern_column_guess() == 0.1
