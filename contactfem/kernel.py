@@ -935,18 +935,17 @@ class ActiveSetSolver:
         #: Seconds of one full solve with the factor (per right-hand side of this block).
         self.solve_seconds = (time.perf_counter() - started) / solved.shape[1]
         # With a backend that solves with L alone, the Schur complement comes from sparse
-        # forward columns (see _slots): until one is measured, a column is taken to cost a
-        # thirtieth of a full solve per right-hand side of this block (CHOLMOD with the
-        # column's pattern visits only its elimination-tree path: measured 0.004 of it on a
-        # rough profile's mesh at 418 000 unknowns, 0.09 on the square at 132 000, where
-        # the paths are longer), and they are not capped.
+        # forward columns (see _slots), which are not capped; what they cost comes from the
+        # backend when it can say (forward_seconds: CHOLMOD called directly, which has two
+        # routes), else from measured batches, taken until then as a quarter of a full
+        # solve (CHOLMOD's blocked sparse solve through cvxopt's interface: 0.24).
         # Not along a load path: there the same columns serve every step, and full ones
         # make each reuse a product, where forward ones cost a full solve every time (the
         # Hertz platen's 20 steps at 247 000 unknowns: 9.2 s against 7.7 s).
         self.forward = (callable(getattr(self.factor, "forward_sparse", None))
                         and k.shape[0] >= FORWARD_COLUMNS_FROM and not self.scalable)
         if self.column_seconds is None:
-            self.column_seconds = self.solve_seconds / (30.0 if self.forward else 1.0)
+            self.column_seconds = self.solve_seconds * (0.25 if self.forward else 1.0)
         if self.scalable:
             self.base_parts = (np.ascontiguousarray(solved[:, 0]), np.ascontiguousarray(solved[:, 1]))
             self.base = self.load_factor * self.base_parts[0] + self.base_parts[1]
