@@ -676,15 +676,17 @@ class ActiveSetSolver:
     is kept for later iterations (the missing ones are solved as one block). A backend
     that solves with L alone (CHOLMOD) keeps W = L⁻¹ P [K0r, E] instead, sparse (the
     elimination tree's paths), forms the Schur blocks as Wᵀ D⁻¹ W and u with one full solve:
-    a column then costs 0.004 of a solve on a rough profile's mesh, 0.09 on the square. The matrix is
+    a column then costs 0.003–0.3 of a solve, by the route and the mesh. The matrix is
     factorised anew, with the current set as reference, when that is cheaper than the
     missing columns: a cost model compares their number times the measured seconds per
     column (plus the dense solve, k³/3 flops at :data:`DENSE_FLOPS`) with the measured
     seconds of the last factorisation step (masking, factorising, probing and the first
     solves), less the ordering and symbolic analysis a refactorisation with CHOLMOD reuses
-    (:class:`contactfem.linalg.Factorizer`). With SuperLU a
-    factorisation costs about 50 columns, with CHOLMOD about 15 full ones (below
-    :data:`FORWARD_COLUMNS_FROM` unknowns) or 50 forward ones. ``max_changes``, when
+    (:class:`contactfem.linalg.Factorizer`); forward columns' cost comes from the backend
+    (:meth:`contactfem.linalg._LibraryCholmod.forward_seconds`) with the Schur product
+    added. With SuperLU a factorisation costs about 50 columns, with CHOLMOD about 15 full
+    ones (below :data:`FORWARD_COLUMNS_FROM` unknowns) or, on a rough profile's graded mesh,
+    a Schur update over about 1 000 changed nodes. ``max_changes``, when
     given, replaces the cost model by a fixed bound on the changed nodes. The columns never
     hold more than :data:`COLUMN_BYTES`; a Schur solve that cannot meet the certificate's
     equilibrium bound (``tolerance``) even after iterative refinement also refactorises.

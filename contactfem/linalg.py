@@ -343,6 +343,13 @@ class _CholmodLibrary:
                              data.ctypes.data, None, stype, _ITYPE_INT, _XTYPE_REAL, _DTYPE_DOUBLE, 1, 1)
 
 
+def _c_array(address: int, kind: type, count: int) -> np.ndarray:
+    """A numpy view of ``count`` values of C type ``kind`` at ``address``."""
+    if count == 0:
+        return np.zeros(0, dtype=np.dtype(kind))
+    return np.ctypeslib.as_array(ctypes.cast(address, ctypes.POINTER(kind)), (count,))
+
+
 def _bundled_cholmod_files() -> list[str]:
     """CHOLMOD shared libraries shipped inside cvxopt's wheel (auditwheel puts them in
     cvxopt.libs beside the package, delvewheel and delocate inside it)."""
@@ -449,6 +456,14 @@ class _LibraryCholmod:
 
     #: Right-hand sides per dense block of a sparse solve (n × 16 doubles at a time).
     SPARSE_BLOCK = 16
+    #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
+    #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
+    BLOCKED_COLUMN_SHARE = 0.3
+    #: What the conversion to a simplicial factor is taken to cost, in full solves, until
+    #: it is measured for the pattern: 0.3–0.7 on a rough profile's graded mesh at 418 000
+    #: unknowns, 1.0–1.2 on the square (33k–526k), 3.5–6.5 on a uniform mesh under a rough
+    #: base at 695 000.
+    CONVERSION_GUESS = 3.0
 
     def __init__(self, matrix: sp.spmatrix, name: str, analysis: "_LibraryAnalysis | None" = None) -> None:
         csr = sp.csr_matrix(matrix)
@@ -473,6 +488,11 @@ class _LibraryCholmod:
         library, common = analysis.library, analysis.common
         factor = analysis.fresh_numeric()
         self.analysis, self.generation, self.size = analysis, analysis.generation, n
+        #: Seconds per right-hand side of the latest dense solve (the scale of the route
+        #: estimates), what the latest forward_sparse spent converting the factor, and the
+        #: inverse fill-reducing permutation once needed.
+        self.column_solve_seconds, self.setup_seconds = 0.0, 0.0
+        self._iperm: np.ndarray | None = None
         if not library.library.cholmod_factorize(ctypes.byref(view), factor, common):
             raise MemoryError(f"CHOLMOD could not factorise {name}")
         minor = ctypes.c_size_t.from_address(factor + _FACTOR_MINOR).value
@@ -499,8 +519,7 @@ class _LibraryCholmod:
         self.column_solve_seconds = (time.perf_counter() - started) / width
         if not result:
             raise MemoryError("CHOLMOD could not allocate a solve's result")
-        values = np.ctypeslib.as_array(ctypes.cast(result.contents.x, ctypes.POINTER(ctypes.c_double)),
-                                       (width, self.size))
+        values = _c_array(result.contents.x, ctypes.c_double, width * self.size).reshape(width, self.size)
         solved = values.T.copy(order="F")  # CHOLMOD's array is freed next
         library.library.cholmod_free_dense(ctypes.byref(result), common)
         return solved
@@ -520,21 +539,11 @@ class _LibraryCholmod:
     def _inverse_permutation(self) -> np.ndarray:
         """Where row r of a right-hand side goes in P b: the inverse of the factor's fill-reducing
         permutation (cholmod_factor's Perm, the third field)."""
-        if getattr(self, "_iperm", None) is None:
-            address = ctypes.c_void_p.from_address(self.factor + _FACTOR_PERM).value
-            perm = np.ctypeslib.as_array(ctypes.cast(address, ctypes.POINTER(ctypes.c_int32)), (self.size,))
+        if self._iperm is None:
+            perm = _c_array(ctypes.c_void_p.from_address(self.factor + _FACTOR_PERM).value, ctypes.c_int32, self.size)
             self._iperm = np.empty(self.size, dtype=np.int64)
             self._iperm[perm] = np.arange(self.size)
         return self._iperm
-
-    #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
-    #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
-    BLOCKED_COLUMN_SHARE = 0.3
-    #: What the conversion to a simplicial factor is taken to cost, in full solves, until
-    #: it is measured for the pattern: 0.3–0.7 on a rough profile's graded mesh at 418 000
-    #: unknowns, 1.0–1.2 on the square (33k–526k), 3.5–6.5 on a uniform mesh under a rough
-    #: base at 695 000.
-    CONVERSION_GUESS = 3.0
 
     def _pattern_column_guess(self) -> float:
         """A column through the pattern solve, in full solves, until measured: it follows the
@@ -580,7 +589,7 @@ class _LibraryCholmod:
         through the pattern solve (its conversion included while the factor is supernodal),
         from the pattern's measured figures, or from one full solve's until measured."""
         analysis = self.analysis
-        solve = getattr(self, "column_solve_seconds", None) or 0.0
+        solve = self.column_solve_seconds
         blocked = k * (analysis.blocked_column_seconds if analysis.blocked_column_seconds is not None
                        else self.BLOCKED_COLUMN_SHARE * solve)
         conversion = 0.0 if analysis.simplicial else (
@@ -614,10 +623,10 @@ class _LibraryCholmod:
         if not result:
             raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
         s = result.contents
-        indptr = np.ctypeslib.as_array(ctypes.cast(s.p, ctypes.POINTER(ctypes.c_int32)), (s.ncol + 1,)).copy()
+        indptr = _c_array(s.p, ctypes.c_int32, s.ncol + 1).copy()
         count = int(indptr[-1])
-        indices = np.ctypeslib.as_array(ctypes.cast(s.i, ctypes.POINTER(ctypes.c_int32)), (max(count, 1),))[:count].copy()
-        values = np.ctypeslib.as_array(ctypes.cast(s.x, ctypes.POINTER(ctypes.c_double)), (max(count, 1),))[:count].copy()
+        indices = _c_array(s.i, ctypes.c_int32, count).copy()
+        values = _c_array(s.x, ctypes.c_double, count).copy()
         shape = (s.nrow, s.ncol)
         library.cholmod_free_sparse(ctypes.byref(result), common)
         return sp.csc_matrix((values, indices, indptr), shape=shape)
@@ -628,7 +637,6 @@ class _LibraryCholmod:
         n, k = rhs.shape
         iperm = self._inverse_permutation()
         converting = not self.analysis.simplicial
-        self.analysis.simplicial = True  # what CHOLMOD makes of a supernodal factor here
         library, common = self.analysis.library.library, self.analysis.common
         dense = np.zeros(n)
         right = _DenseStruct(n, 1, n, n, dense.ctypes.data, None, _XTYPE_REAL, _DTYPE_DOUBLE)
@@ -653,14 +661,14 @@ class _LibraryCholmod:
                                               ctypes.byref(solution), ctypes.byref(pattern), ctypes.byref(work_y),
                                               ctypes.byref(work_e), common):
                     raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
-                if converting:  # the first column's solve is the conversion, near enough
+                if converting:  # CHOLMOD made the factor simplicial: its first column's solve, near enough
                     self.setup_seconds = self.analysis.conversion_seconds = time.perf_counter() - started
-                    converting = False
+                    self.analysis.simplicial, converting = True, False
                 dense[rows] = 0.0
                 reach = pattern.contents
-                count = int(np.ctypeslib.as_array(ctypes.cast(reach.p, ctypes.POINTER(ctypes.c_int32)), (2,))[1])
-                touched = np.ctypeslib.as_array(ctypes.cast(reach.i, ctypes.POINTER(ctypes.c_int32)), (count,)).copy()
-                x = np.ctypeslib.as_array(ctypes.cast(solution.contents.x, ctypes.POINTER(ctypes.c_double)), (n,))
+                count = int(_c_array(reach.p, ctypes.c_int32, 2)[1])
+                touched = _c_array(reach.i, ctypes.c_int32, count).copy()
+                x = _c_array(solution.contents.x, ctypes.c_double, n)
                 rows_out.append(touched)
                 values_out.append(x[touched])  # a copy: only the reach of this column is valid
                 counts[column + 1] = count
