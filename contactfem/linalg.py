@@ -101,7 +101,9 @@ class _Cholmod:
             warnings.simplefilter("always")
             try:
                 started = time.perf_counter()
-                factor = analyze(csc, ordering_method="amd") if analysis is None else analysis
+                # Supernodal always: for small factors CHOLMOD's default picks a simplicial
+                # LDL^T, which accepts a negative pivot without a word.
+                factor = analyze(csc, ordering_method="amd", mode="supernodal") if analysis is None else analysis
                 self.analysis_seconds = time.perf_counter() - started
                 factor.cholesky_inplace(csc)
             except CholmodNotPositiveDefiniteError as error:
