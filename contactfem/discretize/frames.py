@@ -57,11 +57,13 @@ class ReducedSystem:
         shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
         shift.eliminate_zeros()
         stiffness = problem.stiffness
-        k_shift = (stiffness @ shift).tocsr()
-        # The three corrections live on the framed rows and columns: sum them first, then
-        # add to K once (each full-size sparse addition costs as much as the others together).
-        rotated = sp.csr_matrix(stiffness + (k_shift + k_shift.T + shift.T @ k_shift))
-        rotated.sum_duplicates()
+        rotated = None if slaves.any() else _rotated_in_blocks(stiffness, nodes, np.stack([a, b], axis=2))
+        if rotated is None:
+            k_shift = (stiffness @ shift).tocsr()
+            # The three corrections live on the framed rows and columns: sum them first, then
+            # add to K once (each full-size sparse addition costs as much as the others together).
+            rotated = sp.csr_matrix(stiffness + (k_shift + k_shift.T + shift.T @ k_shift))
+            rotated.sum_duplicates()
         rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
         fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
         fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
@@ -93,6 +95,59 @@ class ReducedSystem:
         """The kernel's unknowns of mesh displacements (2 n_points,) or (2 n_points, j) that
         the constraints allow (a rigid motion a platen follows): the inverse of :meth:`displacement`."""
         return _reduce(displacement, self.frame_nodes, self.frames, self.masters)
+
+
+def _rotated_in_blocks(stiffness: sp.csr_matrix, nodes: np.ndarray, frames: np.ndarray) -> sp.csr_matrix | None:
+    """QᵀKQ for a block-diagonal Q (node ``nodes[k]``'s block ``frames[k]``, identity
+    elsewhere), in K's own pattern; None when K is not laid out in 2x2 node blocks.
+
+    The assembled stiffness is (:func:`contactfem.assembly.stiffness_matrix`): every row
+    stores its columns in pairs 2j, 2j+1, and dof rows 2i and 2i+1 the same ones. So KQ
+    mixes each pair of a framed column node j by Q_j, and Qᵀ(KQ) the two rows of each
+    framed node i by Q_iᵀ, in place of a copy of K's values: no sparse product. On the
+    graded mesh under a rough profile (418 000 unknowns, a third of the nodes on ΓC) the
+    thin products and sums this replaces took 0.3 s, as long as a linear solve's
+    numeric factorisation.
+    """
+    indptr, indices = stiffness.indptr, stiffness.indices
+    n_dof = stiffness.shape[0]
+    if n_dof % 2 or stiffness.nnz % 2:
+        return None
+    first, second, end = indptr[0:-1:2], indptr[1::2], indptr[2::2]
+    length = second - first
+    if not np.array_equal(length, end - second) or np.any(length % 2):
+        return None
+    pair_column = indices[0::2]
+    if np.any(pair_column % 2) or not np.array_equal(indices[1::2], pair_column + 1):
+        return None
+    n_nodes = n_dof // 2
+    q00, q01, q10, q11 = (np.ones(n_nodes), np.zeros(n_nodes), np.zeros(n_nodes), np.ones(n_nodes))
+    q00[nodes], q01[nodes], q10[nodes], q11[nodes] = frames[:, 0, 0], frames[:, 0, 1], frames[:, 1, 0], frames[:, 1, 1]
+    framed = np.zeros(n_nodes, dtype=bool)
+    framed[nodes] = True
+    data = stiffness.data.copy()
+    # K Q: the pairs (k_x, k_y) of a row in the columns of framed node j become (k_x, k_y) Q_j.
+    pairs = data.reshape(-1, 2)
+    selected = np.flatnonzero(framed[pair_column // 2])
+    j = pair_column[selected] // 2
+    x, y = pairs[selected, 0], pairs[selected, 1]
+    pairs[selected, 0] = x * q00[j] + y * q10[j]
+    pairs[selected, 1] = x * q01[j] + y * q11[j]
+    # Qᵀ (K Q): the two rows of framed node i become Q_iᵀ [row 2i; row 2i+1].
+    rows = np.flatnonzero(framed & (length > 0))
+    counts = length[rows]
+    i = np.repeat(rows, counts)
+    top = np.arange(len(i)) + np.repeat(first[rows] - np.cumsum(counts) + counts, counts)
+    bottom = top + length[i]
+    if not np.array_equal(indices[top], indices[bottom]):
+        return None
+    upper, lower = data[top], data[bottom]
+    data[top] = q00[i] * upper + q10[i] * lower
+    data[bottom] = q01[i] * upper + q11[i] * lower
+    # K's pattern, shared: neither matrix is changed in place once assembled.
+    rotated = sp.csr_matrix((data, indices, indptr), shape=stiffness.shape, copy=False)
+    rotated.has_canonical_format = stiffness.has_canonical_format
+    return rotated
 
 
 def _reduce(displacement: np.ndarray, nodes: np.ndarray, frames: np.ndarray, masters: np.ndarray) -> np.ndarray:
