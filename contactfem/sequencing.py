@@ -22,6 +22,7 @@ the coarse displacement outside, when :func:`layer_pays`.
 
 from __future__ import annotations
 
+import operator
 from dataclasses import replace
 from typing import Callable
 
@@ -133,9 +134,14 @@ def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Lo
     vertices = loop.vertices
     k = len(vertices)
     lengths = np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)
-    _, part = np.unique(np.asarray(loop.edge_names, dtype=object).astype(str), return_inverse=True)
-    straight = np.array([arc is None for arc in loop.edge_arcs], dtype=bool)
-    coarse_length = np.array([coarse_edge.get(name, np.inf) for name in loop.edge_names], dtype=float)
+    # Each edge's part as a code (the names looked up in C: a profile has 10^5 edges).
+    names = sorted(set(loop.edge_names))
+    code = {name: index for index, name in enumerate(names)}
+    part = np.fromiter(map(code.__getitem__, loop.edge_names), dtype=np.int64, count=k)
+    arcs = loop.edge_arcs
+    straight = (np.ones(k, dtype=bool) if arcs.count(None) == k
+                else np.fromiter((arc is None for arc in arcs), dtype=bool, count=k))
+    coarse_length = np.array([coarse_edge.get(name, np.inf) for name in names], dtype=float)[part]
     short = straight & (lengths < coarse_length)
     if short.sum() < 2:
         return None
@@ -165,9 +171,9 @@ def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Lo
         return None
     if np.sign(_signed_area(new)) != np.sign(_signed_area(vertices)):
         return None
-    index = np.flatnonzero(keep)
-    return Loop(vertices=new, edge_names=tuple(loop.edge_names[i] for i in index),
-                edge_arcs=tuple(loop.edge_arcs[i] for i in index))
+    index = np.flatnonzero(keep).tolist()
+    return Loop(vertices=new, edge_names=tuple(operator.itemgetter(*index)(loop.edge_names)),
+                edge_arcs=tuple(operator.itemgetter(*index)(arcs)))
 
 
 def simple_polygon(vertices: np.ndarray) -> bool:
@@ -178,8 +184,11 @@ def simple_polygon(vertices: np.ndarray) -> bool:
     :data:`MAX_EDGE_PAIRS` candidate pairs."""
     v = np.asarray(vertices, dtype=float)
     k = len(v)
-    if k < 3 or len(np.unique(v, axis=0)) != k or _signed_area(v) == 0.0:
+    if k < 3 or _signed_area(v) == 0.0:
         return False
+    by_point = v[np.lexsort((v[:, 1], v[:, 0]))]
+    if np.any(np.all(by_point[1:] == by_point[:-1], axis=1)):
+        return False  # a repeated vertex
     a, b = v, np.roll(v, -1, axis=0)
     after = np.roll(v, -2, axis=0)
     folded = (_orientation(a, b, after) == 0) & (np.einsum("ij,ij->i", b - a, after - b) < 0)

@@ -238,6 +238,10 @@ def test_loop_validation():
         Loop(np.array([[1, 0], [-1.1, 0]]), ("arc", "flat"), (Arc((0, 0)), None))
     with pytest.raises(MeshError, match="same point"):
         Loop(np.array([[0, 0], [0, 0], [0, 1]]), ("a", "b", "c"))
+    with pytest.raises(MeshError, match="edge 1 must be a non-empty string"):
+        Loop(np.array([[0, 0], [1, 0], [0, 1]]), ("a", "", "c"))
+    with pytest.raises(MeshError, match="edge 2 must be a non-empty string, got 3"):
+        Loop(np.array([[0, 0], [1, 0], [0, 1]]), ("a", "b", 3))
     with pytest.raises(MeshError, match="radius"):
         circle_loop((0, 0), -1.0, "c")
 
