@@ -717,20 +717,24 @@ class ActiveSetSolver:
         self.support_values[self.fixed_dofs] = system.fixed_values
         self.unit_load, self.unit_support_values = self.load, self.support_values
         k = self.stiffness
-        rows = np.repeat(np.arange(n, dtype=k.indices.dtype), np.diff(k.indptr))
-        if int(np.count_nonzero(rows == k.indices)) != n:
+        row_lengths = np.diff(k.indptr)
+        rows = np.repeat(np.arange(n, dtype=k.indices.dtype), row_lengths)
+        on_diagonal = rows == k.indices
+        if int(np.count_nonzero(on_diagonal)) != n:
             raise ValueError("the stiffness matrix must store its whole diagonal")
         # What is factorised for an active set lives in one pattern, so that CHOLMOD's
         # analysis serves every set: K's without the couplings of the supports, which are
         # fixed for good (the contact normals are masked inside it). Kept as stored zeros,
         # those couplings stay edges of the graph the ordering sees, and the square's
         # factorisation took 1.2-1.5x as long (525k and 2.1M unknowns, CHOLMOD).
-        coupling = (self.supported[rows] | self.supported[k.indices]) & (rows != k.indices)
+        coupling = (np.repeat(self.supported, row_lengths) | self.supported[k.indices]) & ~on_diagonal
+        del on_diagonal
         if coupling.any():
+            removed = np.zeros(n + 1, dtype=k.indptr.dtype)
+            np.cumsum(np.bincount(rows[coupling], minlength=n), out=removed[1:])
             kept = ~coupling
             rows = rows[kept]
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-            self.pattern = sp.csr_matrix((k.data[kept], k.indices[kept], indptr), shape=k.shape)
+            self.pattern = sp.csr_matrix((k.data[kept], k.indices[kept], k.indptr - removed), shape=k.shape)
         else:
             self.pattern = k
         del coupling
@@ -975,8 +979,20 @@ class ActiveSetSolver:
         identity. The matrix is kept: a new set rewrites only the entries in the rows and
         columns whose state changed (a few thousand against millions)."""
         pattern = self.pattern
-        entries = None if self._masked_matrix is None else self._entries_of(
-            np.flatnonzero(fixed != self._masked_fixed))
+        if self._masked_matrix is None:
+            # The first set: K's values with the rows and columns of the fixed unknowns (a
+            # few thousand) zeroed, found from their rows instead of a pass over every entry.
+            zeroed = self._entries_of(np.flatnonzero(fixed))
+            if zeroed is None:
+                data = np.where(~fixed[self.entry_rows] & ~fixed[pattern.indices], pattern.data, 0.0)
+            else:
+                data = pattern.data.copy()
+                data[zeroed] = 0.0
+            data[self.diagonal[fixed]] = 1.0
+            self._masked_matrix = sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
+            self._masked_fixed = fixed.copy()
+            return self._masked_matrix
+        entries = self._entries_of(np.flatnonzero(fixed != self._masked_fixed))
         if entries is None:
             keep = ~fixed[self.entry_rows] & ~fixed[pattern.indices]
             data = np.where(keep, pattern.data, 0.0)
@@ -1007,7 +1023,13 @@ class ActiveSetSolver:
             mirrors[hit] = lo[hit] + offset
         if (mirrors < 0).any():
             return None
-        return np.unique(np.concatenate([in_rows, mirrors]))
+        if 64 * len(in_rows) < len(indices):
+            return np.unique(np.concatenate([in_rows, mirrors]))
+        # Many rows (a first active set of thousands of nodes): marking beats sorting.
+        marked = np.zeros(len(indices), dtype=bool)
+        marked[in_rows] = True
+        marked[mirrors] = True
+        return np.flatnonzero(marked)
 
     def _slots(self, nodes: np.ndarray) -> np.ndarray:
         """The slots of K00⁻¹ K0j (released nodes) and K00⁻¹ e_j (added ones) in the column
