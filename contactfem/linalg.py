@@ -184,7 +184,7 @@ class _CvxoptCholmod:
             _release_freed_memory()
             # Always supernodal LLᵀ: CHOLMOD's default picks a simplicial LDLᵀ for small,
             # sparse factors, which passes a negative pivot silently.
-            cholmod.options["supernodal"] = _ALWAYS_SUPERNODAL
+            cholmod.options["supernodal"] = 2  # CHOLMOD_SUPERNODAL (cvxopt cannot ask for a simplicial LLᵀ)
             symbolic = cholmod.symbolic(stored, uplo="U")
         self.analysis_seconds = time.perf_counter() - started
         try:
@@ -275,18 +275,28 @@ _COMMON_DEFAULTS = ((0, ctypes.c_double, 0.0),      # dbound
                     (8, ctypes.c_double, 1.2),      # grow0
                     (40, ctypes.c_double, 40.0),    # supernodal_switch
                     (48, ctypes.c_int, 1),          # supernodal = CHOLMOD_AUTO
+                    (52, ctypes.c_int, 1),          # final_asis
+                    (60, ctypes.c_int, 0),          # final_ll
                     (144, ctypes.c_int, 3),         # print
                     (168, ctypes.c_int, 0))         # nmethods
-_COMMON_PRINT, _COMMON_SUPERNODAL = 144, 48
-#: Common->supernodal = CHOLMOD_SUPERNODAL: always LLᵀ, as cvxopt sets it. CHOLMOD's default
-#: picks a simplicial LDLᵀ for small, sparse factors, which passes a negative pivot silently.
-_ALWAYS_SUPERNODAL = 2
-#: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it)
-#: and Perm (the fill-reducing permutation); further on, xsize (a supernodal factor's
-#: entries) and is_super, at the offsets of CHOLMOD 3 to 5's layout on 64-bit machines
-#: (read only to guess a cost, and checked: n must match and is_super be 1).
+_COMMON_PRINT, _COMMON_SUPERNODAL, _COMMON_FINAL_ASIS, _COMMON_FINAL_LL = 144, 48, 52, 60
+#: Common->supernodal: CHOLMOD_AUTO (1), CHOLMOD's own choice by the factor's flops per
+#: entry (supernodal from 40), or CHOLMOD_SUPERNODAL (2). With final_asis off and final_ll
+#: on, a simplicial factor is an LLᵀ too (the default simplicial LDLᵀ passes a negative
+#: pivot silently), so that W = L⁻¹ P B gives Bᵀ A⁻¹ B = Wᵀ W either way. The meshes here
+#: have little fill, and CHOLMOD picks simplicial on graded and small ones, whose full
+#: solves it runs 2-3x faster (15 ms against 36 ms at 418 000 unknowns under a rough
+#: profile), whose analysis skips the supernodal one, and whose solves with a sparse
+#: right-hand side need no conversion.
+_FACTOR_SWITCH = 1
+#: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it),
+#: Perm (the fill-reducing permutation) and ColCount (a simplicial factor's column counts);
+#: further on, xsize (a supernodal factor's entries) and is_super, at the offsets of
+#: CHOLMOD 3 to 5's layout on 64-bit machines (read only to guess a cost and to tell the
+#: kinds apart; checked: n must match and is_super be 0 or 1).
 _FACTOR_MINOR, _FACTOR_PERM = ctypes.sizeof(ctypes.c_size_t), 2 * ctypes.sizeof(ctypes.c_size_t)
 _FACTOR_XSIZE, _FACTOR_IS_SUPER = 120, 184
+_FACTOR_COLCOUNT = 3 * ctypes.sizeof(ctypes.c_size_t)
 
 
 class _CholmodLibrary:
@@ -334,7 +344,9 @@ class _CholmodLibrary:
             return None
         # CHOLMOD would print its warnings (a non-positive pivot) on stdout; they are raised instead.
         ctypes.c_int.from_buffer(common, _COMMON_PRINT).value = 0
-        ctypes.c_int.from_buffer(common, _COMMON_SUPERNODAL).value = _ALWAYS_SUPERNODAL
+        ctypes.c_int.from_buffer(common, _COMMON_SUPERNODAL).value = _FACTOR_SWITCH
+        ctypes.c_int.from_buffer(common, _COMMON_FINAL_ASIS).value = 0
+        ctypes.c_int.from_buffer(common, _COMMON_FINAL_LL).value = 1
         return common
 
     @staticmethod
@@ -407,11 +419,13 @@ class _LibraryAnalysis:
         #: The numeric factor (0 when none) and how many have been made: a factorisation
         #: whose generation is not the latest was freed and may not be used.
         self.numeric, self.generation = ctypes.c_void_p(0), 0
-        #: Whether a sparse solve converted the numeric factor to a simplicial one, and what
-        #: that conversion took (None until measured): 9.5 ms on a rough profile's graded mesh
-        #: at 418 000 unknowns, 0.65 s on a uniform one at 695 000 (its factor has large
-        #: dense supernodes, each entry of which gets its own row index).
-        self.simplicial = False
+        #: Whether the numeric factor is simplicial (as analysed, or converted by a sparse
+        #: solve), whether a sparse solve converted it, and what that conversion took (None
+        #: until measured): 9.5 ms on a rough profile's graded mesh at 418 000 unknowns,
+        #: 0.65 s on a uniform one at 695 000 (its factor has large dense supernodes, each
+        #: entry of which gets its own row index).
+        self.analysed_simplicial = ctypes.c_int.from_address(symbolic + _FACTOR_IS_SUPER).value == 0
+        self.simplicial, self.converted = self.analysed_simplicial, False
         self.conversion_seconds: float | None = None
         #: Measured seconds per forward column through each route (None until measured).
         self.blocked_column_seconds: float | None = None
@@ -427,18 +441,19 @@ class _LibraryAnalysis:
 
     def fresh_numeric(self) -> int:
         """The factor to number next: the previous numeric one, refactorised in place, unless a
-        sparse solve made it simplicial; then it is freed for a copy of the symbolic one
-        (a fresh factor costs its memory's first touch: 0.3 s more at 526 000 unknowns)."""
+        sparse solve converted it to a simplicial one; then it is freed for a copy of the
+        symbolic one (a fresh factor costs its memory's first touch: 0.3 s more at 526 000
+        unknowns)."""
         functions = self.library.library
         self.generation += 1
-        if self.numeric.value and not self.simplicial:
+        if self.numeric.value and not self.converted:
             return self.numeric.value
         if self.numeric.value:
             functions.cholmod_free_factor(ctypes.byref(self.numeric), self.common)
         copy = functions.cholmod_copy_factor(self.symbolic, self.common)
         if not copy:
             raise MemoryError("CHOLMOD could not copy its symbolic factor")
-        self.numeric.value, self.simplicial = copy, False
+        self.numeric.value, self.simplicial, self.converted = copy, self.analysed_simplicial, False
         return copy
 
 
@@ -556,9 +571,15 @@ class _LibraryCholmod:
         address = self.factor
         size = ctypes.c_size_t.from_address(address).value
         supernodal = ctypes.c_int.from_address(address + _FACTOR_IS_SUPER).value
-        entries = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
-        if size != self.size or supernodal != 1 or not size <= entries < 2**40:
+        if size != self.size or supernodal not in (0, 1):
             return 0.1  # not the layout these offsets assume: the costly end
+        if supernodal:
+            entries = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
+        else:  # a simplicial factor's entries: its column counts
+            counts = ctypes.c_void_p.from_address(address + _FACTOR_COLCOUNT).value
+            entries = int(_c_array(counts, ctypes.c_int32, size).sum()) if counts else 0
+        if not size <= entries < 2**40:
+            return 0.1
         return min(0.1, 0.003 * (entries / size / 31.0) ** 2.2)
 
     def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
@@ -665,7 +686,8 @@ class _LibraryCholmod:
                     raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
                 if converting:  # CHOLMOD made the factor simplicial: its first column's solve, near enough
                     self.setup_seconds = self.analysis.conversion_seconds = time.perf_counter() - started
-                    self.analysis.simplicial, converting = True, False
+                    self.analysis.simplicial = self.analysis.converted = True
+                    converting = False
                 dense[rows] = 0.0
                 reach = pattern.contents
                 count = int(_c_array(reach.p, ctypes.c_int32, 2)[1])

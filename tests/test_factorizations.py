@@ -82,11 +82,14 @@ def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capf
 
 
 @needs_library
+@pytest.mark.parametrize("kind", ["simplicial", "supernodal"])
 @pytest.mark.parametrize("size", [9, 6400])
-def test_library_sparse_solves_match_dense_ones(size):
+def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     """The Schur columns from the library: full columns A⁻¹ B in dense blocks equal
     A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B to 1e-12 through
-    either route (the factor is always an LLᵀ, even for a 2 × 2 grid)."""
+    either route, whichever kind of factor (always an LLᵀ, even for a 2 × 2 grid); only a
+    supernodal one is converted by the pattern solve."""
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
     matrix = _elasticity_like(size, seed=4)
     n = matrix.shape[0]
     rng = np.random.default_rng(5)
@@ -99,12 +102,14 @@ def test_library_sparse_solves_match_dense_ones(size):
     assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
     expected = rhs.T @ dense
     # Both routes: CHOLMOD's blocked sparse solve, then its solve with each column's pattern
-    # (which converts the factor to a simplicial one), then whichever forward_sparse picks.
+    # (which converts a supernodal factor to a simplicial one), then whichever forward_sparse picks.
+    assert factor.analysis.simplicial is (kind == "simplicial")
     for route in (factor._blocked_forward, factor._pattern_forward, factor.forward_sparse):
         forward, scaled = route(sp.csc_matrix(rhs))
         schur = (forward.T @ scaled).toarray()
         assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
-    assert factor.analysis.simplicial and factor.analysis.conversion_seconds is not None
+    assert factor.analysis.simplicial
+    assert factor.analysis.converted is (factor.analysis.conversion_seconds is not None) is (kind == "supernodal")
 
 
 @needs_library
@@ -165,11 +170,13 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
 
 
 @needs_library
-def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor():
-    """A solve with sparse right-hand sides converts CHOLMOD's factor to a simplicial one in
-    place; the next factorisation of the pattern starts again from the symbolic analysis,
-    so it is a supernodal LLᵀ again (its forward columns still give Bᵀ A⁻¹ B = Wᵀ W, which
-    an LDLᵀ would not), and the factorisation it replaced refuses to solve."""
+def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(monkeypatch):
+    """A solve with sparse right-hand sides converts CHOLMOD's supernodal factor to a
+    simplicial one in place; the next factorisation of the pattern starts again from the
+    symbolic analysis, so it is a supernodal LLᵀ again (its forward columns still give
+    Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the factorisation it replaced refuses to
+    solve."""
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=13)
     n = matrix.shape[0]
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
@@ -190,10 +197,12 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
 
 
 @needs_library
-def test_library_picks_the_cheaper_forward_route_from_what_it_measured():
-    """A few columns go through the blocked solve while converting the factor is expected to
-    cost more than it saves; once the conversion and both routes are measured, the choice
-    follows the measured figures: many columns through the pattern solve."""
+def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypatch):
+    """A few columns go through the blocked solve while converting the (supernodal) factor
+    is expected to cost more than it saves; once the conversion and both routes are
+    measured, the choice follows the measured figures: many columns through the pattern
+    solve."""
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=14)
     n = matrix.shape[0]
     factor = linalg._LibraryCholmod(matrix, "the test matrix")
@@ -214,13 +223,47 @@ def test_library_picks_the_cheaper_forward_route_from_what_it_measured():
 
 @needs_library
 def test_library_guesses_a_pattern_column_from_the_factors_fill(monkeypatch):
-    """Until measured, a pattern-solve column is guessed from the supernodal factor's entries
-    per column (longer columns on a path cost more): a positive share of a full solve, at
-    most 0.1, larger for a factor with more fill; where the factor's fields do not read
-    back as a supernodal factor of this size, the costly end (0.1)."""
+    """Until measured, a pattern-solve column is guessed from the factor's entries per
+    column (longer columns on a path cost more): a positive share of a full solve, at most
+    0.1, larger for a factor with more fill, for a supernodal factor as for a simplicial
+    one (its column counts); where the factor's fields do not read back as a factor of this
+    size, the costly end (0.1)."""
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
+    simplicial = linalg._LibraryCholmod(_elasticity_like(6400, seed=15), "m")
+    assert simplicial.analysis.simplicial and 0.0 < simplicial._pattern_column_guess() <= 0.1
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
     sparse_grid = linalg._LibraryCholmod(_elasticity_like(400, seed=15), "m")
     dense_grid = linalg._LibraryCholmod(_elasticity_like(40000, seed=15), "m")
     low, high = sparse_grid._pattern_column_guess(), dense_grid._pattern_column_guess()
     assert 0.0 < low < high <= 0.1
     monkeypatch.setattr(linalg, "_FACTOR_IS_SUPER", linalg._FACTOR_XSIZE)
     assert dense_grid._pattern_column_guess() == 0.1
+
+
+@needs_library
+def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
+    """CHOLMOD picks the kind by the factor's flops per entry: simplicial for the little
+    fill of a small grid, supernodal for a larger one. A simplicial factor is an LLᵀ as
+    well (forward columns give Bᵀ A⁻¹ B = Wᵀ W), refuses a matrix that is not positive
+    definite, and is refactorised in place after pattern solves (nothing to convert)."""
+    small = linalg._LibraryCholmod(_elasticity_like(400, seed=16), "m")
+    large = linalg._LibraryCholmod(_elasticity_like(6400, seed=16), "m")
+    assert small.analysis.analysed_simplicial and not large.analysis.analysed_simplicial
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
+    matrix = _elasticity_like(6400, seed=17)
+    n = matrix.shape[0]
+    factorizer = linalg.Factorizer("cholmod")
+    first = factorizer.factorize(matrix)
+    assert first.analysis.analysed_simplicial
+    rhs = sp.csc_matrix((np.ones(6), (np.arange(0, n, n // 6)[:6], np.arange(6))), shape=(n, 6))
+    first._pattern_forward(rhs)
+    address = first.analysis.numeric.value
+    changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.25)))
+    second = factorizer.factorize(changed)
+    assert second.analysis.numeric.value == address and not second.analysis.converted
+    forward, scaled = second._pattern_forward(rhs)
+    expected = rhs.T @ spla.spsolve(sp.csc_matrix(changed), rhs.toarray())
+    assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
+    bad = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(n - 1), 10.0]))
+    with pytest.raises(SolverError, match="not positive definite"):
+        linalg._LibraryCholmod(bad, "the shifted matrix")
