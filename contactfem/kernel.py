@@ -751,6 +751,7 @@ class ActiveSetSolver:
         self.checks: list[FactorCheck] = []
         self._solved: np.ndarray | None = None
         self._internal: np.ndarray | None = None
+        self._absolute: np.ndarray | None = None
         # |K|, for the round-off bound of the equations: k products and the load and contact force.
         self.absolute = sp.csr_matrix((np.abs(k.data), k.indices, k.indptr), shape=k.shape)
         self.absolute_row_sums = self.absolute @ np.ones(n)
@@ -769,7 +770,7 @@ class ActiveSetSolver:
         self.load_factor = float(factor)
         self.load = self.load_factor * self.unit_load
         self.support_values = self.load_factor * self.unit_support_values
-        self._solved = self._internal = None
+        self._solved = self._internal = self._absolute = None
         if self.factor is not None:
             self.values = self.support_values.copy()
             self.values[self.normal_dofs[self.reference]] = self.gap[self.reference]
@@ -790,11 +791,13 @@ class ActiveSetSolver:
         contact = np.zeros(len(u))
         contact[self.normal_dofs] = nodal_force
         # K u of the last solve, when this is its u (it was computed for its acceptance test).
-        internal = self._internal if u is self._solved else self.stiffness @ u
+        solved = u is self._solved
+        internal = self._internal if solved else self.stiffness @ u
         equations = ~self.supported
         with np.errstate(invalid="ignore", over="ignore"):
             residual = (internal + contact - self.load)[equations]
-            terms = (self.absolute @ np.abs(u) + np.abs(self.load) + np.abs(contact))[equations]
+            absolute = self._absolute if solved else self.absolute @ np.abs(u)
+            terms = (absolute + np.abs(self.load) + np.abs(contact))[equations]
             force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
                      + np.abs(nodal_force).max(initial=0.0))
             force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
@@ -863,14 +866,22 @@ class ActiveSetSolver:
         released = np.flatnonzero(self.reference & ~active)
         added = np.flatnonzero(~self.reference & active)
         u = self._solve_changed(released, added, self.base, self.load, self.values, self.gap[added])
+        fixed = self.normal_dofs[active]
+        # Active normals satisfy u_n = G through the Schur system only to round-off; they
+        # are constraints, so they are set exactly first (complementarity holds exactly),
+        # and K u and |K| |u| serve the refinement, the reactions and the step's scales.
+        u[fixed] = self.gap[active]
+        equations = ~self.supported
+        equations[fixed] = False
+        internal = self.stiffness @ u
+        with np.errstate(invalid="ignore", over="ignore"):
+            absolute = self.absolute @ np.abs(u)
+            target = self.gamma * (absolute + np.abs(self.load))[equations].max(initial=0.0)
+        residual = np.where(equations, self.load - internal, 0.0)
         # Iterative refinement down to the round-off bound of the equations, for solves that
         # are not backward stable (SuperLU without pivoting, long chains of Schur updates); it
-        # corrects with the same factor and Schur structure while the residual improves.
-        equations = ~self.supported
-        equations[self.normal_dofs[active]] = False
-        with np.errstate(invalid="ignore", over="ignore"):
-            target = self.gamma * (self.absolute @ np.abs(u) + np.abs(self.load))[equations].max(initial=0.0)
-        residual = np.where(equations, self.load - self.stiffness @ u, 0.0)
+        # corrects with the same factor and Schur structure while the residual improves (a
+        # correction is zero on every fixed unknown, so the active normals stay exact).
         for _ in range(REFINEMENT_STEPS):
             size = np.abs(residual).max(initial=0.0)
             if not size > target:  # also stops on NaN: the certificate reports it
@@ -879,17 +890,17 @@ class ActiveSetSolver:
             correction = self._solve_changed(
                 released, added, correction_base, residual, np.zeros_like(u), np.zeros(len(added))
             )
-            trial = np.where(equations, residual - self.stiffness @ correction, 0.0)
+            correction[fixed] = 0.0
+            change = self.stiffness @ correction
+            trial = np.where(equations, residual - change, 0.0)
             if not np.abs(trial).max(initial=0.0) < size:
                 break
-            u, residual = u + correction, trial
-        fixed = self.normal_dofs[active]
-        # Active normals satisfy u_n = G through the Schur system only to round-off; they
-        # are constraints, so they are returned exactly (complementarity holds exactly).
-        u[fixed] = self.gap[active]
+            u, residual, internal = u + correction, trial, internal + change
+            absolute = None
         with np.errstate(invalid="ignore", over="ignore"):
-            internal = self.stiffness @ u
-            self._solved, self._internal = u, internal
+            if absolute is None:
+                absolute = self.absolute @ np.abs(u)
+            self._solved, self._internal, self._absolute = u, internal, absolute
             reaction = self.load[fixed] - internal[fixed]
             force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
                      + np.abs(reaction).max(initial=0.0))
