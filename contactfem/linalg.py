@@ -553,6 +553,11 @@ class _LibraryCholmod:
                 _SYS_A, rhs[:, start:start + self.SPARSE_BLOCK].toarray(order="F"))
         return out
 
+    @property
+    def simplicial(self) -> bool:
+        """Whether the factor is simplicial (its pattern solves then convert nothing)."""
+        return self.analysis.simplicial
+
     def _inverse_permutation(self) -> np.ndarray:
         """Where row r of a right-hand side goes in P b: the inverse of the factor's fill-reducing
         permutation (cholmod_factor's Perm, the third field)."""

@@ -487,6 +487,7 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     import contactfem.kernel as kernel
 
     monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # a small mesh, to keep the test quick
+    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0)
     contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
     converged = solve_contact(contact, backend="cholmod")
     rng = np.random.default_rng(5)
@@ -527,3 +528,34 @@ def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled):
     assert np.abs(_gram(forward, other) - expected).max() < 1e-12 * np.abs(expected).max()
     assert np.abs(_gram(forward[:, :3], None if other is None else other[:, :3]) - expected[:3, :3]).max() \
         < 1e-12 * np.abs(expected).max()
+
+
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
+@pytest.mark.parametrize("switch", [0, 2])
+def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch):
+    """A simplicial factor's pattern solves convert nothing, so its Schur columns are forward
+    ones from SIMPLICIAL_FORWARD_COLUMNS_FROM unknowns; a supernodal factor's only from
+    FORWARD_COLUMNS_FROM. Either way the contact solve converges to the same active set."""
+    from test_sequencing import rough_polygon_case
+
+    import contactfem.kernel as kernel
+    import contactfem.linalg as linalg
+    from contactfem.kernel import ActiveSetSolver
+    from contactfem.linalg import backend_provider
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    if backend_provider("cholmod") != "cvxopt" or linalg._cholmod_library() is None:
+        pytest.skip("the kinds of factor are chosen in the library called directly")
+    contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
+    reference = solve_contact(contact, backend="superlu")
+    n = contact.stiffness.shape[0]
+    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", switch)
+    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", n // 2)
+    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 2 * n)
+    linear = ActiveSetSolver(contact, "cholmod")
+    result = solve_contact(contact, backend="cholmod", linear=linear)
+    assert linear.factor.simplicial is (switch == 0)
+    assert linear.forward is (switch == 0)
+    assert result.status is Status.CONVERGED
+    np.testing.assert_array_equal(result.active, reference.active)
