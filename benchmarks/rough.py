@@ -20,8 +20,10 @@ Each size runs in a fresh subprocess (``--single N``), so its peak RSS is its ow
      simplicity sweep, ``polygon_problems`` alone recorded too), meshing (Triangle and the
      boundary bookkeeping), assembly, and the contact solve (``solve_case``: the coarse
      levels of mesh sequencing and every Newton step), with the peak RSS after each; the
-     contact solve runs twice and the faster counts (both kept in ``solve_samples_s``);
-  3. times the baseline, the faster of two: one linear elasticity solve of the same mesh
+     contact solve runs three times and the fastest counts (all kept in ``solve_samples_s``:
+     the first pays for the process's first touch of its memory, which on a virtual machine
+     took up to 2x the solve);
+  3. times the baseline, the fastest of three: one linear elasticity solve of the same mesh
      with the same backend (factorise the kernel's stiffness without contact,
      ``check=False``, and solve once; see benchmarks/performance.py ``linear_system``).
 
@@ -106,7 +108,7 @@ def case_text(csv: Path) -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
-def measure(points: int, directory: Path, method: str, repeat: int = 2) -> dict:
+def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
     from performance import linear_system
 
     from contactfem.case import load_case
