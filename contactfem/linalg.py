@@ -467,7 +467,8 @@ def _free_analysis(library: _CholmodLibrary, common: ctypes.Array, symbolic: int
 
 class _LibraryCholmod:
     """CHOLMOD through the library cvxopt's wheel bundles (see :class:`_CholmodLibrary`):
-    AMD ordering, supernodal LLᵀ, the matrix read in place. A non-positive pivot is
+    AMD ordering, an LLᵀ factor (supernodal or simplicial, CHOLMOD's choice; see
+    :data:`_FACTOR_SWITCH`), the matrix read in place. A non-positive pivot is
     reported as a SolverError. Only the latest factorisation of a pattern may be used
     (see :class:`_LibraryAnalysis`); an earlier one refuses to solve."""
 
