@@ -1000,18 +1000,11 @@ class ActiveSetSolver:
         columns whose state changed (a few thousand against millions)."""
         pattern = self.pattern
         if self._masked_matrix is None:
-            # The first set: K's values with the rows and columns of the fixed unknowns (a
-            # few thousand) zeroed, found from their rows instead of a pass over every entry.
-            zeroed = self._entries_of(np.flatnonzero(fixed))
-            if zeroed is None:
-                data = np.where(~fixed[self.entry_rows] & ~fixed[pattern.indices], pattern.data, 0.0)
-            else:
-                data = pattern.data.copy()
-                data[zeroed] = 0.0
-            data[self.diagonal[fixed]] = 1.0
-            self._masked_matrix = sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=pattern.shape)
-            self._masked_fixed = fixed.copy()
-            return self._masked_matrix
+            # The first set: K's values, then the rows and columns of its fixed unknowns (a
+            # few thousand) rewritten like a change, instead of a pass over every entry.
+            self._masked_matrix = sp.csr_matrix((pattern.data.copy(), pattern.indices, pattern.indptr),
+                                                shape=pattern.shape)
+            self._masked_fixed = np.zeros_like(fixed)
         entries = self._entries_of(np.flatnonzero(fixed != self._masked_fixed))
         if entries is None:
             keep = ~fixed[self.entry_rows] & ~fixed[pattern.indices]

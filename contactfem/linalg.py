@@ -184,7 +184,7 @@ class _CvxoptCholmod:
             _release_freed_memory()
             # Always supernodal LLᵀ: CHOLMOD's default picks a simplicial LDLᵀ for small,
             # sparse factors, which passes a negative pivot silently.
-            cholmod.options["supernodal"] = 2  # CHOLMOD_SUPERNODAL (cvxopt cannot ask for a simplicial LLᵀ)
+            cholmod.options["supernodal"] = _CHOLMOD_SUPERNODAL  # cvxopt cannot ask for a simplicial LLᵀ
             symbolic = cholmod.symbolic(stored, uplo="U")
         self.analysis_seconds = time.perf_counter() - started
         try:
@@ -288,7 +288,8 @@ _COMMON_PRINT, _COMMON_SUPERNODAL, _COMMON_FINAL_ASIS, _COMMON_FINAL_LL = 144, 4
 #: solves it runs 2-3x faster (15 ms against 36 ms at 418 000 unknowns under a rough
 #: profile), whose analysis skips the supernodal one, and whose solves with a sparse
 #: right-hand side need no conversion.
-_FACTOR_SWITCH = 1
+_CHOLMOD_AUTO, _CHOLMOD_SUPERNODAL = 1, 2
+_FACTOR_SWITCH = _CHOLMOD_AUTO
 #: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it),
 #: Perm (the fill-reducing permutation) and ColCount (a simplicial factor's column counts);
 #: further on, xsize (a supernodal factor's entries) and is_super, at the offsets of
@@ -678,7 +679,7 @@ class _LibraryCholmod:
         # per-column Python work is most of a column's cost on a graded mesh (26 µs in CHOLMOD).
         set_pointers = np.zeros(2, dtype=np.int32)
         ones = np.ones(max(int(np.diff(starts).max(initial=0)), 1))
-        given = _CholmodLibrary.sparse(set_pointers, all_rows[:1] if len(all_rows) else np.zeros(1, np.int32), ones, n, 0)
+        given = _CholmodLibrary.sparse(set_pointers, all_rows, ones, n, 0)
         counts = np.zeros(k + 1, dtype=np.int64)
         rows_out: list[np.ndarray] = []
         values_out: list[np.ndarray] = []

@@ -57,7 +57,8 @@ class ReducedSystem:
         shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
         shift.eliminate_zeros()
         stiffness = problem.stiffness
-        rotated = None if slaves.any() else _rotated_in_blocks(stiffness, nodes, np.stack([a, b], axis=2))
+        blocks = np.stack([a, b], axis=2)
+        rotated = None if slaves.any() else _rotated_in_blocks(stiffness, nodes, blocks)
         if rotated is None:
             k_shift = (stiffness @ shift).tocsr()
             # The three corrections live on the framed rows and columns: sum them first, then
@@ -70,7 +71,6 @@ class ReducedSystem:
         order = np.argsort(fixed_dofs)
         load = rotation.T @ problem.load
         np.add.at(load, frames.force_dofs, frames.forces)
-        blocks = np.stack([a, b], axis=2)
         free_modes = None
         if problem.free_modes is not None:
             free_modes = _reduce(problem.free_modes, nodes, blocks, frames.masters)
