@@ -641,28 +641,27 @@ def build_certificate(non_finite: int, slack: np.ndarray, multiplier: np.ndarray
     )
 
 
-def _gram(forward: sp.csc_matrix, scaled: sp.csc_matrix | None) -> np.ndarray:
-    """Wᵀ S (Wᵀ W when ``scaled`` is None) for sparse forward columns W, dense (k, k).
+def _cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
+    """leftᵀ right for sparse forward columns, dense (k_left, k_right).
 
     The columns share the rows near the elimination tree's root and little else: the rows
-    that a quarter of the columns or more touch go through BLAS as dense blocks (on the
-    square at 526 000 unknowns, 256 columns share 14 000 rows: 0.04 s against 0.66 s as a
-    sparse product), the others through a sparse product (1 200 columns on a rough
-    profile's mesh at 418 000 unknowns touch 68 000 rows, 1 200 of them shared: 2.4 s as one
-    dense block over all of them, 0.25 s as a sparse product).
+    that a quarter of the right-hand columns or more touch go through BLAS as dense blocks
+    (on the square at 526 000 unknowns, 256 columns share 14 000 rows: 0.04 s against
+    0.66 s as a sparse product), the others through a sparse product (1 200 columns on a
+    rough profile's mesh at 418 000 unknowns touch 68 000 rows, 1 200 of them shared: 2.4 s
+    as one dense block over all of them, 0.25 s as a sparse product).
     """
-    k = forward.shape[1]
-    counts = np.bincount(forward.indices, minlength=forward.shape[0])
+    k = right.shape[1]
+    counts = np.bincount(right.indices, minlength=right.shape[0])
     shared = counts >= max(1, k // 4)
-    if 16 * int(shared.sum()) * k > COLUMN_BYTES:
+    if 8 * int(shared.sum()) * (k + left.shape[1]) > COLUMN_BYTES:
         shared[:] = False
     heavy = np.flatnonzero(shared)
-    block = forward[heavy].toarray()
-    gram = block.T @ (block if scaled is None else scaled[heavy].toarray())
+    product = left[heavy].toarray().T @ right[heavy].toarray()
     if len(heavy) < int(np.count_nonzero(counts)):
-        light = sp.diags((~shared).astype(float)) @ forward
-        gram += (light.T @ (light if scaled is None else scaled)).toarray()
-    return gram
+        light = sp.diags((~shared).astype(float)) @ left
+        product += (light.T @ right).toarray()
+    return product
 
 
 class ActiveSetSolver:
@@ -766,6 +765,12 @@ class ActiveSetSolver:
         self._masked_matrix: sp.csr_matrix | None = None
         self._masked_fixed: np.ndarray | None = None
 
+    def analyse(self) -> None:
+        """Order and analyse the pattern every set is factorised in, ahead of the first set
+        (:meth:`contactfem.linalg.Factorizer.analyse`): a caller with other work to do first
+        may run this in another thread."""
+        self.factorizer.analyse(self.pattern)
+
     def set_load_factor(self, factor: float) -> None:
         """Multiply the system's load and prescribed values by ``factor`` (a step of a load
         path; the solver must be built with ``scalable=True``). The factorisation and the
@@ -850,8 +855,9 @@ class ActiveSetSolver:
         if self.max_changes is not None:
             return len(changed) > self.max_changes
         missing = int((self.slot_of[changed] < 0).sum())
-        if not self.forward and (self.column_count + missing) * 8 * self.stiffness.shape[0] > COLUMN_BYTES:
-            return True
+        stored = self.column_count + missing
+        if stored * 8 * (2 * stored if self.forward else self.stiffness.shape[0]) > COLUMN_BYTES:
+            return True  # the full columns, or the forward ones' Schur blocks (grown 2x)
         k = len(changed)
         if self.forward and callable(getattr(self.factor, "forward_seconds", None)):
             # The backend knows its routes: a forward column costs 0.004 of a full solve on a
@@ -861,10 +867,11 @@ class ActiveSetSolver:
             columns = missing * (self.column_seconds or 0.0)
         update = columns + k**3 / 3 / DENSE_FLOPS
         if self.forward:
-            # u itself: one full solve; the Schur blocks Wᵀ W, at most k² times a column's
-            # length (its elimination-tree path: √n until one is stored).
+            # u itself: one full solve; the Schur blocks Wᵀ W of the missing columns against
+            # every stored one, at most a column's length each (its elimination-tree path:
+            # √n until one is stored).
             path = self.forward_store.nnz / self.column_count if self.column_count else np.sqrt(len(self.free))
-            update += self.solve_seconds + 2.0 * k * k * path / DENSE_FLOPS
+            update += self.solve_seconds + 2.0 * missing * stored * path / DENSE_FLOPS
         return update > self.refactorization_seconds
 
     def _solve_refined(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -991,6 +998,7 @@ class ActiveSetSolver:
         if self.forward:
             self.forward_store = sp.csc_matrix((k.shape[0], 0))
             self.scaled_store = sp.csc_matrix((k.shape[0], 0))
+            self.gram_store = np.empty((0, 0))
         elif getattr(self, "column_store", None) is None:
             self.column_store = np.empty((k.shape[0], 0), order="F")
 
@@ -1067,6 +1075,7 @@ class ActiveSetSolver:
                 # An LLᵀ factor has D = I: the scaled columns are the forward ones, kept once.
                 self.scaled_store = (self.forward_store if scaled is forward
                                      else sp.hstack([self.scaled_store, scaled], format="csc"))
+                self._extend_gram(forward, count)
             else:
                 solved = solve_sparse_columns(self.factor, rhs)
                 if count + len(missing) > self.column_store.shape[1]:
@@ -1082,6 +1091,21 @@ class ActiveSetSolver:
             self.slot_of[missing] = np.arange(count, count + len(missing))
             self.column_count = count + len(missing)
         return self.slot_of[nodes]
+
+    def _extend_gram(self, forward: sp.csc_matrix, count: int) -> None:
+        """Add the new forward columns' rows and columns to the Schur blocks of every stored
+        column, Wᵀ S (S = D⁻¹ W, W itself for an LLᵀ factor): a step then takes its blocks
+        from the store instead of multiplying all its changed nodes' columns again (about
+        as many as the last step's, with a handful new)."""
+        total = count + forward.shape[1]
+        if total > self.gram_store.shape[0]:
+            grown = np.empty((2 * total, 2 * total))
+            grown[:count, :count] = self.gram_store[:count, :count]
+            self.gram_store = grown
+        block = _cross(forward, self.scaled_store)  # (new, all): rows count ... total - 1
+        block[:, count:] = 0.5 * (block[:, count:] + block[:, count:].T)  # symmetric to round-off
+        self.gram_store[count:total, :total] = block
+        self.gram_store[:count, count:total] = block[:, :count].T
 
     def _free_part(self, rows: sp.csr_matrix) -> sp.csr_matrix:
         """Rows of K restricted to the reference set's free columns (K_r0), without stored zeros."""
@@ -1163,9 +1187,7 @@ class ActiveSetSolver:
         r = len(released)
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
-        forward, scaled = self.forward_store[:, slots], self.scaled_store[:, slots]
-        gram = _gram(forward, scaled if self.scaled_store is not self.forward_store else None)
-        gram = 0.5 * (gram + gram.T)  # Cᵀ K00⁻¹ C is symmetric; round-off made it not quite
+        gram = self.gram_store[np.ix_(slots, slots)]
         released_values = fixed_values[dofs_r]
         k_r0, k_rr, b_r = self._released_rows(dofs_r, load, fixed_values)
         # z0 = base + K00⁻¹ K0r G_r: the released normals lose their fixed values.

@@ -507,27 +507,47 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     assert np.abs(schur_u - fresh_u).max() < 1e-10 * scale
     assert np.abs(schur_reaction - fresh_reaction).max() < 1e-8 * np.abs(fresh_reaction).max()
     assert linear.forward_store.nnz < 0.25 * linear.forward_store.shape[0] * linear.forward_store.shape[1]
+    # Later sets add columns in batches; each batch's Schur blocks join the store, which
+    # stays the product of all the stored columns, and the solves stay those of a fresh
+    # factorisation of each set.
+    for batch in range(3):
+        flip = rng.choice(len(target), 10, replace=False)
+        target[flip] = ~target[flip]
+        batch_u, _ = linear.solve(target)
+        fresh_u, _ = ActiveSetSolver(contact, "cholmod").solve(target)
+        assert linear.factorizations == 1
+        assert np.abs(batch_u - fresh_u).max() < 1e-10 * np.abs(fresh_u).max()
+    count = linear.column_count
+    assert count > 24 + 10
+    stored = linear.gram_store[:count, :count]
+    expected = linear.forward_store.toarray().T @ linear.scaled_store.toarray()
+    assert np.abs(stored - expected).max() < 1e-12 * np.abs(expected).max()
+    assert np.array_equal(stored, stored.T)
 
 
 @pytest.mark.parametrize("scaled", [False, True])
 def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled):
     """Wᵀ S for sparse forward columns is the dense product to round-off, whether the rows
     that many columns share (the elimination tree's top) go through dense blocks and the
-    others through a sparse product, or all of them one way."""
+    others through a sparse product, or all of them one way; and for new columns against
+    all of them (the rows a store of Schur blocks gains)."""
     import scipy.sparse as sp
 
-    from contactfem.kernel import _gram
+    from contactfem.kernel import _cross
 
     rng = np.random.default_rng(11)
     n, k = 5000, 40
     own = sp.random(n, k, density=0.01, random_state=12, format="csc")
     top = sp.csc_matrix(np.vstack([rng.standard_normal((30, k)), np.zeros((n - 30, k))]))  # rows all share
     forward = sp.csc_matrix(own + top)
-    other = sp.csc_matrix(forward.multiply(rng.uniform(0.5, 2.0, forward.shape))) if scaled else None
-    expected = forward.toarray().T @ (other.toarray() if scaled else forward.toarray())
-    assert np.abs(_gram(forward, other) - expected).max() < 1e-12 * np.abs(expected).max()
-    assert np.abs(_gram(forward[:, :3], None if other is None else other[:, :3]) - expected[:3, :3]).max() \
-        < 1e-12 * np.abs(expected).max()
+    other = sp.csc_matrix(forward.multiply(rng.uniform(0.5, 2.0, forward.shape))) if scaled else forward
+    expected = forward.toarray().T @ other.toarray()
+    scale = np.abs(expected).max()
+    assert np.abs(_cross(forward, other) - expected).max() < 1e-12 * scale
+    assert np.abs(_cross(forward[:, :3], other[:, :3]) - expected[:3, :3]).max() < 1e-12 * scale
+    assert np.abs(_cross(forward[:, 35:], other) - expected[35:]).max() < 1e-12 * scale
+    assert np.abs(_cross(own[:, 35:].tocsc(), sp.csc_matrix(own)) - own[:, 35:].toarray().T @ own.toarray()).max() \
+        < 1e-12 * np.abs(own.toarray()).max() ** 2
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
