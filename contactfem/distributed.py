@@ -367,7 +367,7 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
         finally:
             level.linear.destroy()
 
-    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse)
+    return predict_from_coarser(case, problem, lambda: c, say, prepare_coarse, solve_coarse)
 
 
 def distributed_report(case: Case, outcome: DistributedResult, extras: dict | None = None) -> dict:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -383,8 +384,17 @@ def _bundled_cholmod_files() -> list[str]:
 _LIBRARY_STATE: dict[str, _CholmodLibrary | None] = {}
 
 
+_LIBRARY_LOCK = threading.Lock()
+
+
 def _cholmod_library() -> _CholmodLibrary | None:
-    """The bundled CHOLMOD, loaded once; None where cvxopt has none or its layout is unknown."""
+    """The bundled CHOLMOD, loaded once (by one thread: a solver analyses its pattern while
+    coarser levels factorise); None where cvxopt has none or its layout is unknown."""
+    with _LIBRARY_LOCK:
+        return _load_cholmod_library()
+
+
+def _load_cholmod_library() -> _CholmodLibrary | None:
     if "library" not in _LIBRARY_STATE:
         _LIBRARY_STATE["library"] = None
         try:
@@ -484,25 +494,36 @@ class _LibraryCholmod:
     #: base at 695 000.
     CONVERSION_GUESS = 3.0
 
-    def __init__(self, matrix: sp.spmatrix, name: str, analysis: "_LibraryAnalysis | None" = None) -> None:
+    @staticmethod
+    def _view(matrix: sp.spmatrix) -> tuple[sp.csr_matrix, _SparseStruct, tuple[np.ndarray, ...]]:
+        """The canonical CSR of ``matrix``, CHOLMOD's view of it and the arrays the view reads."""
         csr = sp.csr_matrix(matrix)
         if not csr.has_canonical_format:
             csr = csr.copy()
             csr.sum_duplicates()
-        indptr, indices = csr.indptr.astype(np.int32, copy=False), csr.indices.astype(np.int32, copy=False)
-        data = np.ascontiguousarray(csr.data, dtype=float)
-        n = csr.shape[0]
+        arrays = (csr.indptr.astype(np.int32, copy=False), csr.indices.astype(np.int32, copy=False),
+                  np.ascontiguousarray(csr.data, dtype=float))
         # Upper triangle (stype = 1) of the symmetric matrix whose CSC arrays are the CSR ones.
-        view = _CholmodLibrary.sparse(indptr, indices, data, n, 1)
+        return csr, _CholmodLibrary.sparse(*arrays, csr.shape[0], 1), arrays
+
+    @classmethod
+    def analyse(cls, matrix: sp.spmatrix, name: str) -> _LibraryAnalysis:
+        """The ordering and symbolic analysis of ``matrix``'s pattern (its values unread)."""
+        csr, view, _arrays = cls._view(matrix)
+        library = _cholmod_library()
+        common = library.start()
+        symbolic = library.library.cholmod_analyze(ctypes.byref(view), common)
+        if not symbolic:
+            library.library.cholmod_finish(common)
+            raise MemoryError(f"CHOLMOD could not analyse {name}")
+        return _LibraryAnalysis(library, common, symbolic, csr.indptr, csr.indices)
+
+    def __init__(self, matrix: sp.spmatrix, name: str, analysis: "_LibraryAnalysis | None" = None) -> None:
+        csr, view, _arrays = self._view(matrix)
+        n = csr.shape[0]
         started = time.perf_counter()
         if analysis is None or not analysis.matches(csr):
-            library = _cholmod_library()
-            common = library.start()
-            symbolic = library.library.cholmod_analyze(ctypes.byref(view), common)
-            if not symbolic:
-                library.library.cholmod_finish(common)
-                raise MemoryError(f"CHOLMOD could not analyse {name}")
-            analysis = _LibraryAnalysis(library, common, symbolic, csr.indptr, csr.indices)
+            analysis = self.analyse(csr, name)
         self.analysis_seconds = time.perf_counter() - started
         library, common = analysis.library, analysis.common
         factor = analysis.fresh_numeric()
@@ -732,6 +753,20 @@ class _LibraryCholmod:
         return forward, forward
 
 
+def _analyse_ahead(backend: str, matrix: sp.spmatrix, name: str) -> object | None:
+    """The analysis of ``matrix``'s pattern that ``backend``'s factorisation would reuse, or
+    None where it reuses none (or makes it only with the numbers)."""
+    if backend != "cholmod":
+        return None
+    if _installed("cvxopt"):
+        if _cholmod_library() is not None and matrix.nnz < 2**31:
+            return _LibraryCholmod.analyse(matrix, name)
+        return None  # cvxopt's interface analyses with its own copy of the matrix
+    from sksparse.cholmod import analyze
+
+    return analyze(_symmetric_csc(matrix), ordering_method="amd", mode="supernodal")
+
+
 def _cvxopt_cholmod(matrix: sp.spmatrix, name: str, analysis: object | None = None) -> Factorization:
     """CHOLMOD from cvxopt's wheel: called directly where its bundled library is found,
     through cvxopt's interface otherwise."""
@@ -875,6 +910,18 @@ class Factorizer:
         self.analysis_seconds: list[float] = []
         self._analysis: object | None = None
         self._pattern: tuple[int, int] | None = None
+        #: Seconds of the analysis made ahead of the factorisations (:meth:`analyse`).
+        self.ahead_seconds = 0.0
+
+    def analyse(self, matrix: sp.spmatrix) -> None:
+        """Order and analyse ``matrix``'s pattern now, for the factorisations to come (a
+        backend that reuses no analysis does nothing): the first then costs only its numbers.
+        May run in another thread than the factorisations, not at the same time as one."""
+        started = time.perf_counter()
+        analysis = _analyse_ahead(self.backend, matrix, self.name)
+        if analysis is not None:
+            self._analysis, self._pattern = analysis, (matrix.shape[0], matrix.nnz)
+            self.ahead_seconds = time.perf_counter() - started
 
     def factorize(self, matrix: sp.spmatrix, *, check: bool = True,
                   equations: np.ndarray | None = None) -> Factorization:

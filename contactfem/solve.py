@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
@@ -21,6 +22,8 @@ from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
+    ActiveSetSolver,
+    ContactSystem,
     Iteration,
     KernelResult,
     Status,
@@ -162,11 +165,23 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
                    load_factor: float = 1.0) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
     coarser meshes) and what the prediction cost: what a fine solve and a coarse level share."""
-    reduced = problem.contact_system(contact_method)
-    c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    initial_active, second_guess, sequencing = starting_set(
-        reduced.system.gap, case.solver.tolerance,
-        lambda: _predict_from_coarser(case, problem, reduced, c, say, load_factor))
+    tolerance = case.solver.tolerance
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        # This level's kernel system (contact nodes in normal and tangent unknowns), its
+        # solver and that solver's ordering and symbolic analysis are made while the
+        # coarser levels mesh and solve: on a rough profile's mesh they are 0.6-0.8 of a
+        # linear solve, the analysis (most of it) outside the interpreter's lock.
+        reduced_soon = pool.submit(problem.contact_system, contact_method)
+        solver_soon = pool.submit(lambda: _analysed_solver(reduced_soon.result().system, backend, tolerance))
+
+        def fine() -> tuple[ReducedSystem, float]:
+            reduced = reduced_soon.result()
+            return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
+
+        initial_active, second_guess, sequencing = starting_set(
+            problem.contact.gap, tolerance, lambda: _predict_from_coarser(case, problem, fine, say, load_factor))
+        reduced, c = fine()
+        linear = solver_soon.result()
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
@@ -180,13 +195,20 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         reduced.system,
         c=c,
         initial_active=initial_active,
-        tolerance=case.solver.tolerance,
+        tolerance=tolerance,
         max_iterations=case.solver.max_iterations,
         backend=backend,
         on_iteration=on_iteration,
         second_guess=second_guess,
+        linear=linear,
     )
     return reduced, kernel, sequencing
+
+
+def _analysed_solver(system: ContactSystem, backend: str, tolerance: float) -> ActiveSetSolver:
+    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
+    linear.analyse()
+    return linear
 
 
 @dataclass(frozen=True, eq=False)
@@ -247,7 +269,8 @@ def solve_load_path(
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     first = dataclasses.replace(reduced, system=reduced.system.scaled(factors[0]))
-    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), first, c, say, factors[0])
+    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), lambda: (first, c), say,
+                                                       factors[0])
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     solved = factorizations = 0
@@ -325,10 +348,11 @@ class CoarseSolve:
     displacement: np.ndarray | None = None
 
 
-def _predict_from_coarser(case: Case, problem: DiscreteProblem, reduced: ReducedSystem, c: float, say: Progress,
-                          factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
+def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[], tuple[ReducedSystem, float]],
+                          say: Progress, factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively),
-    corrected in a layer along ΓC of ``reduced`` (the fine kernel's system), and its cost.
+    corrected in a layer along ΓC of the fine kernel's system, and its cost. ``fine`` gives
+    that system and its c once a coarse level has solved (they may be made meanwhile).
 
     ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
     """
@@ -345,10 +369,11 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, reduced: Reduced
         return coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
 
     def correct(coarse: CoarseSolve, active: np.ndarray) -> tuple[np.ndarray, dict]:
+        reduced, c = fine()
         return correct_in_layer(reduced, coarse, active, c, case.solver.tolerance, case.solver.max_iterations,
                                 _serial_backend(case))
 
-    return predict_from_coarser(case, problem, c, say, prepare_coarse, solve_coarse, correct)
+    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct)
 
 
 def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
@@ -406,14 +431,15 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     }
 
 
-def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Progress,
+def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], float], say: Progress,
                          prepare_coarse: Callable[[Case, int], DiscreteProblem],
                          solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
                          correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
                          ) -> tuple[np.ndarray | None, dict]:
     """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
     process, or across MPI ranks), and optionally to ``correct`` its prediction on the
-    fine mesh: the predicted active set and what it cost.
+    fine mesh: the predicted active set and what it cost. ``c`` gives the fine kernel's c,
+    asked for once the coarse level has solved.
 
     (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
@@ -439,7 +465,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: float, say: Pr
         return None, {}
     if coarse_result.kernel.status is not Status.CONVERGED:
         return None, {}
-    active = predict_active_set(problem.contact, coarse_result.contact, c)
+    active = predict_active_set(problem.contact, coarse_result.contact, c())
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
     corrected: dict = {}
     if correct is not None:

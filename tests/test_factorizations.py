@@ -267,3 +267,32 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     bad = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(n - 1), 10.0]))
     with pytest.raises(SolverError, match="not positive definite"):
         linalg._LibraryCholmod(bad, "the shifted matrix")
+
+
+@pytest.mark.parametrize("backend", linalg.available_backends())
+def test_an_analysis_made_ahead_in_another_thread_serves_the_first_factorisation(backend):
+    """Factorizer.analyse orders and analyses a pattern for the factorisations to come, in
+    another thread while this one factorises other matrices (a fine level's solver while
+    its coarser levels solve): the first factorisation then analyses nothing (a backend
+    that reuses no analysis does it all then) and solves as a fresh one does, to round-off."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    matrix = _elasticity_like(6400, seed=3)
+    rhs = np.random.default_rng(4).standard_normal(matrix.shape[0])
+    expected = spla.spsolve(sp.csc_matrix(matrix), rhs)
+    ahead = linalg.Factorizer(backend, name="the test matrix")
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        analysed = pool.submit(ahead.analyse, matrix)
+        others = [linalg.factorize(_elasticity_like(size, seed=size), backend) for size in (400, 900, 1600)]
+        analysed.result()
+    assert all(np.isfinite(np.asarray(other.solve(np.ones(other_size)))).all()
+               for other, other_size in zip(others, (800, 1800, 3200)))
+    factor = ahead.factorize(matrix)
+    provider = linalg.backend_provider(backend)
+    reuses = provider == "sksparse" or (provider == "cvxopt" and linalg._cholmod_library() is not None)
+    if reuses:
+        assert ahead.ahead_seconds > 0 and ahead.analysis_seconds == [pytest.approx(0.0, abs=1e-3)]
+    else:
+        assert ahead.ahead_seconds == 0.0
+    solved = np.asarray(factor.solve(rhs)).ravel()
+    assert np.abs(solved - expected).max() < 1e-12 * np.abs(expected).max()
