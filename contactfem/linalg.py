@@ -22,6 +22,7 @@ singular matrix from a sound one whatever the backend.
 from __future__ import annotations
 
 import ctypes
+import functools
 import importlib.util
 import threading
 import time
@@ -841,7 +842,9 @@ BACKEND_CHOICES = ("auto", *BACKEND_NAMES, *DISTRIBUTED_BACKENDS)
 _EXTRAS = {"cholmod": "cholmod", "pardiso": "pardiso", "petsc": "petsc"}
 
 
+@functools.lru_cache(maxsize=None)
 def _installed(module: str | None) -> bool:
+    """Whether ``module`` can be imported (asked once: every factorisation resolves its backend)."""
     if module is None:
         return True
     try:
