@@ -641,6 +641,12 @@ def build_certificate(non_finite: int, slack: np.ndarray, multiplier: np.ndarray
     )
 
 
+def _row_positions(indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions of the entries of CSR ``rows`` (in order) and each row's length."""
+    starts, lengths = indptr[rows], indptr[rows + 1] - indptr[rows]
+    return np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(int(lengths.sum())), lengths
+
+
 def _cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
     """leftᵀ right for sparse forward columns, dense (k_left, k_right).
 
@@ -947,17 +953,21 @@ class ActiveSetSolver:
         # The fixed unknowns' values reach the equations through their columns of K, that is
         # (K symmetric) their rows: a few thousand rows instead of a product with all of K.
         fixed_dofs = np.flatnonzero(fixed)
-        fixed_rows_t = k[fixed_dofs].T
+        owner, column, value = self._row_entries(fixed_dofs)
+        n = k.shape[0]
+
+        def fixed_columns_times(values: np.ndarray) -> np.ndarray:
+            return np.bincount(column, weights=value * values[fixed_dofs][owner], minlength=n)
+
         if self.scalable:
             # The right-hand side is f (F − K s) + (−K g) on the equations and f s + g on the
             # fixed unknowns (s the unit prescribed values, g the gaps of the reference set).
             gaps = self.values - self.support_values
-            parts = [self.unit_load - fixed_rows_t @ self.unit_support_values[fixed_dofs],
-                     -(fixed_rows_t @ gaps[fixed_dofs])]
+            parts = [self.unit_load - fixed_columns_times(self.unit_support_values), -fixed_columns_times(gaps)]
             parts[0][fixed] = self.unit_support_values[fixed]
             parts[1][fixed] = gaps[fixed]
         else:
-            parts = [self.load - fixed_rows_t @ self.values[fixed_dofs]]
+            parts = [self.load - fixed_columns_times(self.values)]
             parts[0][fixed] = self.values[fixed]
         # The singularity probe's solve rides along with the first solve of the factor.
         probe = probe_vector(len(parts[0]), self.free)
@@ -986,7 +996,7 @@ class ActiveSetSolver:
             self.base = np.ascontiguousarray(solved[:, 0])
         # ‖K00‖∞ over its equations: the masked rows keep only their free columns, so each
         # row sum of |K| loses its fixed columns (|K| symmetric: the fixed rows).
-        free_sums = self.absolute_row_sums - self.absolute[fixed_dofs].T @ np.ones(len(fixed_dofs))
+        free_sums = self.absolute_row_sums - np.bincount(column, weights=np.abs(value), minlength=n)
         norm = float(free_sums[self.free].max(initial=0.0))
         self.checks.append(check_factorization(masked, self.factor, equations=self.free, probe=probe,
                                                solution=solved[:, -1], norm=norm, name=name))
@@ -1032,8 +1042,7 @@ class ActiveSetSolver:
         pattern is symmetric: an entry (d, j) of row d has its mirror (j, d) in row j);
         None if some mirror is not stored."""
         indptr, indices = self.pattern.indptr, self.pattern.indices
-        starts, lengths = indptr[dofs], indptr[dofs + 1] - indptr[dofs]
-        in_rows = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(int(lengths.sum()))
+        in_rows, lengths = _row_positions(indptr, dofs)
         owners = np.repeat(dofs, lengths)
         partners = indices[in_rows]
         # The mirror's offset in its (sorted) row: scan the at most max-row-length offsets.
@@ -1062,10 +1071,10 @@ class ActiveSetSolver:
             # symmetric, restricted to the free unknowns) or e_j (an added one).
             dofs = self.normal_dofs[missing]
             released = self.reference[missing]
-            rows_k = self._free_part(self.stiffness[dofs[released]]).tocoo()
-            columns = np.concatenate([np.flatnonzero(released)[rows_k.row], np.flatnonzero(~released)])
-            entries = np.concatenate([rows_k.col, dofs[~released]])
-            values = np.concatenate([rows_k.data, np.ones(int((~released).sum()))])
+            owner, column, value = self._free_entries(*self._row_entries(dofs[released]))
+            columns = np.concatenate([np.flatnonzero(released)[owner], np.flatnonzero(~released)])
+            entries = np.concatenate([column, dofs[~released]])
+            values = np.concatenate([value, np.ones(int((~released).sum()))])
             rhs = sp.csc_matrix((values, (entries, columns)), shape=(n, len(missing)))
             started = time.perf_counter()
             count = self.column_count
@@ -1107,11 +1116,19 @@ class ActiveSetSolver:
         self.gram_store[count:total, :total] = block
         self.gram_store[:count, count:total] = block[:, :count].T
 
-    def _free_part(self, rows: sp.csr_matrix) -> sp.csr_matrix:
-        """Rows of K restricted to the reference set's free columns (K_r0), without stored zeros."""
-        part = rows.multiply(self.free[None, :]).tocsr()
-        part.eliminate_zeros()
-        return part
+    def _row_entries(self, dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The entries of K's rows ``dofs``: each one's row (its position in ``dofs``), column
+        and value, row by row. Read from K's arrays: a step asks for a few rows, and SciPy's
+        row indexing costs more in checks than in copying them."""
+        k = self.stiffness
+        positions, lengths = _row_positions(k.indptr, dofs)
+        return np.repeat(np.arange(len(dofs)), lengths), k.indices[positions], k.data[positions]
+
+    def _free_entries(self, owner: np.ndarray, column: np.ndarray,
+                      value: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Entries of :meth:`_row_entries` in the reference set's free columns, without zeros (K_r0)."""
+        keep = self.free[column] & (value != 0.0)
+        return owner[keep], column[keep], value[keep]
 
     def _combine(self, slots: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Σ_k weights[k] · column(slots[k]) (n,), one matrix-vector product over the block."""
@@ -1158,10 +1175,20 @@ class ActiveSetSolver:
                        fixed_values: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
         """The released normals' equations: K_r0 (their rows on the reference set's free
         unknowns), K_rr and b_r = F_r − K_r· (fixed values, the released ones now free)."""
-        values = fixed_values.copy()
-        values[dofs_r] = 0.0
-        rows_r = self.stiffness[dofs_r]
-        return self._free_part(rows_r), rows_r[:, dofs_r].toarray(), load[dofs_r] - rows_r @ values
+        n, r = self.stiffness.shape[0], len(dofs_r)
+        owner, column, value = self._row_entries(dofs_r)
+        slot = np.full(n, -1)
+        slot[dofs_r] = np.arange(r)
+        among = slot[column] >= 0
+        k_rr = np.zeros((r, r))
+        k_rr[owner[among], slot[column[among]]] = value[among]
+        # The released normals' own values are unknowns now: only the others' enter b_r.
+        known = np.where(among, 0.0, value * fixed_values[column])
+        b_r = load[dofs_r] - np.bincount(owner, weights=known, minlength=r)
+        owner, column, value = self._free_entries(owner, column, value)
+        starts = np.zeros(r + 1, dtype=np.int64)
+        np.cumsum(np.bincount(owner, minlength=r), out=starts[1:])
+        return sp.csr_matrix((value, column, starts), shape=(r, n)), k_rr, b_r
 
     @staticmethod
     def _solve_schur(top: np.ndarray, bottom: np.ndarray, rhs: np.ndarray, released: int,
