@@ -919,7 +919,7 @@ class Factorizer:
     def analyse(self, matrix: sp.spmatrix) -> None:
         """Order and analyse ``matrix``'s pattern now, for the factorisations to come (a
         backend that reuses no analysis does nothing): the first then costs only its numbers.
-        May run in another thread than the factorisations, not at the same time as one."""
+        May run in another thread than this Factorizer's factorisations, not during one."""
         started = time.perf_counter()
         analysis = _analyse_ahead(self.backend, matrix, self.name)
         if analysis is not None:
