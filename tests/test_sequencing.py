@@ -337,3 +337,29 @@ def test_overlap_counts_a_gap_below_round_off_as_touching():
     gap = np.array([1.0, 0.5, -1e-17, 0.0])
     np.testing.assert_array_equal(overlapped(gap, 1e-10), [False, False, False, False])
     np.testing.assert_array_equal(overlapped(np.array([-1e-3, -2e-3, 1e-3]), 1e-10), [True, True, False])
+
+
+def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch):
+    """The fine level's kernel system, solver and analysis are made in a worker thread while
+    the coarse levels mesh and solve: the coarse levels still run, and an error in making
+    the fine system reaches the caller as itself."""
+    from contactfem.discretize import DiscreteProblem
+    from contactfem.errors import SolverError
+    from contactfem.solve import prepare, solve_case
+
+    case = rough_polygon_case(1000)
+    problem = prepare(case)
+    assert problem.n_unknowns > 5_000
+    original = DiscreteProblem.contact_system
+    coarse_systems = []
+
+    def contact_system(self, method):
+        if self is problem:
+            raise SolverError("the fine system could not be made")
+        coarse_systems.append(self.n_unknowns)
+        return original(self, method)
+
+    monkeypatch.setattr(DiscreteProblem, "contact_system", contact_system)
+    with pytest.raises(SolverError, match="the fine system could not be made"):
+        solve_case(case, problem=problem)
+    assert coarse_systems and max(coarse_systems) < problem.n_unknowns / 3
