@@ -121,6 +121,7 @@ def solve_case(
     problem: DiscreteProblem | None = None,
     accept_uncertified: bool = False,
     load_factor: float = 1.0,
+    coarse_levels: dict | None = None,
 ) -> SolveResult:
     """Mesh, assemble and solve ``case`` with ``method`` (default: the case's).
 
@@ -130,7 +131,10 @@ def solve_case(
     active set (a problem scaled by that factor, the first step of a load path). With
     ``accept_uncertified``, a solve whose active set settled but whose iterate fails the
     kernel's certificate is returned (``result.kernel.status`` says so) rather than raised,
-    so that its figures can be reported.
+    so that its figures can be reported. ``coarse_levels``, a dict shared by solves of one
+    ``problem`` at one ``load_factor`` (``compare``'s two methods), keeps the coarse level
+    of mesh sequencing that the first of them meshes and solves, and the next reuse it: it
+    is the same whatever the fine method (it is solved with :data:`SEQUENCING_METHOD`).
 
     Raises
     ------
@@ -148,7 +152,8 @@ def solve_case(
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, load_factor)
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, load_factor,
+                                                 coarse_levels)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -162,9 +167,11 @@ def solve_case(
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
-                   load_factor: float = 1.0) -> tuple[ReducedSystem, KernelResult, dict]:
+                   load_factor: float = 1.0, coarse_levels: dict | None = None,
+                   ) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
-    coarser meshes) and what the prediction cost: what a fine solve and a coarse level share."""
+    coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
+    what the prediction cost: what a fine solve and a coarse level share."""
     tolerance = case.solver.tolerance
     with ThreadPoolExecutor(max_workers=1) as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
@@ -181,7 +188,8 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
         initial_active, second_guess, sequencing = starting_set(
-            problem.contact.gap, tolerance, lambda: _predict_from_coarser(case, problem, fine, say, load_factor))
+            problem.contact.gap, tolerance,
+            lambda: _predict_from_coarser(case, problem, fine, say, load_factor, coarse_levels))
         reduced, c = fine()
         linear = solver_soon.result()
     numbers = itertools.count(1)
@@ -349,27 +357,39 @@ class CoarseSolve:
     sequencing: Mapping
     mesh: Mesh | None = None
     displacement: np.ndarray | None = None
+    #: Whether an earlier solve of the same fine problem meshed and solved this level.
+    reused: bool = False
 
 
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[], tuple[ReducedSystem, float]],
-                          say: Progress, factor: float = 1.0) -> tuple[np.ndarray | None, dict]:
+                          say: Progress, factor: float = 1.0,
+                          coarse_levels: dict | None = None) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively),
     corrected in a layer along ΓC of the fine kernel's system, and its cost. ``fine`` gives
     that system and its c once a coarse level has solved (they may be made meanwhile).
 
     ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
+    ``coarse_levels`` keeps the coarse level's problem and solve, or gives them when an
+    earlier solve of ``problem`` kept them (see :func:`solve_case`).
     """
+    kept = {} if coarse_levels is None else coarse_levels
+
     def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
+        if "solve" in kept:
+            return dataclasses.replace(kept["solve"], reused=True)
         # Only the contact fields and the displacement are read: no stresses.
         coarse, kernel, sequencing = _contact_solve(coarse_case, coarse_problem, get_method(SEQUENCING_METHOD),
                                                     _serial_backend(coarse_case), lambda message: None, factor)
         displacement = coarse.displacement(kernel.displacement)
-        return CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
-                           coarse_problem.mesh, displacement)
+        kept["solve"] = CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
+                                    coarse_problem.mesh, displacement)
+        return kept["solve"]
 
     def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
-        coarse_problem = prepare(coarse_case, refine=refine)
-        return coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
+        if "problem" not in kept:
+            coarse_problem = prepare(coarse_case, refine=refine)
+            kept["problem"] = coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
+        return kept["problem"]
 
     def correct(coarse: CoarseSolve, active: np.ndarray) -> tuple[np.ndarray, dict]:
         reduced, c = fine()
@@ -482,6 +502,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
         "coarse_factorizations": coarse_result.kernel.factorizations,
         "predicted_active": int(active.sum()),
         "levels": 1 + coarse_result.sequencing.get("levels", 0),
+        **({"coarse_reused": True} if getattr(coarse_result, "reused", False) else {}),
         **corrected,
         "seconds": time.perf_counter() - started,
     }

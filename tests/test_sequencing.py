@@ -363,3 +363,33 @@ def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces
     with pytest.raises(SolverError, match="the fine system could not be made"):
         solve_case(case, problem=problem)
     assert coarse_systems and max(coarse_systems) < problem.n_unknowns / 3
+
+
+def test_compare_meshes_and_solves_the_coarse_levels_once_for_both_methods(monkeypatch):
+    """Both methods' active sets are predicted from the same coarse levels (solved with the
+    positive method whatever the fine one): compare meshes and solves them once, and the
+    second method's solve is the one it would be on its own."""
+    import contactfem.solve as solve_module
+    from contactfem.studies import compare_methods
+
+    case = rough_polygon_case(1000)
+    prepared = []
+    original = solve_module.prepare
+
+    def counting_prepare(*args, **kwargs):
+        problem = original(*args, **kwargs)
+        prepared.append(problem.n_unknowns)
+        return problem
+
+    monkeypatch.setattr(solve_module, "prepare", counting_prepare)
+    _, outcomes = compare_methods(case)
+    positive, standard = outcomes["positive"], outcomes["standard"]
+    levels = positive.sequencing["levels"]
+    assert levels >= 1 and standard.sequencing["levels"] == levels
+    assert "coarse_reused" not in positive.sequencing and standard.sequencing["coarse_reused"] is True
+    assert len(prepared) == levels  # each coarse level once (compare meshes the fine one itself)
+    alone = solve_module.solve_case(case, method="standard", problem=positive.problem)
+    assert "coarse_reused" not in alone.sequencing
+    np.testing.assert_array_equal(alone.kernel.active, standard.kernel.active)
+    u, w = alone.solution.displacement, standard.solution.displacement
+    assert np.abs(u - w).max() <= 1e-10 * np.abs(u).max()
