@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
@@ -54,6 +54,12 @@ Progress = Callable[[str], None]
 #: The method mesh sequencing solves its coarse levels with: its λ ≥ 0 is the pressure
 #: the fine indicator needs, whichever method the fine level uses.
 SEQUENCING_METHOD = "positive"
+#: Unknowns from which a level's kernel system, solver and analysis are made in a worker
+#: thread beside its coarser levels (see :func:`_contact_solve`). Below, the analysis is a
+#: few milliseconds and the two threads' Python work only takes turns: on a rough
+#: profile's graded mesh the worker cost 4-15% at 7 000 unknowns, nothing at 27 000, and
+#: saved 3-7% at 52 000-105 000 and 18% at 209 000 (in alternation in one process).
+BESIDE_COARSER_FROM = 20_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,10 +179,11 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
     what the prediction cost: what a fine solve and a coarse level share."""
     tolerance = case.solver.tolerance
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    with ThreadPoolExecutor(max_workers=1) if problem.n_unknowns >= BESIDE_COARSER_FROM else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
         # solver and that solver's ordering and symbolic analysis are made while the
-        # coarser levels mesh and solve: on a rough profile's graded mesh they cost about
+        # coarser levels mesh and solve (from BESIDE_COARSER_FROM unknowns; in place
+        # below, first): on a rough profile's graded mesh they cost about
         # one linear solve (0.3 s at 208 000 unknowns), the analysis most of it, outside the
         # interpreter's lock (the analysis alone in the worker, the system and solver made
         # here first, took 10-20% longer overall at 105 000 and 418 000 unknowns).
@@ -213,6 +220,26 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         linear=linear,
     )
     return reduced, kernel, sequencing
+
+
+class _InPlace:
+    """An executor that runs each task when it is submitted (what a small level's system,
+    solver and analysis need: see :data:`BESIDE_COARSER_FROM`)."""
+
+    def __enter__(self) -> "_InPlace":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        return None
+
+    @staticmethod
+    def submit(task: Callable, *args) -> Future:
+        done: Future = Future()
+        try:
+            done.set_result(task(*args))
+        except BaseException as error:  # the caller's result() raises it, as from a thread
+            done.set_exception(error)
+        return done
 
 
 def _analysed_solver(system: ContactSystem, backend: str, tolerance: float) -> ActiveSetSolver:

@@ -100,13 +100,18 @@ def test_the_cost_model_pays_for_a_quarter_but_not_for_half_the_unknowns():
     assert not coarse_level_pays(10_000, 0)
 
 
-def test_a_sequenced_rough_solve_has_the_answer_of_a_cold_start():
+@pytest.mark.parametrize("beside_from", [0, 10**9])
+def test_a_sequenced_rough_solve_has_the_answer_of_a_cold_start(monkeypatch, beside_from):
     """2 000 segments (about 15 000 unknowns, a few hundred patches): the pipeline predicts
     from a decimated coarse level and converges to the cold start's active set and answer,
-    certified."""
+    certified, whether each level's system and analysis are made beside its coarser levels
+    (a worker thread) or first."""
+    import contactfem.solve as solve_module
     from contactfem.kernel import Status, solve_contact
     from contactfem.methods import get_method
     from contactfem.solve import prepare, solve_case
+
+    monkeypatch.setattr(solve_module, "BESIDE_COARSER_FROM", beside_from)
 
     case = rough_polygon_case(2000)
     problem = prepare(case)
@@ -339,13 +344,17 @@ def test_overlap_counts_a_gap_below_round_off_as_touching():
     np.testing.assert_array_equal(overlapped(np.array([-1e-3, -2e-3, 1e-3]), 1e-10), [True, True, False])
 
 
-def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch):
+@pytest.mark.parametrize("beside_from", [0, 10**9])
+def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch, beside_from):
     """The fine level's kernel system, solver and analysis are made in a worker thread while
-    the coarse levels mesh and solve: the coarse levels still run, and an error in making
-    the fine system reaches the caller as itself."""
+    the coarse levels mesh and solve (or first, in place, on a small mesh): the coarse
+    levels still run, and an error in making the fine system reaches the caller as itself."""
+    import contactfem.solve as solve_module
     from contactfem.discretize import DiscreteProblem
     from contactfem.errors import SolverError
     from contactfem.solve import prepare, solve_case
+
+    monkeypatch.setattr(solve_module, "BESIDE_COARSER_FROM", beside_from)
 
     case = rough_polygon_case(1000)
     problem = prepare(case)
