@@ -55,10 +55,12 @@ Progress = Callable[[str], None]
 #: the fine indicator needs, whichever method the fine level uses.
 SEQUENCING_METHOD = "positive"
 #: Unknowns from which a level's kernel system, solver and analysis are made in a worker
-#: thread beside its coarser levels (see :func:`_contact_solve`). Below, the analysis is a
-#: few milliseconds and the two threads' Python work only takes turns: on a rough
-#: profile's graded mesh the worker cost 4-15% at 7 000 unknowns, nothing at 27 000, and
-#: saved 3-7% at 52 000-105 000 and 18% at 209 000 (in alternation in one process).
+#: thread beside its coarser levels (see :func:`_contact_solve`). Below, the analysis (the
+#: part that runs outside the interpreter's lock) takes a few milliseconds, so there is
+#: little to gain and the two threads' Python work only takes turns: on a rough profile's
+#: graded mesh the worker saved 18% at 209 000 unknowns and 3-7% at 52 000-105 000, and at
+#: 7 000-27 000 its effect was within this machine's noise (from 15% slower to 10% faster,
+#: in alternation in one process, the fastest of 5-10 runs).
 BESIDE_COARSER_FROM = 20_000
 
 
