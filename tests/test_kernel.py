@@ -469,14 +469,17 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh():
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
-def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypatch):
+@pytest.mark.parametrize("route", ["library", "interface"])
+def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypatch, route):
     """With CHOLMOD through cvxopt the Schur complement over the changed nodes comes from
     sparse forward columns W = L⁻¹ P C (Cᵀ K⁻¹ C = Wᵀ D⁻¹ W) and u from one full solve: on
     a rough base, a set that releases some nodes of the reference and adds others gives
     the displacement and reactions of factorising that set itself, to round-off, while each
-    column holds a small fraction of the unknowns."""
+    column holds a small fraction of the unknowns. Both of cvxopt's routes: the bundled
+    library called directly (W alone), and cvxopt's interface (W and D⁻¹ W kept apart)."""
     from test_sequencing import rough_polygon_case
 
+    import contactfem.linalg as linalg
     from contactfem.kernel import ActiveSetSolver
     from contactfem.linalg import backend_provider
     from contactfem.methods import get_method
@@ -484,6 +487,10 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
 
     if backend_provider("cholmod") != "cvxopt":
         pytest.skip("the forward columns are cvxopt's")
+    if route == "interface":
+        monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
+    elif linalg._cholmod_library() is None:
+        pytest.skip("no CHOLMOD library bundled with cvxopt here")
     import contactfem.kernel as kernel
 
     monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # a small mesh, to keep the test quick
@@ -523,6 +530,7 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     expected = linear.forward_store.toarray().T @ linear.scaled_store.toarray()
     assert np.abs(stored - expected).max() < 1e-12 * np.abs(expected).max()
     assert np.array_equal(stored, stored.T)
+    assert (linear.scaled_store is linear.forward_store) == (route == "library")
 
 
 @pytest.mark.parametrize("scaled", [False, True])
