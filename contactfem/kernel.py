@@ -862,8 +862,11 @@ class ActiveSetSolver:
             return len(changed) > self.max_changes
         missing = int((self.slot_of[changed] < 0).sum())
         stored = self.column_count + missing
-        if stored * 8 * (2 * stored if self.forward else self.stiffness.shape[0]) > COLUMN_BYTES:
-            return True  # the full columns, or the forward ones' Schur blocks (grown 2x)
+        # The full columns, or the forward ones' Schur blocks (their store grows to twice
+        # the columns each way).
+        held = 8 * (2 * stored) ** 2 if self.forward else 8 * stored * self.stiffness.shape[0]
+        if held > COLUMN_BYTES:
+            return True
         k = len(changed)
         if self.forward and callable(getattr(self.factor, "forward_seconds", None)):
             # The backend knows its routes: a forward column costs 0.004 of a full solve on a

@@ -587,3 +587,39 @@ def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch
     assert linear.forward is (switch == 0)
     assert result.status is Status.CONVERGED
     np.testing.assert_array_equal(result.active, reference.active)
+
+
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
+@pytest.mark.parametrize("forward", [True, False])
+def test_columns_past_the_memory_bound_are_not_kept(monkeypatch, forward):
+    """A Schur update whose kept columns (full ones: 8 n bytes each) or kept Schur blocks
+    (forward ones: their store grows to (2k)² entries) would pass COLUMN_BYTES factorises
+    the set instead, however cheap the cost model finds the columns, with the same answer."""
+    from test_sequencing import rough_polygon_case
+
+    import contactfem.kernel as kernel
+    from contactfem.kernel import ActiveSetSolver
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
+    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
+    contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
+    reference = solve_contact(contact, backend="cholmod").active.copy()
+    target = reference.copy()
+    flip = np.random.default_rng(6).choice(len(target), 24, replace=False)
+    target[flip] = ~target[flip]
+    n = contact.stiffness.shape[0]
+    held = 8 * (2 * 24) ** 2 if forward else 8 * 24 * n
+    for bound, factorizations, columns in ((held, 1, 24), (held - 1, 2, 0)):
+        monkeypatch.setattr(kernel, "COLUMN_BYTES", bound)
+        linear = ActiveSetSolver(contact, "cholmod")
+        linear.solve(reference)
+        if forward and not linear.forward:
+            pytest.skip("this CHOLMOD has no forward columns")
+        assert linear.forward == forward
+        linear.column_seconds, linear.refactorization_seconds = 1e-9, 1e3  # columns look free
+        u, _ = linear.solve(target)
+        assert (linear.factorizations, linear.column_solves) == (factorizations, columns)
+        fresh_u, _ = ActiveSetSolver(contact, "cholmod").solve(target)
+        assert np.abs(u - fresh_u).max() < 1e-10 * np.abs(fresh_u).max()
