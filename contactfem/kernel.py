@@ -1180,11 +1180,13 @@ class ActiveSetSolver:
         unknowns), K_rr and b_r = F_r − K_r· (fixed values, the released ones now free)."""
         n, r = self.stiffness.shape[0], len(dofs_r)
         owner, column, value = self._row_entries(dofs_r)
-        slot = np.full(n, -1)
-        slot[dofs_r] = np.arange(r)
-        among = slot[column] >= 0
+        # Each entry's column among the released normals, if it is one (a search among the
+        # r of them, not a map over all n unknowns: this runs at every step).
+        order = np.argsort(dofs_r)
+        at = np.minimum(np.searchsorted(dofs_r[order], column), r - 1)
+        among = dofs_r[order][at] == column
         k_rr = np.zeros((r, r))
-        k_rr[owner[among], slot[column[among]]] = value[among]
+        k_rr[owner[among], order[at[among]]] = value[among]
         # The released normals' own values are unknowns now: only the others' enter b_r.
         known = np.where(among, 0.0, value * fixed_values[column])
         b_r = load[dofs_r] - np.bincount(owner, weights=known, minlength=r)

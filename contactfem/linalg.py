@@ -95,17 +95,25 @@ def _symmetric_csc(matrix: sp.spmatrix) -> sp.csc_matrix:
 class _Cholmod:
     """CHOLMOD through scikit-sparse (which links the system's SuiteSparse and BLAS)."""
 
+    @staticmethod
+    def analyse(matrix: sp.spmatrix, name: str) -> object:
+        """The ordering and symbolic analysis of ``matrix``'s pattern: the factor object a
+        factorisation fills."""
+        from sksparse.cholmod import analyze
+
+        # Supernodal always: for small factors CHOLMOD's default picks a simplicial LDL^T,
+        # which accepts a negative pivot without a word.
+        return analyze(_symmetric_csc(matrix), ordering_method="amd", mode="supernodal")
+
     def __init__(self, matrix: sp.spmatrix, name: str, analysis: object | None = None) -> None:
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze
+        from sksparse.cholmod import CholmodNotPositiveDefiniteError
 
         csc = _symmetric_csc(matrix)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
                 started = time.perf_counter()
-                # Supernodal always: for small factors CHOLMOD's default picks a simplicial
-                # LDL^T, which accepts a negative pivot without a word.
-                factor = analyze(csc, ordering_method="amd", mode="supernodal") if analysis is None else analysis
+                factor = self.analyse(csc, name) if analysis is None else analysis
                 self.analysis_seconds = time.perf_counter() - started
                 factor.cholesky_inplace(csc)
             except CholmodNotPositiveDefiniteError as error:
@@ -754,26 +762,31 @@ class _LibraryCholmod:
         return forward, forward
 
 
-def _analyse_ahead(backend: str, matrix: sp.spmatrix, name: str) -> object | None:
-    """The analysis of ``matrix``'s pattern that ``backend``'s factorisation would reuse, or
-    None where it reuses none (or makes it only with the numbers)."""
-    if backend != "cholmod":
-        return None
-    if _installed("cvxopt"):
-        if _cholmod_library() is not None and matrix.nnz < 2**31:
-            return _LibraryCholmod.analyse(matrix, name)
-        return None  # cvxopt's interface analyses with its own copy of the matrix
-    from sksparse.cholmod import analyze
-
-    return analyze(_symmetric_csc(matrix), ordering_method="amd", mode="supernodal")
+def _library_serves(matrix: sp.spmatrix) -> bool:
+    """Whether cvxopt's bundled CHOLMOD is called directly for ``matrix`` (found here, and
+    the matrix within its int interface)."""
+    return _cholmod_library() is not None and matrix.nnz < 2**31
 
 
 def _cvxopt_cholmod(matrix: sp.spmatrix, name: str, analysis: object | None = None) -> Factorization:
     """CHOLMOD from cvxopt's wheel: called directly where its bundled library is found,
     through cvxopt's interface otherwise."""
-    if _cholmod_library() is not None and matrix.nnz < 2**31:  # the library's int interface
+    if _library_serves(matrix):
         return _LibraryCholmod(matrix, name, analysis if isinstance(analysis, _LibraryAnalysis) else None)
     return _CvxoptCholmod(matrix, name, analysis if isinstance(analysis, _CvxoptAnalysis) else None)
+
+
+def _cvxopt_cholmod_analysis(matrix: sp.spmatrix, name: str) -> _LibraryAnalysis | None:
+    """The bundled library's analysis, where :func:`_cvxopt_cholmod` calls the library; None
+    through cvxopt's interface, which analyses with its own copy of the matrix."""
+    return _LibraryCholmod.analyse(matrix, name) if _library_serves(matrix) else None
+
+
+#: What each factorisation that reuses an analysis can make of it ahead (Factorizer.analyse).
+_ANALYSES: dict[Callable[..., Factorization], Callable[[sp.spmatrix, str], object | None]] = {
+    _cvxopt_cholmod: _cvxopt_cholmod_analysis,
+    _Cholmod: _Cholmod.analyse,
+}
 
 
 class _Pardiso:
@@ -921,7 +934,8 @@ class Factorizer:
         backend that reuses no analysis does nothing): the first then costs only its numbers.
         May run in another thread than this Factorizer's factorisations, not during one."""
         started = time.perf_counter()
-        analysis = _analyse_ahead(self.backend, matrix, self.name)
+        analyse = _ANALYSES.get(_implementation(self.backend))
+        analysis = analyse(matrix, self.name) if analyse is not None else None
         if analysis is not None:
             self._analysis, self._pattern = analysis, (matrix.shape[0], matrix.nnz)
             self.ahead_seconds = time.perf_counter() - started

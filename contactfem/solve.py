@@ -189,17 +189,16 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         # one linear solve (0.3 s at 208 000 unknowns), the analysis most of it, outside the
         # interpreter's lock (the analysis alone in the worker, the system and solver made
         # here first, took 10-20% longer overall at 105 000 and 418 000 unknowns).
-        reduced_soon = pool.submit(problem.contact_system, contact_method)
-        solver_soon = pool.submit(lambda: _analysed_solver(reduced_soon.result().system, backend, tolerance))
-
         def fine() -> tuple[ReducedSystem, float]:
-            reduced = reduced_soon.result()
+            reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
+        fine_soon = pool.submit(fine)
+        solver_soon = pool.submit(lambda: _analysed_solver(fine_soon.result()[0].system, backend, tolerance))
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
-            lambda: _predict_from_coarser(case, problem, fine, say, load_factor, coarse_levels))
-        reduced, c = fine()
+            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, load_factor, coarse_levels))
+        reduced, c = fine_soon.result()
         linear = solver_soon.result()
     numbers = itertools.count(1)
 
@@ -531,7 +530,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
         "coarse_factorizations": coarse_result.kernel.factorizations,
         "predicted_active": int(active.sum()),
         "levels": 1 + coarse_result.sequencing.get("levels", 0),
-        **({"coarse_reused": True} if getattr(coarse_result, "reused", False) else {}),
+        **({"coarse_reused": True} if coarse_result.reused else {}),
         **corrected,
         "seconds": time.perf_counter() - started,
     }
