@@ -303,15 +303,15 @@ def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.
     return layer
 
 
-def layer_depth(mesh: Mesh, samples: int = 20_000) -> float:
+def layer_depth(mesh: Mesh, samples: int = 5_000) -> float:
     """How deep the correcting layer reaches: :data:`LAYER_DEPTH` of the fine mesh's typical
     (median) triangle diameters, that is :data:`LAYER_DEPTH` / :data:`COARSENING` of the
     coarse level's, beyond which the coarse solution is taken as right. The median is
     taken over an even sample of at most ``samples`` triangles."""
     step = max(1, mesh.n_triangles // samples)
-    corners = mesh.points[mesh.triangles[::step]]
-    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
-    return LAYER_DEPTH * float(np.median(sides.max(axis=1)))
+    a, b, c = (mesh.points[mesh.triangles[::step, k]] for k in range(3))
+    longest = np.maximum.reduce([((a - b) ** 2).sum(axis=1), ((b - c) ** 2).sum(axis=1), ((c - a) ** 2).sum(axis=1)])
+    return LAYER_DEPTH * float(np.sqrt(np.median(longest)))
 
 
 def layer_pays(fine_unknowns: int, layer_unknowns: int, patches: int) -> bool:

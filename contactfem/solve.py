@@ -448,11 +448,16 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     points, boundary = problem.mesh.points, problem.mesh.points[problem.contact.nodes]
     depth = layer_depth(problem.mesh)
     # The layer's share from an even sample of the nodes first: on a mesh graded onto ΓC
-    # it is most of the mesh, and finding every node of it would be wasted.
-    step = max(1, len(points) // LAYER_SAMPLES)
-    share = float(contact_layer(points[::step], boundary, depth).mean())
-    if not layer_pays(fine_unknowns, int(0.9 * share * fine_unknowns), patches):
-        return active, {}
+    # it is most of the mesh, and finding every node of it would be wasted. Near an even
+    # sample of the contact nodes is within the layer too: that lower bound refuses such a
+    # mesh without a search among all of them (11-22 ms from 52 000 to 209 000 unknowns
+    # on a rough profile's graded mesh, 95% of whose nodes are in the layer).
+    sample = points[::max(1, len(points) // LAYER_SAMPLES)]
+    few = boundary[::max(1, len(boundary) // LAYER_SAMPLES)]
+    for nearby in (few, boundary) if len(few) < len(boundary) else (boundary,):
+        share = float(contact_layer(sample, nearby, depth).mean())
+        if not layer_pays(fine_unknowns, int(0.9 * share * fine_unknowns), patches):
+            return active, {}
     nodes = contact_layer(points, boundary, depth)
     keep = np.repeat(nodes, 2)
     if not layer_pays(fine_unknowns, int(keep.sum()), patches):

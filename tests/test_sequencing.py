@@ -197,6 +197,43 @@ def test_the_layer_corrects_a_fragmented_prediction_at_asperity_scale(monkeypatc
     assert 0 < record["layer_unknowns"] < problem.n_unknowns
 
 
+def test_a_layer_holding_most_of_a_graded_mesh_is_refused_from_a_sample_of_the_contact_nodes(monkeypatch):
+    """On a mesh graded onto a rough profile nearly every node is within the layer's depth
+    of ΓC: the nodes near every few contact nodes already exceed the layer's share, so the
+    prediction is kept without a search among all contact nodes (a lower bound: a node near
+    some of them is near one of them)."""
+    import contactfem.sequencing as sequencing
+    import contactfem.solve as solve
+    from contactfem.methods import get_method
+    from contactfem.solve import CoarseSolve, correct_in_layer, prepare
+
+    monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
+    monkeypatch.setattr(solve, "LAYER_SAMPLES", 500)
+    case = rough_polygon_case(2000)
+    case = replace(case, mesh=replace(case.mesh, size=0.1, contact_size=1.0 / 2000))
+    problem = prepare(case)
+    points, boundary = problem.mesh.points, problem.mesh.points[problem.contact.nodes]
+    depth = sequencing.layer_depth(problem.mesh)
+    assert sequencing.contact_layer(points, boundary, depth).mean() > 2 * sequencing.LAYER_MAX_FRACTION
+    searched = []
+
+    def recording(points, nearby, depth):
+        searched.append(len(nearby))
+        return sequencing.contact_layer(points, nearby, depth)
+
+    monkeypatch.setattr(solve, "contact_layer", recording)
+    predicted = np.zeros(len(boundary), dtype=bool)
+    predicted[::4] = True
+    level = CoarseSolve(None, None, {}, problem.mesh, np.zeros((problem.mesh.n_points, 2)))
+    kept, record = correct_in_layer(problem.contact_system(get_method("positive")), level, predicted, 1.0, 1e-10,
+                                    50, "auto")
+    assert kept is predicted and record == {}
+    assert searched == [len(boundary[::len(boundary) // 500])]  # one search, among every fourth
+    sample = points[::7]
+    few = sequencing.contact_layer(sample, boundary[::4], depth)
+    assert not (few & ~sequencing.contact_layer(sample, boundary, depth)).any()
+
+
 def test_the_layer_pays_only_on_a_fragmented_zone_of_a_large_mesh_with_an_interior():
     from contactfem.sequencing import layer_pays
 
