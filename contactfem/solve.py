@@ -55,12 +55,14 @@ Progress = Callable[[str], None]
 #: the fine indicator needs, whichever method the fine level uses.
 SEQUENCING_METHOD = "positive"
 #: Unknowns from which a level's kernel system, solver and analysis are made in a worker
-#: thread beside its coarser levels (see :func:`_contact_solve`). Below, the analysis (the
-#: part that runs outside the interpreter's lock) takes a few milliseconds, so there is
-#: little to gain and the two threads' Python work only takes turns: on a rough profile's
-#: graded mesh the worker saved 18% at 209 000 unknowns and 3-7% at 52 000-105 000, and at
-#: 7 000-27 000 its effect was within this machine's noise (from 15% slower to 10% faster,
-#: in alternation in one process, the fastest of 5-10 runs).
+#: thread beside its coarser levels (see :func:`_contact_solve`). Below, the system and
+#: solver (a few milliseconds of Python, which would only take turns with the coarse
+#: levels' own) are made first and only the analysis, which runs outside the interpreter's
+#: lock, beside them. On a rough profile's graded mesh the whole in the worker saved 18%
+#: at 209 000 unknowns and 3-7% at 52 000-105 000, and at 7 000-27 000 its effect was
+#: within this machine's noise (from 15% slower to 10% faster, in alternation in one
+#: process, the fastest of 5-10 runs); the analysis alone beside the coarse level saved
+#: 4-7% at 7 000-13 000 (the fastest and the median of 30 runs in alternation).
 BESIDE_COARSER_FROM = 20_000
 
 
@@ -181,11 +183,13 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
     what the prediction cost: what a fine solve and a coarse level share."""
     tolerance = case.solver.tolerance
-    with ThreadPoolExecutor(max_workers=1) if problem.n_unknowns >= BESIDE_COARSER_FROM else _InPlace() as pool:
+    # Without a coarse level there is nothing to overlap with.
+    with ThreadPoolExecutor(max_workers=1) if worth_sequencing(problem.n_unknowns) else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
         # solver and that solver's ordering and symbolic analysis are made while the
-        # coarser levels mesh and solve (from BESIDE_COARSER_FROM unknowns; in place
-        # below, first): on a rough profile's graded mesh they cost about
+        # coarser levels mesh and solve (from BESIDE_COARSER_FROM unknowns; below, the
+        # system and solver here first and only the analysis beside): on a rough
+        # profile's graded mesh they cost about
         # one linear solve (0.3 s at 208 000 unknowns), the analysis most of it, outside the
         # interpreter's lock (the analysis alone in the worker, the system and solver made
         # here first, took 10-20% longer overall at 105 000 and 418 000 unknowns).
@@ -193,8 +197,13 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
-        fine_soon = pool.submit(fine)
-        solver_soon = pool.submit(lambda: _analysed_solver(fine_soon.result()[0].system, backend, tolerance))
+        if problem.n_unknowns >= BESIDE_COARSER_FROM:
+            fine_soon = pool.submit(fine)
+            solver_soon = pool.submit(lambda: _analysed_solver(fine_soon.result()[0].system, backend, tolerance))
+        else:
+            fine_soon = _InPlace.submit(fine)
+            solver = ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance)
+            solver_soon = pool.submit(lambda: (solver.analyse(), solver)[1])
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
             lambda: _predict_from_coarser(case, problem, fine_soon.result, say, load_factor, coarse_levels))

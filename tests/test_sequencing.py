@@ -13,6 +13,7 @@ from conftest import case_from, square_case_dict
 from contactfem.case import PolygonGeometry
 from contactfem.mesh.polygon import Loop, polygon_problems
 from contactfem.sequencing import (
+    SEQUENCING_THRESHOLD,
     coarse_level_pays,
     coarser,
     decimated_loop,
@@ -384,8 +385,9 @@ def test_overlap_counts_a_gap_below_round_off_as_touching():
 @pytest.mark.parametrize("beside_from", [0, 10**9])
 def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch, beside_from):
     """The fine level's kernel system, solver and analysis are made in a worker thread while
-    the coarse levels mesh and solve (or first, in place, on a small mesh): the coarse
-    levels still run, and an error in making the fine system reaches the caller as itself."""
+    the coarse levels mesh and solve (or the system first, in place, on a small mesh): an
+    error in making the fine system reaches the caller as itself, after the coarse levels
+    that ran beside it or before any."""
     import contactfem.solve as solve_module
     from contactfem.discretize import DiscreteProblem
     from contactfem.errors import SolverError
@@ -408,7 +410,41 @@ def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces
     monkeypatch.setattr(DiscreteProblem, "contact_system", contact_system)
     with pytest.raises(SolverError, match="the fine system could not be made"):
         solve_case(case, problem=problem)
-    assert coarse_systems and max(coarse_systems) < problem.n_unknowns / 3
+    if beside_from == 0:
+        assert coarse_systems and max(coarse_systems) < problem.n_unknowns / 3
+    else:
+        assert coarse_systems == []
+
+
+def test_below_the_worker_threshold_only_the_analysis_runs_beside_the_coarse_level(monkeypatch):
+    """On a mesh with a coarse level but under BESIDE_COARSER_FROM unknowns, the fine
+    solver's ordering and symbolic analysis (outside the interpreter's lock) run in another
+    thread while the coarse level solves, and the coarse level's own (no coarser level
+    below it) in the calling thread; the answer is the cold start's."""
+    import threading
+
+    from contactfem.kernel import ActiveSetSolver, Status, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import BESIDE_COARSER_FROM, prepare, solve_case
+
+    case = rough_polygon_case(1000)
+    problem = prepare(case)
+    assert SEQUENCING_THRESHOLD <= problem.n_unknowns < BESIDE_COARSER_FROM
+    original = ActiveSetSolver.analyse
+    threads = {}
+
+    def analyse(self):
+        threads[self.stiffness.shape[0]] = threading.current_thread() is threading.main_thread()
+        return original(self)
+
+    monkeypatch.setattr(ActiveSetSolver, "analyse", analyse)
+    sequenced = solve_case(case, problem=problem)
+    assert sequenced.sequencing["levels"] == 1
+    fine_size = max(threads)
+    assert threads == {fine_size: False, min(threads): True} and min(threads) < fine_size / 3
+    cold = solve_contact(problem.contact_system(get_method("positive")).system)
+    assert sequenced.kernel.status is cold.status is Status.CONVERGED
+    np.testing.assert_array_equal(sequenced.kernel.active, cold.active)
 
 
 def test_compare_meshes_and_solves_the_coarse_levels_once_for_both_methods(monkeypatch):
