@@ -77,12 +77,23 @@ COLUMN_BYTES = 2**29
 #: took 0.135 s that way against 0.059 s with full columns).
 FORWARD_COLUMNS_FROM = 100_000
 #: The same from a simplicial factor (CHOLMOD's choice on meshes with little fill, such as
-#: one graded onto a rough profile), whose pattern solves need no conversion: on the graded
+#: one graded onto a rough profile), whose pattern solves need no conversion, as long as
+#: its elimination tree's paths are short (see :data:`FORWARD_PATH_SHARE`): on the graded
 #: profile at 27 000-52 000 unknowns the contact solve took 0.82x the time this way (one
-#: fine factorisation instead of two or three). The shipped smooth cases of 16 000-68 000
-#: unknowns, whose factors are supernodal, stay with full columns (a plate with a hole at
-#: 42 000 took 1.07x the time with forward ones: two changed nodes, one more full solve).
-SIMPLICIAL_FORWARD_COLUMNS_FROM = 20_000
+#: fine factorisation instead of two or three), at 7 000-13 000 0.89x. The shipped smooth
+#: cases of 16 000-68 000 unknowns, whose factors are supernodal, stay with full columns
+#: (a plate with a hole at 42 000 took 1.07x the time with forward ones: two changed
+#: nodes, one more full solve).
+SIMPLICIAL_FORWARD_COLUMNS_FROM = 5_000
+#: The largest share of the unknowns a forward column may touch, on average over a sample
+#: of :data:`PATH_SAMPLES` contact normals, for a simplicial factor below
+#: :data:`FORWARD_COLUMNS_FROM` unknowns to take forward columns: the column of e_j is the
+#: elimination tree's path from j, 3% of the unknowns on a rough profile's graded mesh of
+#: 7 000, 0.7% at 52 000, but 42% on a wavy strip of 5 120 (a long thin mesh, its tree
+#: nearly a chain), where forward columns and their Schur blocks took twice the time of
+#: full ones.
+FORWARD_PATH_SHARE = 0.1
+PATH_SAMPLES = 8
 
 
 def roundoff_bound(terms: int) -> float:
@@ -758,6 +769,8 @@ class ActiveSetSolver:
             backend, name="the stiffness matrix with its supports and active contact normals fixed")
         #: Measured seconds of one column solve within a block (None before any solve).
         self.column_seconds: float | None = None
+        #: The share of the unknowns a forward column touches (None until measured).
+        self.path_share: float | None = None
         self.reference: np.ndarray | None = None
         self.factor = None
         self.checks: list[FactorCheck] = []
@@ -990,6 +1003,8 @@ class ActiveSetSolver:
                         else FORWARD_COLUMNS_FROM)
         self.forward = (callable(getattr(self.factor, "forward_sparse", None))
                         and k.shape[0] >= forward_from and not self.scalable)
+        if self.forward and k.shape[0] < FORWARD_COLUMNS_FROM:
+            self.forward = self._short_paths(active)
         if self.column_seconds is None:
             self.column_seconds = self.solve_seconds * (0.25 if self.forward else 1.0)
         if self.scalable:
@@ -1039,6 +1054,21 @@ class ActiveSetSolver:
             data[entries[(rows == columns) & fixed[rows]]] = 1.0
         self._masked_fixed = fixed.copy()
         return self._masked_matrix
+
+    def _short_paths(self, active: np.ndarray) -> bool:
+        """Whether the forward columns of this pattern touch at most :data:`FORWARD_PATH_SHARE`
+        of the unknowns, measured once from the columns of e_j at an even sample of the
+        free contact normals (a fixed one's column is e_j itself)."""
+        if self.path_share is None:
+            free = self.normal_dofs[~active]
+            if len(free) == 0:
+                return False  # nothing to measure this time
+            sample = np.unique(free[np.linspace(0, len(free) - 1, PATH_SAMPLES).astype(np.int64)])
+            n = self.stiffness.shape[0]
+            rhs = sp.csc_matrix((np.ones(len(sample)), (sample, np.arange(len(sample)))), shape=(n, len(sample)))
+            forward, _ = self.factor.forward_sparse(rhs)
+            self.path_share = forward.nnz / len(sample) / n
+        return self.path_share <= FORWARD_PATH_SHARE
 
     def _entries_of(self, dofs: np.ndarray) -> np.ndarray | None:
         """Positions in the pattern of every entry in the rows and columns of ``dofs`` (the

@@ -590,6 +590,54 @@ def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
+def test_forward_columns_only_where_the_elimination_trees_paths_are_short():
+    """Below FORWARD_COLUMNS_FROM unknowns a simplicial factor takes forward columns only if
+    the column of e_j, the elimination tree's path from j, touches at most
+    FORWARD_PATH_SHARE of the unknowns, measured at a few free contact normals: a block on
+    a rough base (a 2D mesh: short paths) takes them, a long strip of 800 x 4 cells (its
+    tree nearly a chain) keeps full columns. A sampled column touches more than its own
+    unknown and fewer than all, and the block's Schur update gives a fresh factorisation's
+    answer."""
+    from conftest import case_from, square_case_dict
+    from test_sequencing import rough_polygon_case
+
+    import contactfem.kernel as kernel
+    from contactfem.kernel import ActiveSetSolver
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    strip = square_case_dict(8)
+    strip["geometry"]["rectangle"]["upper"] = [1, 1.0 / 200]
+    strip["mesh"]["divisions"] = [800, 4]
+    shares = {}
+    for name, case in (("block", rough_polygon_case(1000)), ("strip", case_from(strip))):
+        contact = prepare(case).contact_system(get_method("positive")).system
+        n = contact.stiffness.shape[0]
+        assert kernel.SIMPLICIAL_FORWARD_COLUMNS_FROM <= n < kernel.FORWARD_COLUMNS_FROM
+        reference = solve_contact(contact, backend="cholmod").active.copy()
+        target = reference.copy()
+        target[np.random.default_rng(7).choice(len(target), 6, replace=False)] ^= True
+        linear = ActiveSetSolver(contact, "cholmod")
+        linear.solve(reference)
+        if not callable(getattr(linear.factor, "forward_sparse", None)) or not linear.factor.simplicial:
+            pytest.skip("this CHOLMOD's factor is not a simplicial one with forward solves")
+        shares[name] = linear.path_share
+        assert linear.forward is (linear.path_share <= kernel.FORWARD_PATH_SHARE)
+        free = linear.normal_dofs[~reference]
+        probe = free[len(free) // 2]
+        column, _ = linear.factor.forward_sparse(
+            sp.csc_matrix((np.ones(1), ([probe], [0])), shape=(n, 1)))
+        assert 1 < column.nnz < n
+        if name == "block":  # the forward route's Schur update (full columns' are tested below)
+            linear.column_seconds, linear.refactorization_seconds = 1e-9, 1e3
+            u, _ = linear.solve(target)
+            assert linear.factorizations == 1 and linear.column_solves == 6
+            fresh_u, _ = ActiveSetSolver(contact, "cholmod").solve(target)
+            assert np.abs(u - fresh_u).max() < 1e-10 * np.abs(fresh_u).max()
+    assert shares["block"] < kernel.FORWARD_PATH_SHARE < shares["strip"]
+
+
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
 @pytest.mark.parametrize("forward", [True, False])
 def test_columns_past_the_memory_bound_are_not_kept(monkeypatch, forward):
     """A Schur update whose kept columns (full ones: 8 n bytes each) or kept Schur blocks
