@@ -280,6 +280,30 @@ def test_triangulate_l_shape():
     assert edge_lengths(mesh, mesh.boundary_edges).max() <= h * (1 + 1e-12)
 
 
+def test_a_triangulated_domain_builds_its_edge_topology_once(monkeypatch):
+    """The mesh keeps the topology its boundary was oriented from (points projected onto a
+    hole's circle afterwards): it is the one Topology.from_triangles builds for its
+    triangles, and no stage builds it again."""
+    from contactfem.mesh.topology import Topology
+
+    builds = []
+    original = Topology.from_triangles.__func__
+
+    def counting(cls, triangles, n_points):
+        builds.append(len(triangles))
+        return original(cls, triangles, n_points)
+
+    monkeypatch.setattr(Topology, "from_triangles", classmethod(counting))
+    mesh = triangulate_domain(square(), [circle_loop((0.3, -0.2), 1.0, "hole")], max_edge=0.2)
+    check_mesh(mesh)
+    assert builds == [mesh.n_triangles]
+    fresh = original(Topology, mesh.triangles, mesh.n_points)
+    np.testing.assert_array_equal(mesh.topology.edges, fresh.edges)
+    np.testing.assert_array_equal(mesh.topology.boundary, fresh.boundary)
+    np.testing.assert_array_equal(mesh.topology.half_edge_flipped, fresh.half_edge_flipped)
+    assert builds == [mesh.n_triangles]
+
+
 def test_triangulate_square_with_circular_hole():
     """Square minus disk: area error O(h^2) from the inscribed polygon; hole nodes exactly on the circle."""
     center, radius = (0.3, -0.2), 1.0

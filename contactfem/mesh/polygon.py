@@ -13,7 +13,8 @@ import triangle
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Circle, Mesh
-from contactfem.mesh.refine import _undirected_keys, boundary_edges
+from contactfem.mesh.refine import _undirected_keys, oriented_boundary
+from contactfem.mesh.topology import Topology
 
 __all__ = ["Arc", "Loop", "arc_sweep", "circle_loop", "first_crossing", "loop_outline", "loop_signed_area",
            "polygon_problems", "triangulate_domain"]
@@ -1034,8 +1035,9 @@ def triangulate_domain(
 
     # Orient the boundary from the triangles (body on the left) and give each edge
     # the part and curve of the input segment Triangle says it came from.
-    edges = boundary_edges(tri)
     n = len(out_points)
+    topology = Topology.from_triangles(tri, n)
+    edges = oriented_boundary(topology)
     seg_keys = _undirected_keys(out_segments, n)
     order = np.argsort(seg_keys)
     edge_keys = _undirected_keys(edges, n)
@@ -1061,7 +1063,7 @@ def triangulate_domain(
             "projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge"
         )
 
-    return Mesh(
+    mesh = Mesh(
         points=out_points,
         triangles=tri,
         boundary_edges=edges,
@@ -1070,3 +1072,7 @@ def triangulate_domain(
         edge_curves=edge_curves,
         curves=tuple(boundary.curves),
     )
+    # The topology the boundary was read from (the projection onto arcs moved points, not
+    # connections): Mesh.topology, a cached property, would build it again.
+    mesh.__dict__["topology"] = topology
+    return mesh

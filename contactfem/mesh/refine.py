@@ -117,7 +117,12 @@ def boundary_edges(triangles: np.ndarray) -> np.ndarray:
         # No topology for such triangles, but files are read with this before
         # check_mesh, which then names the degenerate triangle.
         return _decode(_single_codes(_sorted_edge_codes(tri, n)), n)
-    topology = Topology.from_triangles(tri, n)
+    return oriented_boundary(Topology.from_triangles(tri, n))
+
+
+def oriented_boundary(topology: Topology) -> np.ndarray:
+    """:func:`boundary_edges` of a triangulation whose topology is built: its boundary
+    edges oriented as in their triangle, sorted by undirected key."""
     edges = topology.edges[topology.boundary].astype(np.int64)
     flipped = topology.half_edge_flipped[topology.boundary_half_edges]
     edges[flipped] = edges[flipped][:, ::-1]
