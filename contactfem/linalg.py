@@ -494,6 +494,11 @@ class _LibraryCholmod:
 
     #: Right-hand sides per dense block of a sparse solve (n × 16 doubles at a time).
     SPARSE_BLOCK = 16
+    #: Columns from which a batch's time per column is recorded for its route: a smaller
+    #: batch measures the call's fixed cost more than its columns' (a probe of 8 columns at
+    #: 13 000 unknowns measured 0.15 ms a pattern column, twice a batch of 78's, and sent
+    #: that batch through the blocked route at 0.23 ms a column).
+    MEASURED_FROM = 16
     #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
     #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
     BLOCKED_COLUMN_SHARE = 0.3
@@ -638,10 +643,12 @@ class _LibraryCholmod:
         started = time.perf_counter()
         if blocked < pattern:
             result = self._blocked_forward(rhs)
-            self.analysis.blocked_column_seconds = (time.perf_counter() - started) / max(k, 1)
+            if k >= self.MEASURED_FROM:
+                self.analysis.blocked_column_seconds = (time.perf_counter() - started) / k
         else:
             result = self._pattern_forward(rhs)
-            self.analysis.pattern_column_seconds = (time.perf_counter() - started - self.setup_seconds) / max(k, 1)
+            if k >= self.MEASURED_FROM:
+                self.analysis.pattern_column_seconds = (time.perf_counter() - started - self.setup_seconds) / k
         return result
 
     def _route_seconds(self, k: int) -> tuple[float, float]:

@@ -199,9 +199,10 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
 @needs_library
 def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypatch):
     """A few columns go through the blocked solve while converting the (supernodal) factor
-    is expected to cost more than it saves; once the conversion and both routes are
-    measured, the choice follows the measured figures: many columns through the pattern
-    solve."""
+    is expected to cost more than it saves, and say nothing of a column's cost (fewer than
+    MEASURED_FROM: the call's fixed cost); a batch of MEASURED_FROM columns is measured.
+    Once the conversion and both routes are measured, the choice follows the measured
+    figures: many columns through the pattern solve."""
     monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=14)
     n = matrix.shape[0]
@@ -209,9 +210,15 @@ def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypat
     factor.solve(np.ones(n))  # the kernel always solves first: the per-column scale
     few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
     factor.forward_sparse(few)
-    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
+    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is None
     blocked, pattern = factor._route_seconds(2)
     assert blocked < pattern
+    factor.analysis.conversion_seconds = 1e3  # as if measured: a costly conversion
+    k = linalg._LibraryCholmod.MEASURED_FROM
+    batch = sp.csc_matrix((np.ones(k), (np.arange(0, 50 * k, 50), np.arange(k))), shape=(n, k))
+    factor.forward_sparse(batch)
+    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
+    assert factor.analysis.pattern_column_seconds is None
     factor.analysis.conversion_seconds = 0.0  # as if measured: a cheap conversion
     factor.analysis.blocked_column_seconds = 1.0
     factor.analysis.pattern_column_seconds = 1e-6
