@@ -383,3 +383,24 @@ def test_the_case_hash_covers_the_profile_file(tmp_path):
     assert load_case(tmp_path / "case.yaml").digest == first
     (tmp_path / "surface.csv").write_text("0,0\n0.5,2e-4\n1,0\n", encoding="utf-8")
     assert load_case(tmp_path / "case.yaml").digest != first
+
+
+def test_the_benchmark_times_contact_and_linear_solves_in_alternation(tmp_path, monkeypatch):
+    """benchmarks/rough.py's record for a small profile: as many linear solves as contact
+    solves (the first contact solve before them, the others between), between its floor
+    and its cap, the fastest of each and the ratio of their medians, and the solve's
+    Newton steps, factorisations and active nodes."""
+    import rough
+
+    monkeypatch.setattr(rough, "REPEAT_SECONDS", 1e9)  # as many as the cap allows
+    monkeypatch.setattr(rough, "MAX_REPEAT", 4)
+    record = rough.measure(300, tmp_path, "positive", repeat=3)
+    solves, baselines = record["solve_samples_s"], record["baseline_samples_s"]
+    assert len(solves) == len(baselines) == 4
+    assert record["solve_s"] == min(solves) and record["baseline_s"] == min(baselines)
+    assert record["solve_over_baseline"] == pytest.approx(min(solves) / min(baselines), rel=1e-12)
+    assert record["median_solve_over_baseline"] == pytest.approx(np.median(solves) / np.median(baselines),
+                                                                 rel=1e-12)
+    assert record["newton_steps"] >= 1 and record["factorizations"] >= 1 and record["active_nodes"] > 0
+    monkeypatch.setattr(rough, "REPEAT_SECONDS", 0.0)  # a single slow solve: the floor
+    assert len(rough.measure(300, tmp_path, "positive", repeat=3)["baseline_samples_s"]) == 3
