@@ -23,7 +23,6 @@ from contactfem.discretize.frames import ReducedSystem
 from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
     ActiveSetSolver,
-    ContactSystem,
     Iteration,
     KernelResult,
     Status,
@@ -187,23 +186,24 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     with ThreadPoolExecutor(max_workers=1) if worth_sequencing(problem.n_unknowns) else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
         # solver and that solver's ordering and symbolic analysis are made while the
-        # coarser levels mesh and solve (from BESIDE_COARSER_FROM unknowns; below, the
-        # system and solver here first and only the analysis beside): on a rough
-        # profile's graded mesh they cost about
+        # coarser levels mesh and solve: on a rough profile's graded mesh they cost about
         # one linear solve (0.3 s at 208 000 unknowns), the analysis most of it, outside the
-        # interpreter's lock (the analysis alone in the worker, the system and solver made
-        # here first, took 10-20% longer overall at 105 000 and 418 000 unknowns).
+        # interpreter's lock. From BESIDE_COARSER_FROM unknowns all three go to the worker
+        # (the analysis alone there took 10-20% longer overall at 105 000 and 418 000
+        # unknowns); below, the system and solver are made here first.
         def fine() -> tuple[ReducedSystem, float]:
             reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
+        def solver() -> ActiveSetSolver:
+            return ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance)
+
         if problem.n_unknowns >= BESIDE_COARSER_FROM:
             fine_soon = pool.submit(fine)
-            solver_soon = pool.submit(lambda: _analysed_solver(fine_soon.result()[0].system, backend, tolerance))
+            solver_soon = pool.submit(lambda: _analysed(solver()))
         else:
             fine_soon = _InPlace.submit(fine)
-            solver = ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance)
-            solver_soon = pool.submit(lambda: (solver.analyse(), solver)[1])
+            solver_soon = pool.submit(_analysed, solver())
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
             lambda: _predict_from_coarser(case, problem, fine_soon.result, say, load_factor, coarse_levels))
@@ -252,9 +252,8 @@ class _InPlace:
         return done
 
 
-def _analysed_solver(system: ContactSystem, backend: str, tolerance: float) -> ActiveSetSolver:
-    """The kernel's solver for ``system`` with its pattern analysed, ready to factorise."""
-    linear = ActiveSetSolver(system, backend, tolerance=tolerance)
+def _analysed(linear: ActiveSetSolver) -> ActiveSetSolver:
+    """``linear`` with its pattern analysed, ready to factorise."""
     linear.analyse()
     return linear
 
