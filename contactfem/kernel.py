@@ -676,7 +676,12 @@ def _cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
     heavy = np.flatnonzero(shared)
     product = left[heavy].toarray().T @ right[heavy].toarray()
     if len(heavy) < int(np.count_nonzero(counts)):
-        light = sp.diags((~shared).astype(float)) @ left
+        # left without the shared rows' entries, selected from its arrays (a product with a
+        # diagonal mask cost twice the sparse product itself at 7 000-100 000 unknowns).
+        light_entries = ~shared[left.indices]
+        kept_before = np.concatenate([[0], np.cumsum(light_entries)])
+        light = sp.csc_matrix((left.data[light_entries], left.indices[light_entries], kept_before[left.indptr]),
+                              shape=left.shape)
         product += (light.T @ right).toarray()
     return product
 
