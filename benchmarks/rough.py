@@ -10,7 +10,9 @@ The body is the case's 1 x 0.5 block whose base is a seeded self-affine profile
 (:func:`self_affine_profile`, Hurst exponent 0.8, 1e-3 from lowest to highest point),
 pushed onto the flat obstacle by the displacement of its top. Every size draws the same
 random phases, so the coarse shape is the same and finer sizes add shorter wavelengths.
-Each size runs in a fresh subprocess (``--single N``), so its peak RSS is its own. A run:
+Each size runs in a fresh subprocess (``--single N``), so its peak RSS is its own, with
+the C heap kept for reuse as the ``contactfem`` command keeps it (:mod:`contactfem.heap`;
+``--plain-heap`` leaves glibc's defaults). A run:
 
   1. warms up on a 200-point profile (imports, Triangle, the first factorisation) and
      records the peak RSS it leaves (the interpreter and libraries, about 0.1 GB): the
@@ -197,12 +199,17 @@ def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
     return record
 
 
-def single(points: int, method: str) -> None:
+def single(points: int, method: str, keep_heap: bool = True) -> None:
+    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
+    from contactfem.heap import keep_freed_memory
+
+    heap_kept = keep_freed_memory() if keep_heap else False
     with tempfile.TemporaryDirectory(prefix="contactfem-rough-") as tmp:
         measure(200, Path(tmp), method)  # warm-up, untimed
         warm = peak_rss_gb()
         record = measure(points, Path(tmp), method)
         record["peak_rss_gb_warm"] = warm
+        record["heap_kept"] = heap_kept
         # What each stage added above the interpreter and libraries.
         record["validation_memory_gb"] = record["peak_rss_gb_validation"] - warm
         record["net_peak_gb"] = record["peak_rss_gb"] - warm
@@ -213,8 +220,9 @@ def single(points: int, method: str) -> None:
 # --------------------------------------------------------------------------- sweep
 
 
-def run_subprocess(points: int, method: str, timeout: float) -> dict:
-    command = [sys.executable, str(Path(__file__).resolve()), "--single", str(points), "--method", method]
+def run_subprocess(points: int, method: str, timeout: float, keep_heap: bool = True) -> dict:
+    command = [sys.executable, str(Path(__file__).resolve()), "--single", str(points), "--method", method,
+               *([] if keep_heap else ["--plain-heap"])]
     started = time.perf_counter()
     try:
         done = subprocess.run(command, check=False, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
@@ -289,6 +297,8 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per size")
     parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
     parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
+    parser.add_argument("--plain-heap", action="store_true",
+                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
     parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
     args = parser.parse_args()
     if args.write_surface:
@@ -296,7 +306,7 @@ def main() -> None:
         print(f"wrote {SURFACE_FILE}")
         return
     if args.single is not None:
-        single(args.single, args.method)
+        single(args.single, args.method, keep_heap=not args.plain_heap)
         return
     if args.table:
         print(table(json.loads(args.out.read_text())["records"]))
@@ -307,9 +317,10 @@ def main() -> None:
     result = {"benchmark": "cases/rough.yaml with a self-affine profile of N points", "started":
               time.strftime("%Y-%m-%d %H:%M:%S %Z"), "command": " ".join([Path(sys.executable).name, *sys.argv]),
               "hurst": HURST, "height": HEIGHT, "seed": SEED, "sizes": args.sizes, "method": args.method,
+              "heap": "glibc defaults" if args.plain_heap else "kept for reuse, as the command runs (contactfem.heap)",
               "machine": machine_info(), "records": []}
     for points in args.sizes:
-        record = run_subprocess(points, args.method, args.timeout)
+        record = run_subprocess(points, args.method, args.timeout, keep_heap=not args.plain_heap)
         result["records"].append(record)
         result["growth_exponents"] = scaling(result["records"])
         args.out.parent.mkdir(parents=True, exist_ok=True)

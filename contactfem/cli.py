@@ -20,6 +20,7 @@ from contactfem.errors import (
     Interrupted,
     MeshError,
 )
+from contactfem.heap import keep_freed_memory
 from contactfem.io.registry import (
     ADAPT_JSON,
     COMPARE_JSON,
@@ -1108,5 +1109,12 @@ def _plot_sweep(path: Path, table: dict) -> None:
         plt.close(figure)
 
 
-if __name__ == "__main__":
+def run() -> None:
+    """The ``contactfem`` command: the process's heap kept for reuse (:mod:`contactfem.heap`;
+    a library caller's process is left as it is), then :func:`main`."""
+    keep_freed_memory()
     main()
+
+
+if __name__ == "__main__":
+    run()
