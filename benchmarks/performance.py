@@ -12,7 +12,9 @@ unless --getfem-sizes says otherwise: at N = 1024 it takes minutes and about 15 
 skipped, with the reason printed and recorded, when that Python cannot import getfem.
 
 Each (N, method) runs in a fresh subprocess (``--single N --methods M``) so that its
-peak RSS is its own and its memory goes back to the OS before the next run. A run:
+peak RSS is its own and its memory goes back to the OS before the next run, with the C
+heap kept for reuse as the ``contactfem`` command keeps it (:mod:`contactfem.heap`;
+``--plain-heap`` leaves glibc's defaults). A run:
   1. warms up on an 8 x 8 square (imports, first factorisation, writers), untimed;
   2. times the pipeline: parse the case, mesh and assemble (contactfem.solve.prepare),
      solve_case (contact solve, postprocess, report), write_outputs (VTU + HDF5 + JSON
@@ -216,9 +218,15 @@ def best_of(samples: list[dict]) -> dict:
     return record
 
 
-def single(divisions: int, methods: list[str], repeat: int = 1) -> None:
+def single(divisions: int, methods: list[str], repeat: int = 1, keep_heap: bool = True) -> None:
+    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
+    from contactfem.heap import keep_freed_memory
+
+    heap_kept = keep_freed_memory() if keep_heap else False
     warm_up(methods)
     records = [best_of([measure(divisions, method) for _ in range(repeat)]) for method in methods]
+    for record in records:
+        record["heap_kept"] = heap_kept
     sys.stdout.write(RECORD_PREFIX + json.dumps(records) + "\n")
     sys.stdout.flush()
 
@@ -329,9 +337,10 @@ def machine_info() -> dict:
 # --------------------------------------------------------------------------- sweep
 
 
-def run_single_subprocess(divisions: int, method: str, timeout: float, repeat: int) -> list[dict]:
+def run_single_subprocess(divisions: int, method: str, timeout: float, repeat: int,
+                          keep_heap: bool = True) -> list[dict]:
     command = [sys.executable, str(Path(__file__).resolve()), "--single", str(divisions), "--methods", method,
-               "--repeat", str(repeat)]
+               "--repeat", str(repeat), *([] if keep_heap else ["--plain-heap"])]
     started = time.perf_counter()
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
@@ -585,6 +594,8 @@ def main() -> None:
                         help="time each (N, method) this many times in its process and keep the fastest "
                              "of each stage (default 1; the peak RSS is the largest)")
     parser.add_argument("--timeout", type=float, default=3600.0, help="seconds allowed per subprocess run")
+    parser.add_argument("--plain-heap", action="store_true",
+                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
     parser.add_argument("--getfem", action="store_true", help="also run benchmarks/getfem_square.py")
     parser.add_argument("--getfem-sizes", nargs="+", type=int, help="sizes for GetFEM (default: the sweep's)")
     parser.add_argument("--getfem-python", default="/usr/bin/python3", help="the Python that has getfem")
@@ -593,7 +604,7 @@ def main() -> None:
     args = parser.parse_args()
 
     if args.single is not None:
-        single(args.single, args.methods, args.repeat)
+        single(args.single, args.methods, args.repeat, keep_heap=not args.plain_heap)
         return
 
     if args.sizes and args.quick:
@@ -616,7 +627,7 @@ def main() -> None:
           f"sizes {sizes}", flush=True)
     for n in sizes:
         for method in args.methods:
-            for record in run_single_subprocess(n, method, args.timeout, args.repeat):
+            for record in run_single_subprocess(n, method, args.timeout, args.repeat, keep_heap=not args.plain_heap):
                 result["records"].append(record)
                 print(summary_line(record), flush=True)
             save(result, out, md_path)
