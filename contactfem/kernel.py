@@ -768,6 +768,7 @@ class ActiveSetSolver:
         del coupling
         self.entry_rows = rows
         self.diagonal = np.flatnonzero(rows == self.pattern.indices)
+        self.longest_row = int(np.diff(self.pattern.indptr).max(initial=0))
         self.factorizations = 0
         self.column_solves = 0
         self.factorizer = Factorizer(
@@ -787,6 +788,7 @@ class ActiveSetSolver:
         self.absolute_row_sums = self.absolute @ np.ones(n)
         self.gamma = roundoff_bound(int(np.diff(k.indptr).max(initial=0)) + 2)
         self._masked_matrix: sp.csr_matrix | None = None
+        self._probe: np.ndarray | None = None  # the singularity probe, restricted to each set's equations
         self._masked_fixed: np.ndarray | None = None
 
     def analyse(self) -> None:
@@ -991,7 +993,9 @@ class ActiveSetSolver:
             parts = [self.load - fixed_columns_times(self.values)]
             parts[0][fixed] = self.values[fixed]
         # The singularity probe's solve rides along with the first solve of the factor.
-        probe = probe_vector(len(parts[0]), self.free)
+        if self._probe is None:
+            self._probe = probe_vector(len(parts[0]))
+        probe = np.where(self.free, self._probe, 0.0)
         started = time.perf_counter()
         solved = np.asarray(self.factor.solve(np.column_stack([*parts, probe]))).reshape(len(probe), -1)
         #: Seconds of one full solve with the factor (per right-hand side of this block).
@@ -1046,7 +1050,13 @@ class ActiveSetSolver:
             self._masked_matrix = sp.csr_matrix((pattern.data.copy(), pattern.indices, pattern.indptr),
                                                 shape=pattern.shape)
             self._masked_fixed = np.zeros_like(fixed)
-        entries = self._entries_of(np.flatnonzero(fixed != self._masked_fixed))
+        changed = np.flatnonzero(fixed != self._masked_fixed)
+        indptr = pattern.indptr
+        # Finding the changed rows' mirrors scans up to a row's length per entry; once that
+        # is the whole pattern's size (a coarse level's first sets change most contact
+        # nodes), one pass over every entry costs less (0.1 ms against 0.4 at 1 700 unknowns).
+        searched = int((indptr[changed + 1] - indptr[changed]).sum()) * self.longest_row
+        entries = self._entries_of(changed) if searched < len(pattern.indices) else None
         if entries is None:
             keep = ~fixed[self.entry_rows] & ~fixed[pattern.indices]
             data = np.where(keep, pattern.data, 0.0)
