@@ -440,10 +440,11 @@ def test_a_refactorisation_of_the_same_pattern_solves_its_own_matrix(backend):
         assert np.abs(matrix @ solution - rhs).max() <= 1e-12 * np.abs(rhs).max()
 
 
-def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh():
-    """Successive active sets rewrite only the rows and columns whose state changed; the
+def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh(monkeypatch):
+    """Successive active sets rewrite only the rows and columns whose state changed (or,
+    when those rows reach as many entries as the pattern holds, mask it in one pass); the
     result is the matrix masked from scratch, entry for entry, on a problem with supports
-    and contact nodes in rotated frames."""
+    and contact nodes in rotated frames, by either way."""
     from conftest import case_from, square_case_dict
 
     from contactfem.kernel import ActiveSetSolver
@@ -453,12 +454,20 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh():
     problem = prepare(case_from(square_case_dict(12)))
     contact = problem.contact_system(get_method("standard")).system
     linear = ActiveSetSolver(contact, "superlu")
+    searches = []
+    search = linear._entries_of
+    monkeypatch.setattr(linear, "_entries_of", lambda dofs: searches.append(len(dofs)) or search(dofs))
     rng = np.random.default_rng(7)
-    m = len(contact.gap)
-    for _ in range(6):
-        active = rng.random(m) < 0.5
-        fixed = linear.supported.copy()
-        fixed[linear.normal_dofs[active]] = True
+    m, n = len(contact.gap), len(linear.supported)
+    fixed = linear.supported.copy()
+    for step in range(8):
+        # A third of every unknown fixed anew (rows reaching the whole pattern), or one
+        # contact node flipped.
+        if step % 2 == 0:
+            fixed = linear.supported | (rng.random(n) < 1 / 3)
+        else:
+            fixed = fixed.copy()
+            fixed[linear.normal_dofs[rng.integers(m)]] ^= True
         masked = linear._masked(fixed)
         pattern = linear.pattern
         keep = ~fixed[linear.entry_rows] & ~fixed[pattern.indices]
@@ -466,6 +475,8 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh():
         expected[linear.diagonal[fixed]] = 1.0
         np.testing.assert_array_equal(masked.data, expected)
         assert masked.indices is pattern.indices or np.array_equal(masked.indices, pattern.indices)
+    # The single flips were searched row by row, the redrawn thirds masked in one pass.
+    assert searches == [1, 1, 1, 1]
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
