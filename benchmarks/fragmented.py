@@ -29,7 +29,9 @@ off (the same reduction and kernel from a cold start): unknowns, active nodes, p
 (runs of consecutive active nodes along ΓC), Newton steps, factorisations, column solves,
 contact-solve seconds (reduction, sequencing and kernel), one linear solve (factorise the
 kernel's stiffness without contact, with the same backend, and solve once) and their
-ratio; the fastest of ``--repeat`` runs. Writes benchmarks/results/fragmented.json.
+ratio; the fastest of ``--repeat`` runs, in a process whose C heap is kept for reuse as the
+``contactfem`` command keeps it (:mod:`contactfem.heap`; ``--plain-heap`` leaves glibc's
+defaults). Writes benchmarks/results/fragmented.json.
 """
 
 from __future__ import annotations
@@ -269,13 +271,20 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", choices=["positive", "standard"], default=["positive", "standard"])
     parser.add_argument("--repeat", type=int, default=2, help="runs per measurement, the fastest kept (default 2)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--plain-heap", action="store_true",
+                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
     args = parser.parse_args()
+    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
+    from contactfem.heap import keep_freed_memory
+
+    heap_kept = keep_freed_memory() if not args.plain_heap else False
 
     result = {
         "benchmark": "fragmented contact: rough profiles, wavy tractions, the square, the shipped cases",
         "started": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "repeat": args.repeat,
+        "heap_kept": heap_kept,
         "machine": machine_info(),
         "records": [],
     }
