@@ -662,15 +662,18 @@ def _cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
     """leftᵀ right for sparse forward columns, dense (k_left, k_right).
 
     The columns share the rows near the elimination tree's root and little else: the rows
-    that a quarter of the right-hand columns or more touch go through BLAS as dense blocks
+    that an eighth of the right-hand columns or more touch go through BLAS as dense blocks
     (on the square at 526 000 unknowns, 256 columns share 14 000 rows: 0.04 s against
     0.66 s as a sparse product), the others through a sparse product (1 200 columns on a
     rough profile's mesh at 418 000 unknowns touch 68 000 rows, 1 200 of them shared: 2.4 s
-    as one dense block over all of them, 0.25 s as a sparse product).
+    as one dense block over all of them, 0.25 s as a sparse product). A row in the sparse
+    product costs about its two counts' product, in the dense block the two column counts':
+    an eighth took 0.78-0.91 of a quarter's time on the rough profile's mesh from 27 000 to
+    418 000 unknowns (a sixteenth 0.81-0.91, but 1.11 at 27 000; a thirty-second 1.0-1.35).
     """
     k = right.shape[1]
     counts = np.bincount(right.indices, minlength=right.shape[0])
-    shared = counts >= max(1, k // 4)
+    shared = counts >= max(1, k // 8)
     if 8 * int(shared.sum()) * (k + left.shape[1]) > COLUMN_BYTES:
         shared[:] = False
     heavy = np.flatnonzero(shared)
