@@ -2,19 +2,21 @@
 
 glibc serves each allocation above a threshold (128 kB at first, rising with what is freed
 to at most 32 MB) with a mapping of its own and unmaps it when it is freed, and gives back
-what stays free at the top of its heap. numpy asks for huge pages for its large arrays,
-but a C library's blocks are faulted in page by page: CHOLMOD's factor and workspace (about 200 MB
-at 650 000 unknowns) are mapped anew at every factorisation of every level and faulted in
-again, 52 000 faults for one factorisation and solve there. On the 100 000-point rough profile (650 000 unknowns, five
-levels) a process took 600 000-670 000 page faults and 11-17 s of system time, its contact
-solves 4.2-4.5 s at best and 7.0-7.1 by the median; with the heap kept, 160 000-200 000
-faults, 3-6 s, 3.4-3.7 s and 3.6-3.9 s, and a lower peak (1.01-1.04 GB above the interpreter
-against 1.13-1.14: one heap for every thread). From 1 000 to 64 000 points the solves took
-the same time either way, within this machine's noise (``benchmarks/rough.py --plain-heap``).
+what stays free at the top of its heap. numpy asks for huge pages for its large arrays, but
+a C library's blocks are faulted in page by page: CHOLMOD's factor and workspace (about 200
+MB at 650 000 unknowns) are mapped anew at every factorisation of every level and faulted
+in again, 52 000 faults for one factorisation and solve there. On the 100 000-point rough
+profile (650 000 unknowns, five levels) a process took 600 000-670 000 page faults and
+11-17 s of system time, its contact solves 4.2-4.5 s at best and 7.0-7.1 by the median;
+with the heap kept, 160 000-200 000 faults, 3-6 s, 3.4-3.7 s and 3.6-3.9 s, and a lower
+peak (1.01-1.04 GB above the interpreter against 1.13-1.14: one heap for every thread).
+From 1 000 to 64 000 points the solves took the same time either way, within this machine's
+noise (``benchmarks/rough.py --plain-heap``).
 
 The policy belongs to the application, not the library: :func:`keep_freed_memory` is called
-by the ``contactfem`` command before it does any work (and by the benchmarks, which time
-what the command does), never on import. A user who tunes glibc's allocator through the
+by the ``contactfem`` command before it does any work (and by ``benchmarks/rough.py``,
+``performance.py`` and ``fragmented.py``, which time what the command does), never on
+import. A user who tunes glibc's allocator through the
 environment keeps their settings, and a sweep's Dask workers, other processes, keep Dask's
 (memory handed back, which its per-worker memory limits need).
 """
