@@ -79,29 +79,54 @@ def _interruptible(command):
             previous = signal.signal(signal.SIGTERM, terminate)
         except ValueError:  # not the main thread (an embedding application): leave SIGTERM alone
             previous = None
+
+        def interrupted(cause: BaseException):
+            if isinstance(cause, KeyboardInterrupt):
+                word, name, code = "interrupted", "SIGINT", EXIT_INTERRUPTED
+            else:
+                word, name, code = "terminated", "SIGTERM", EXIT_TERMINATED
+            click.echo(f"error: {word} ({name}); no result was switched in, earlier results are unchanged",
+                       err=True)
+            sys.exit(code)
+
         try:
             # Overflow and 0/0 in numpy are caught by the finiteness checks and refused
             # with one line naming the key; numpy's own warnings would only add noise.
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 return command(*args, **kwargs)
-        except KeyboardInterrupt:
-            click.echo("error: interrupted (SIGINT); no result was switched in, earlier results are unchanged",
-                       err=True)
-            sys.exit(EXIT_INTERRUPTED)
-        except Interrupted:
-            click.echo("error: terminated (SIGTERM); no result was switched in, earlier results are unchanged",
-                       err=True)
-            sys.exit(EXIT_TERMINATED)
+        except (KeyboardInterrupt, Interrupted) as signalled:
+            interrupted(signalled)
         except MemoryError:
             click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
                        "a larger mesh.size or fewer refinements)", err=True)
             sys.exit(EXIT_FAILURE)
+        except Exception as error:
+            # A signal that lands inside the interpreter's own locking (a worker thread being
+            # started waits on a Condition) surfaces as another error, raised while its
+            # exception unwinds ("release unlocked lock"): it is still that signal.
+            cause = _interruption_behind(error)
+            if cause is None:
+                raise
+            interrupted(cause)
         finally:
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
 
     return wrapper
+
+
+def _interruption_behind(error: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or SIGTERM's :class:`Interrupted` that ``error`` was raised while
+    handling (its chain of causes and contexts), or None."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        if isinstance(current, (KeyboardInterrupt, Interrupted)):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
 
 
 def _refuse_non_finite(case, solution, report: dict) -> None:

@@ -150,6 +150,41 @@ def test_sigint_during_the_solve_exits_130_and_keeps_earlier_results(solved, tmp
     assert leftovers(solved.parent) == []
 
 
+@pytest.mark.parametrize(("signal_error", "code", "line"), [
+    (KeyboardInterrupt, 130, "error: interrupted (SIGINT)"),
+    ("terminated", 143, "error: terminated (SIGTERM)"),
+])
+def test_a_signal_that_surfaces_as_another_error_still_exits_as_that_signal(capsys, signal_error, code, line):
+    """A signal landing while a worker thread starts (Condition.wait inside Thread.start)
+    unwinds into "RuntimeError: release unlocked lock", raised while handling it: the
+    command still says one line and exits 130 or 143, with no traceback. Any other error
+    goes on unchanged."""
+    from contactfem.cli import _interruptible
+    from contactfem.errors import Interrupted
+
+    raised = Interrupted if signal_error == "terminated" else signal_error
+
+    @_interruptible
+    def command():
+        try:
+            raise raised()
+        except BaseException:
+            raise RuntimeError("release unlocked lock")  # its __context__ is the signal's error
+
+    with pytest.raises(SystemExit) as exit_info:
+        command()
+    assert exit_info.value.code == code
+    err = capsys.readouterr().err
+    assert err.startswith(line) and len(err.splitlines()) == 1
+
+    @_interruptible
+    def failing():
+        raise RuntimeError("a plain failure")
+
+    with pytest.raises(RuntimeError, match="a plain failure"):
+        failing()
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize(("signal_number", "code", "word"), [(signal.SIGTERM, 143, "terminated"),
                                                              (signal.SIGINT, 130, "interrupted")])
