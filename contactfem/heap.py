@@ -10,8 +10,10 @@ profile (650 000 unknowns, five levels) a process took 600 000-670 000 page faul
 11-17 s of system time, its contact solves 4.2-4.5 s at best and 7.0-7.1 by the median;
 with the heap kept, 160 000-200 000 faults, 3-6 s, 3.4-3.7 s and 3.6-3.9 s, and a lower
 peak (1.01-1.04 GB above the interpreter against 1.13-1.14: one heap for every thread).
-From 1 000 to 64 000 points the solves took the same time either way, within this machine's
-noise (``benchmarks/rough.py --plain-heap``).
+At 32 000 points (209 000 unknowns, fresh processes taking turns) the first solve of a
+process took 1.6-2.1 s against 1.9-2.4 and the later ones 0.95-1.2 against 1.0-1.9; from
+1 000 to 16 000 points and at 64 000 the same either way within this machine's noise
+(``benchmarks/rough.py --plain-heap``).
 
 The policy belongs to the application, not the library: :func:`keep_freed_memory` is called
 by the ``contactfem`` command before it does any work (and by ``benchmarks/rough.py``,
