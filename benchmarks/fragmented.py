@@ -47,7 +47,12 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from performance import linear_system, machine_info
+from performance import (
+    add_heap_option,
+    heap_as_the_command,
+    linear_system,
+    machine_info,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
@@ -271,13 +276,9 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+", choices=["positive", "standard"], default=["positive", "standard"])
     parser.add_argument("--repeat", type=int, default=2, help="runs per measurement, the fastest kept (default 2)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    parser.add_argument("--plain-heap", action="store_true",
-                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
+    add_heap_option(parser)
     args = parser.parse_args()
-    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
-    from contactfem.heap import keep_freed_memory
-
-    heap_kept = keep_freed_memory() if not args.plain_heap else False
+    heap_kept = heap_as_the_command(not args.plain_heap)
 
     result = {
         "benchmark": "fragmented contact: rough profiles, wavy tractions, the square, the shipped cases",

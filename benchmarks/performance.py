@@ -218,11 +218,22 @@ def best_of(samples: list[dict]) -> dict:
     return record
 
 
-def single(divisions: int, methods: list[str], repeat: int = 1, keep_heap: bool = True) -> None:
-    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
+def add_heap_option(parser: argparse.ArgumentParser) -> None:
+    """``--plain-heap``, shared by the benchmarks that time what the command does."""
+    parser.add_argument("--plain-heap", action="store_true",
+                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
+
+
+def heap_as_the_command(keep_heap: bool = True) -> bool:
+    """This process's heap as the ``contactfem`` command keeps it (:mod:`contactfem.heap`),
+    unless ``keep_heap`` is False (glibc's defaults); whether it is kept."""
     from contactfem.heap import keep_freed_memory
 
-    heap_kept = keep_freed_memory() if keep_heap else False
+    return keep_freed_memory() if keep_heap else False
+
+
+def single(divisions: int, methods: list[str], repeat: int = 1, keep_heap: bool = True) -> None:
+    heap_kept = heap_as_the_command(keep_heap)
     warm_up(methods)
     records = [best_of([measure(divisions, method) for _ in range(repeat)]) for method in methods]
     for record in records:
@@ -594,8 +605,7 @@ def main() -> None:
                         help="time each (N, method) this many times in its process and keep the fastest "
                              "of each stage (default 1; the peak RSS is the largest)")
     parser.add_argument("--timeout", type=float, default=3600.0, help="seconds allowed per subprocess run")
-    parser.add_argument("--plain-heap", action="store_true",
-                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
+    add_heap_option(parser)
     parser.add_argument("--getfem", action="store_true", help="also run benchmarks/getfem_square.py")
     parser.add_argument("--getfem-sizes", nargs="+", type=int, help="sizes for GetFEM (default: the sweep's)")
     parser.add_argument("--getfem-python", default="/usr/bin/python3", help="the Python that has getfem")

@@ -200,10 +200,9 @@ def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
 
 
 def single(points: int, method: str, keep_heap: bool = True) -> None:
-    # The process as the command runs it (contactfem.heap), unless asked for glibc's defaults.
-    from contactfem.heap import keep_freed_memory
+    from performance import heap_as_the_command
 
-    heap_kept = keep_freed_memory() if keep_heap else False
+    heap_kept = heap_as_the_command(keep_heap)
     with tempfile.TemporaryDirectory(prefix="contactfem-rough-") as tmp:
         measure(200, Path(tmp), method)  # warm-up, untimed
         warm = peak_rss_gb()
@@ -290,6 +289,8 @@ def table(records: list[dict]) -> str:
 
 
 def main() -> None:
+    from performance import add_heap_option
+
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, default=DEFAULT_SIZES, help="profile points per run")
     parser.add_argument("--method", default="positive", choices=("positive", "standard"))
@@ -297,8 +298,7 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per size")
     parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
     parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
-    parser.add_argument("--plain-heap", action="store_true",
-                        help="leave glibc's allocator as it is (the command keeps freed memory: contactfem.heap)")
+    add_heap_option(parser)
     parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
     args = parser.parse_args()
     if args.write_surface:

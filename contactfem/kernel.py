@@ -1231,8 +1231,9 @@ class ActiveSetSolver:
         # Each entry's column among the released normals, if it is one (a search among the
         # r of them, not a map over all n unknowns: this runs at every step).
         order = np.argsort(dofs_r)
-        at = np.minimum(np.searchsorted(dofs_r[order], column), r - 1)
-        among = dofs_r[order][at] == column
+        in_order = dofs_r[order]
+        at = np.minimum(np.searchsorted(in_order, column), r - 1)
+        among = in_order[at] == column
         k_rr = np.zeros((r, r))
         k_rr[owner[among], order[at[among]]] = value[among]
         # The released normals' own values are unknowns now: only the others' enter b_r.

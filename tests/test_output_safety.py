@@ -20,7 +20,7 @@ import pytest
 from click.testing import CliRunner
 
 from contactfem.cli import main
-from contactfem.errors import OutputError
+from contactfem.errors import Interrupted, OutputError
 from contactfem.io.atomic import LOCK_FILE
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,7 +152,7 @@ def test_sigint_during_the_solve_exits_130_and_keeps_earlier_results(solved, tmp
 
 @pytest.mark.parametrize(("signal_error", "code", "line"), [
     (KeyboardInterrupt, 130, "error: interrupted (SIGINT)"),
-    ("terminated", 143, "error: terminated (SIGTERM)"),
+    (Interrupted, 143, "error: terminated (SIGTERM)"),
 ])
 def test_a_signal_that_surfaces_as_another_error_still_exits_as_that_signal(capsys, signal_error, code, line):
     """A signal landing while a worker thread starts (Condition.wait inside Thread.start)
@@ -160,14 +160,11 @@ def test_a_signal_that_surfaces_as_another_error_still_exits_as_that_signal(caps
     command still says one line and exits 130 or 143, with no traceback. Any other error
     goes on unchanged."""
     from contactfem.cli import _interruptible
-    from contactfem.errors import Interrupted
-
-    raised = Interrupted if signal_error == "terminated" else signal_error
 
     @_interruptible
     def command():
         try:
-            raise raised()
+            raise signal_error()
         except BaseException:
             raise RuntimeError("release unlocked lock")  # its __context__ is the signal's error
 
