@@ -72,29 +72,31 @@ def _interruptible(command):
         import signal
         import warnings
 
-        def terminate(signum, frame):
-            raise Interrupted()
-
-        try:
-            previous = signal.signal(signal.SIGTERM, terminate)
-        except ValueError:  # not the main thread (an embedding application): leave SIGTERM alone
-            previous = None
+        from contactfem import interrupts
 
         def interrupted(cause: BaseException):
             if isinstance(cause, KeyboardInterrupt):
                 word, name, code = "interrupted", "SIGINT", EXIT_INTERRUPTED
             else:
                 word, name, code = "terminated", "SIGTERM", EXIT_TERMINATED
-            click.echo(f"error: {word} ({name}); no result was switched in, earlier results are unchanged",
-                       err=True)
+            if interrupts.switched():
+                outcome = "the results were switched in before it and are complete"
+            else:
+                outcome = "no result was switched in, earlier results are unchanged"
+            click.echo(f"error: {word} ({name}); {outcome}", err=True)
             sys.exit(code)
 
         try:
             # Overflow and 0/0 in numpy are caught by the finiteness checks and refused
             # with one line naming the key; numpy's own warnings would only add noise.
-            with warnings.catch_warnings():
+            with interrupts.listening(), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                return command(*args, **kwargs)
+                result = command(*args, **kwargs)
+                # A signal whose exception a finalizer swallowed: the switch-over refused to
+                # decide after it, and the command ends as that signal all the same.
+                if interrupts.received() is not None:
+                    interrupted(KeyboardInterrupt() if interrupts.received() == signal.SIGINT else Interrupted())
+                return result
         except (KeyboardInterrupt, Interrupted) as signalled:
             interrupted(signalled)
         except MemoryError:
@@ -109,9 +111,6 @@ def _interruptible(command):
             if cause is None:
                 raise
             interrupted(cause)
-        finally:
-            if previous is not None:
-                signal.signal(signal.SIGTERM, previous)
 
     return wrapper
 

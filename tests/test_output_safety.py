@@ -182,6 +182,100 @@ def test_a_signal_that_surfaces_as_another_error_still_exits_as_that_signal(caps
         failing()
 
 
+def _writes_after(event, directory: Path):
+    """A writing command that runs ``event`` while its result is staged, then switches it in."""
+    from contactfem.cli import _interruptible
+    from contactfem.io.atomic import claimed_directory
+
+    @_interruptible
+    def command():
+        with claimed_directory(directory, overwrite=True) as claim:
+            with claim.stage() as staging:
+                (staging / "report.json").write_text('{"new": true}', encoding="utf-8")
+                event()
+        return "done"
+
+    return command
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize(("signal_number", "code", "line"), [
+    (signal.SIGINT, 130, "error: interrupted (SIGINT); no result was switched in"),
+    (signal.SIGTERM, 143, "error: terminated (SIGTERM); no result was switched in"),
+])
+def test_a_signal_whose_exception_a_finalizer_swallows_still_stops_the_command(
+        tmp_path, capsys, signal_number, code, line):
+    """A signal that lands while the collector runs a finalizer (CI saw it in CHOLMOD's
+    factor being freed) raises its exception there, where Python prints and drops it: the
+    command must still switch nothing in, say one line and exit as that signal."""
+    import weakref
+
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "report.json").write_text("{}", encoding="utf-8")
+    before = snapshot(out)
+    swallowed = []
+
+    def signal_inside_a_finalizer():
+        def fire():
+            signal.raise_signal(signal_number)
+            swallowed.append("not reached")  # the handler raised above, inside the finalizer
+
+        class Factor:
+            pass
+
+        factor = Factor()
+        weakref.finalize(factor, fire)
+        del factor  # the finalizer runs here; its exception goes to sys.unraisablehook
+
+    with pytest.raises(SystemExit) as exit_info:
+        _writes_after(signal_inside_a_finalizer, out)()
+    assert swallowed == []
+    assert exit_info.value.code == code
+    err = capsys.readouterr().err
+    assert err.startswith(line) and len(err.splitlines()) == 1, err
+    assert snapshot(out) == before
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] in ([], [LOCK_FILE])
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_signal_after_the_switch_says_the_results_are_in(tmp_path, capsys):
+    """Once the result is switched in, a signal still ends the command as that signal, but
+    the line says the new results are complete rather than that none was switched in."""
+    from contactfem.cli import _interruptible
+    from contactfem.io.atomic import claimed_directory
+
+    out = tmp_path / "results"
+
+    @_interruptible
+    def command():
+        with claimed_directory(out) as claim:
+            with claim.stage() as staging:
+                (staging / "report.json").write_text('{"new": true}', encoding="utf-8")
+        signal.raise_signal(signal.SIGINT)
+
+    with pytest.raises(SystemExit) as exit_info:
+        command()
+    assert exit_info.value.code == 130
+    err = capsys.readouterr().err
+    assert err.startswith("error: interrupted (SIGINT); the results were switched in") and len(err.splitlines()) == 1
+    assert json.loads((out / "report.json").read_text(encoding="utf-8")) == {"new": True}
+
+
+def test_a_record_of_a_signal_never_reaches_library_callers(tmp_path):
+    """Outside a command (the library used from Python), a signal recorded by an earlier
+    command stops nothing: atomic writes go through."""
+    from contactfem import interrupts
+    from contactfem.io.atomic import atomic_write_text
+
+    interrupts._received.append(signal.SIGINT)  # as an earlier command would have left it
+    try:
+        atomic_write_text(tmp_path / "a.txt", "written")
+    finally:
+        interrupts._received.clear()
+    assert (tmp_path / "a.txt").read_text(encoding="utf-8") == "written"
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize(("signal_number", "code", "word"), [(signal.SIGTERM, 143, "terminated"),
                                                              (signal.SIGINT, 130, "interrupted")])

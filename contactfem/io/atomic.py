@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from contactfem import interrupts
 from contactfem.errors import ExistingResultError, OutputError
 
 __all__ = [
@@ -153,6 +154,7 @@ def atomic_path(final: Path | str) -> Iterator[Path]:
     try:
         yield temp
         _fsync_file(temp)
+        interrupts.stop_if_received()  # see ClaimedDirectory.stage
         os.replace(temp, final)
     except BaseException as exc:
         # BaseException too: an interrupted write must not leave its temporary behind.
@@ -291,11 +293,15 @@ class ClaimedDirectory:
             expanded = [name for pattern in replaces
                         for name in (fnmatch.filter(existing, pattern) if _is_pattern(pattern) else [pattern])]
             plan = {"files": names, "replaces": [name for name in expanded if name not in names]}
+            # A stop signal whose exception was swallowed on the way (in a finalizer) still
+            # stops the run here, before anything is decided.
+            interrupts.stop_if_received()
             with _signals_deferred():
                 atomic_write_text(staging / SWITCH_FILE, json.dumps(plan))
                 _fsync_directory(staging)
                 decided = True
                 _switch(staging, self.directory)
+                interrupts.note_switched()
         finally:
             if not decided:
                 shutil.rmtree(staging, ignore_errors=True)
