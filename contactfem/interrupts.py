@@ -21,13 +21,13 @@ from contactfem.errors import Interrupted
 
 __all__ = ["listening", "note_switched", "received", "stop_if_received", "switched"]
 
-#: The signals received since a command began listening, the first first; kept after it
+#: The signals received since a command began listening, the earliest first; kept after it
 #: stops listening, for it to say how it ended.
 _received: list[int] = []
 #: Whether a staged result was switched in since the command began listening.
-_switched: list[bool] = [False]
+_switched = False
 #: Whether a command is listening now (outside one, library callers never see a record).
-_active: list[bool] = [False]
+_active = False
 
 
 def _stop(signum: int) -> BaseException:
@@ -48,19 +48,20 @@ def stop_if_received() -> None:
     """While a command listens, raise the first recorded signal's exception again
     (KeyboardInterrupt for SIGINT, :class:`Interrupted` for SIGTERM), so that nothing is
     decided after it."""
-    if _active[0] and _received:
+    if _active and _received:
         raise _stop(_received[0])
 
 
 def note_switched() -> None:
     """Record that a staged result was switched in (the command's message then says so)."""
-    if _active[0]:
-        _switched[0] = True
+    global _switched
+    if _active:
+        _switched = True
 
 
 def switched() -> bool:
     """Whether a result was switched in since the command began listening."""
-    return _switched[0]
+    return _switched
 
 
 @contextmanager
@@ -69,8 +70,9 @@ def listening() -> Iterator[None]:
     and are recorded; an exception of theirs that Python swallows (in a finalizer) is not
     printed, since the record stands for it. Outside the main thread (an embedding
     application) signals cannot be handled here and are left alone."""
+    global _switched, _active
     _received.clear()
-    _switched[0] = False
+    _switched = False
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -89,11 +91,11 @@ def listening() -> Iterator[None]:
             hook(unraisable)
 
     sys.unraisablehook = quiet_about_stops
-    _active[0] = True
+    _active = True
     try:
         yield
     finally:
-        _active[0] = False
+        _active = False
         sys.unraisablehook = hook
         _restore(previous)
 
