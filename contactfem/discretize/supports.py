@@ -272,9 +272,12 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
         return np.stack([d[:, 0], d[:, 1], -arm[:, 1] * d[:, 0] + arm[:, 0] * d[:, 1]], axis=1)
 
     def gram_of(rows: np.ndarray, where: np.ndarray) -> np.ndarray:
-        gram = np.zeros((n_pieces, 3, 3))
-        np.add.at(gram, piece_of[where], rows[:, :, None] * rows[:, None, :])
-        return gram
+        # Entry by entry through bincount: np.add.at on (k, 3, 3) operands leaves numpy's
+        # fast path (8 ms instead of 17 for the 64 000 contact nodes of a force-driven block).
+        outer = (rows[:, :, None] * rows[:, None, :]).reshape(len(rows), 9)
+        owner = piece_of[where]
+        return np.stack([np.bincount(owner, weights=outer[:, k], minlength=n_pieces) for k in range(9)],
+                        axis=1).reshape(n_pieces, 3, 3)
 
     def loose(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         eigenvalues, eigenvectors = np.linalg.eigh(gram)
