@@ -1008,11 +1008,15 @@ def triangulate_domain(
     if tri is None or len(tri) == 0:
         raise MeshError("Triangle produced no triangles; are the holes inside the outer loop?")
 
-    # Keep only nodes that some triangle uses, renumbered in their original order.
-    used, tri = np.unique(np.asarray(tri, dtype=np.int64), return_inverse=True)
-    tri = tri.reshape(-1, 3)
+    # Keep only nodes that some triangle uses, renumbered in their original order (marked
+    # and counted: sorting the triangles' million entries took 76 ms at 354 000 triangles).
+    tri = np.asarray(tri, dtype=np.int64)
+    in_use = np.zeros(len(result["vertices"]), dtype=bool)
+    in_use[tri] = True
+    used = np.flatnonzero(in_use)
     renumber = np.full(len(result["vertices"]), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
+    tri = renumber[tri]
     out_points = np.array(result["vertices"][used], dtype=np.float64)
     out_segments = renumber[np.asarray(result["segments"], dtype=np.int64)]
     source = np.asarray(result["segment_markers"], dtype=np.int64).reshape(-1) - MARKER_OFFSET
@@ -1023,10 +1027,11 @@ def triangulate_domain(
     corners = out_points[tri]
     e1 = corners[:, 1] - corners[:, 0]
     e2 = corners[:, 2] - corners[:, 0]
-    flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    flip = cross < 0
     tri[flip] = tri[flip][:, [0, 2, 1]]
 
-    meshed_area = 0.5 * float(np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])))
+    meshed_area = 0.5 * float(np.sum(np.abs(cross)))
     if abs(meshed_area - expected_area) > AREA_TOLERANCE * sum(areas):
         raise MeshError(
             f"meshed area {meshed_area:.12g} differs from the area {expected_area:.12g} enclosed by the "
@@ -1055,13 +1060,16 @@ def triangulate_domain(
     for index, circle in enumerate(boundary.curves):
         nodes = np.unique(edges[edge_curves == index])
         out_points[nodes] = circle.project(out_points[nodes])
-    corners = out_points[tri]
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    if np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0):
-        raise MeshError(
-            "projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge"
-        )
+    if boundary.curves:
+        corners = out_points[tri]
+        e1 = corners[:, 1] - corners[:, 0]
+        e2 = corners[:, 2] - corners[:, 0]
+        if np.any(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0):
+            raise MeshError(
+                "projecting boundary nodes onto their arcs inverted a triangle; use a smaller max_edge"
+            )
+    elif np.any(cross == 0):  # no point moved: the triangles' areas are those measured above
+        raise MeshError("Triangle produced a triangle of zero area; is part of the outline degenerate?")
 
     mesh = Mesh(
         points=out_points,
