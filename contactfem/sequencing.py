@@ -134,13 +134,11 @@ def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Lo
     vertices = loop.vertices
     k = len(vertices)
     lengths = np.linalg.norm(np.roll(vertices, -1, axis=0) - vertices, axis=1)
-    # Each edge's part as a code (the names looked up in C: a profile has 10^5 edges).
-    names = sorted(set(loop.edge_names))
-    code = {name: index for index, name in enumerate(names)}
-    part = np.fromiter(map(code.__getitem__, loop.edge_names), dtype=np.int64, count=k)
+    # Each edge's part as a code (a profile has 10^5 edges).
+    names, part = loop.part_codes
     arcs = loop.edge_arcs
-    straight = (np.ones(k, dtype=bool) if arcs.count(None) == k
-                else np.fromiter((arc is None for arc in arcs), dtype=bool, count=k))
+    straight = np.ones(k, dtype=bool)
+    straight[loop.arc_edges] = False
     coarse_length = np.array([coarse_edge.get(name, np.inf) for name in names], dtype=float)[part]
     short = straight & (lengths < coarse_length)
     if short.sum() < 2:

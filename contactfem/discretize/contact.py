@@ -208,7 +208,7 @@ def _geometry_edges(case: Case, name: str):
         for index, loop in enumerate((geometry.outer, *geometry.holes)):
             area = loop_signed_area(loop)
             body_on_left = area > 0 if index == 0 else area < 0
-            on_part = np.flatnonzero([part == name for part in loop.edge_names])
+            on_part = np.flatnonzero(loop.on_parts((name,)))
             if len(on_part):
                 vertices = np.asarray(loop.vertices, dtype=float)
                 yield (vertices[on_part], vertices[(on_part + 1) % len(vertices)],

@@ -85,8 +85,9 @@ def _contact_grading(case: Case):
     contact = set(case.contact_parts)
     for loop in (case.geometry.outer, *case.geometry.holes):
         k = len(loop.vertices)
-        on_contact = np.fromiter((name in contact for name in loop.edge_names), dtype=bool, count=k)
-        straight = on_contact & np.fromiter((arc is None for arc in loop.edge_arcs), dtype=bool, count=k)
+        on_contact = loop.on_parts(contact)
+        straight = on_contact.copy()
+        straight[loop.arc_edges] = False
         # All straight contact edges at once: a rough profile has thousands.
         start, end = loop.vertices[straight], np.roll(loop.vertices, -1, axis=0)[straight]
         counts = np.maximum(2, (4 * np.hypot(*(end - start).T) / settings.contact_size).astype(np.int64) + 2)

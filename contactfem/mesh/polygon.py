@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 import math
+import operator
 from bisect import bisect_right
+from functools import cached_property
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Callable
@@ -135,6 +138,30 @@ class Loop:
         object.__setattr__(self, "edge_names", names)
         object.__setattr__(self, "edge_arcs", arcs)
 
+    # Per-edge attributes as arrays, made in C (map, count): a profile has 10^5 edges.
+    @cached_property
+    def part_codes(self) -> tuple[tuple[str, ...], np.ndarray]:
+        """The loop's part names in order of first appearance, and each edge's index among them (k,)."""
+        names = tuple(dict.fromkeys(self.edge_names))
+        index = {name: i for i, name in enumerate(names)}
+        codes = np.fromiter(map(index.__getitem__, self.edge_names), dtype=np.int64, count=len(self.edge_names))
+        return names, codes
+
+    def on_parts(self, parts) -> np.ndarray:
+        """Whether each edge (k,) belongs to one of ``parts`` (part names)."""
+        names, codes = self.part_codes
+        wanted = set(parts)
+        return np.isin(codes, [i for i, name in enumerate(names) if name in wanted])
+
+    @cached_property
+    def arc_edges(self) -> np.ndarray:
+        """The indices of the edges that are arcs, in order (the others are straight)."""
+        k = len(self.edge_arcs)
+        if self.edge_arcs.count(None) == k:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(np.fromiter(map(operator.is_not, self.edge_arcs, itertools.repeat(None)),
+                                          dtype=bool, count=k))
+
 
 def _is_positive_number(value: object) -> bool:
     """Whether ``value`` is a finite real number > 0 (bools excluded)."""
@@ -212,12 +239,12 @@ def loop_signed_area(loop: Loop) -> float:
     vertices = loop.vertices
     following = np.roll(vertices, -1, axis=0)
     area = 0.5 * float(np.sum(vertices[:, 0] * following[:, 1] - vertices[:, 1] * following[:, 0]))
-    for i, arc in enumerate(loop.edge_arcs):
-        if arc is not None:
-            _, sweep = arc_sweep(vertices[i], following[i], arc)
-            radius = float(np.linalg.norm(vertices[i] - np.asarray(arc.center)))
-            # The circular segment between the chord and the arc, on the arc's side.
-            area += 0.5 * radius**2 * (sweep - math.sin(sweep))
+    for i in loop.arc_edges.tolist():
+        arc = loop.edge_arcs[i]
+        _, sweep = arc_sweep(vertices[i], following[i], arc)
+        radius = float(np.linalg.norm(vertices[i] - np.asarray(arc.center)))
+        # The circular segment between the chord and the arc, on the arc's side.
+        area += 0.5 * radius**2 * (sweep - math.sin(sweep))
     return area
 
 
@@ -813,9 +840,9 @@ def _discretise(loops: list[Loop], max_edge: float, size: SizeField | None = Non
         k = len(loop.vertices)
         starts = loop.vertices
         ends = np.roll(loop.vertices, -1, axis=0)
-        index = {name: boundary.part(name) for name in dict.fromkeys(loop.edge_names)}
-        part = np.fromiter((index[name] for name in loop.edge_names), dtype=np.int64, count=k)
-        arcs = [i for i, arc in enumerate(loop.edge_arcs) if arc is not None]
+        names, codes = loop.part_codes
+        part = np.array([boundary.part(name) for name in names], dtype=np.int64)[codes]
+        arcs = loop.arc_edges.tolist()
         straight = np.ones(k, dtype=bool)
         straight[arcs] = False
         curve = np.full(k, -1, dtype=np.int64)
