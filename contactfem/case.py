@@ -1358,7 +1358,8 @@ def _extent(geometry: Geometry) -> float | None:
     if isinstance(geometry, PolygonGeometry):
         v = geometry.outer.vertices
         span = np.ptp(v, axis=0).max()
-        radii = [np.hypot(*(v[i] - a.center)) for i, a in enumerate(geometry.outer.edge_arcs) if a is not None]
+        arcs = geometry.outer.edge_arcs
+        radii = [np.hypot(*(v[i] - arcs[i].center)) for i in geometry.outer.arc_edges.tolist()]
         return float(max([span, *(2 * rr for rr in radii)]))
     return None
 
