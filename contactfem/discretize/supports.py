@@ -255,8 +255,8 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
                       axis=1) / np.maximum(count, 1)[:, None]
     # Per coordinate: numpy's unbuffered reductions take a fast path on 1-D operands only
     # (0.45 ms against 3.0 ms for both coordinates at once at 52 000 nodes).
-    low = np.stack([np.full(n_pieces, np.inf) for _ in range(2)], axis=1)
-    high = -low
+    low = np.full((n_pieces, 2), np.inf)
+    high = np.full((n_pieces, 2), -np.inf)
     for k in range(2):
         coordinate = np.ascontiguousarray(mesh.points[used, k])
         column_low, column_high = low[:, k].copy(), high[:, k].copy()
