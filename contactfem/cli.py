@@ -69,7 +69,6 @@ def _interruptible(command):
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
-        import signal
         import warnings
 
         from contactfem import interrupts
@@ -94,8 +93,7 @@ def _interruptible(command):
                 result = command(*args, **kwargs)
                 # A signal whose exception a finalizer swallowed: the switch-over refused to
                 # decide after it, and the command ends as that signal all the same.
-                if interrupts.received() is not None:
-                    interrupted(KeyboardInterrupt() if interrupts.received() == signal.SIGINT else Interrupted())
+                interrupts.stop_if_received()
                 return result
         except (KeyboardInterrupt, Interrupted) as signalled:
             interrupted(signalled)

@@ -19,10 +19,9 @@ from contextlib import contextmanager
 
 from contactfem.errors import Interrupted
 
-__all__ = ["listening", "note_switched", "received", "stop_if_received", "switched"]
+__all__ = ["listening", "note_switched", "stop_if_received", "switched"]
 
-#: The signals received since a command began listening, the earliest first; kept after it
-#: stops listening, for it to say how it ended.
+#: The signals received since a command began listening, the earliest first.
 _received: list[int] = []
 #: Whether a staged result was switched in since the command began listening.
 _switched = False
@@ -37,11 +36,6 @@ def _stop(signum: int) -> BaseException:
 def _handle(signum: int, frame) -> None:
     _received.append(signum)
     raise _stop(signum)
-
-
-def received() -> int | None:
-    """The first stop signal received while listening, or None."""
-    return _received[0] if _received else None
 
 
 def stop_if_received() -> None:

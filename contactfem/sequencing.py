@@ -137,8 +137,7 @@ def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Lo
     # Each edge's part as a code (a profile has 10^5 edges).
     names, part = loop.part_codes
     arcs = loop.edge_arcs
-    straight = np.ones(k, dtype=bool)
-    straight[loop.arc_edges] = False
+    straight = loop.straight_edges
     coarse_length = np.array([coarse_edge.get(name, np.inf) for name in names], dtype=float)[part]
     short = straight & (lengths < coarse_length)
     if short.sum() < 2:

@@ -86,8 +86,7 @@ def _contact_grading(case: Case):
     for loop in (case.geometry.outer, *case.geometry.holes):
         k = len(loop.vertices)
         on_contact = loop.on_parts(contact)
-        straight = on_contact.copy()
-        straight[loop.arc_edges] = False
+        straight = on_contact & loop.straight_edges
         # All straight contact edges at once: a rough profile has thousands.
         start, end = loop.vertices[straight], np.roll(loop.vertices, -1, axis=0)[straight]
         counts = np.maximum(2, (4 * np.hypot(*(end - start).T) / settings.contact_size).astype(np.int64) + 2)

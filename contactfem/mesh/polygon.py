@@ -154,13 +154,18 @@ class Loop:
         return np.isin(codes, [i for i, name in enumerate(names) if name in wanted])
 
     @cached_property
-    def arc_edges(self) -> np.ndarray:
-        """The indices of the edges that are arcs, in order (the others are straight)."""
+    def straight_edges(self) -> np.ndarray:
+        """Whether each edge (k,) is straight (not an arc); read-only."""
         k = len(self.edge_arcs)
-        if self.edge_arcs.count(None) == k:
-            return np.zeros(0, dtype=np.int64)
-        return np.flatnonzero(np.fromiter(map(operator.is_not, self.edge_arcs, itertools.repeat(None)),
-                                          dtype=bool, count=k))
+        straight = (np.ones(k, dtype=bool) if self.edge_arcs.count(None) == k
+                    else np.fromiter(map(operator.is_, self.edge_arcs, itertools.repeat(None)), dtype=bool, count=k))
+        straight.setflags(write=False)
+        return straight
+
+    @property
+    def arc_edges(self) -> np.ndarray:
+        """The indices of the edges that are arcs, in order."""
+        return np.flatnonzero(~self.straight_edges)
 
 
 def _is_positive_number(value: object) -> bool:
@@ -842,9 +847,8 @@ def _discretise(loops: list[Loop], max_edge: float, size: SizeField | None = Non
         ends = np.roll(loop.vertices, -1, axis=0)
         names, codes = loop.part_codes
         part = np.array([boundary.part(name) for name in names], dtype=np.int64)[codes]
-        arcs = loop.arc_edges.tolist()
-        straight = np.ones(k, dtype=bool)
-        straight[arcs] = False
+        straight = loop.straight_edges
+        arcs = np.flatnonzero(~straight).tolist()
         curve = np.full(k, -1, dtype=np.int64)
         counts = np.zeros(k, dtype=np.int64)
         line_points, counts[straight] = _lines_points(starts[straight], ends[straight], max_edge, size)
