@@ -986,7 +986,7 @@ def _profile_expression(r: _Reader, spec: dict, key: str, limit: int) -> tuple[n
     bad = np.flatnonzero(~np.isfinite(h) | (np.abs(h) > SCALE_LIMIT))
     if bad.size:
         raise r.fail(f"{key}.expression", expression.text,
-                     f"is {h[bad[0]]:g} at x = {s[bad[0]]:.17g}; expected finite heights within ±{SCALE_LIMIT:g}")
+                     f"is {h[bad[0]]:g} at x = {float(s[bad[0]])!r}; expected finite heights within ±{SCALE_LIMIT:g}")
     return s, h
 
 
@@ -1026,8 +1026,8 @@ def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) ->
         steps = np.flatnonzero(~(np.diff(s) > 0))
         if steps.size:
             line = line_of_row(int(steps[0]) + 1)
-            raise r.fail(fkey, text, f"line {line}: x = {s[steps[0] + 1]:.17g} does not exceed the x before it, "
-                         f"{s[steps[0]]:.17g}; expected x strictly increasing (a height profile h(x))")
+            raise r.fail(fkey, text, f"line {line}: x = {float(s[steps[0] + 1])!r} does not exceed the x before it, "
+                         f"{float(s[steps[0]])!r}; expected x strictly increasing (a height profile h(x))")
     else:
         h = table[:, 0]
         s = _equally_spaced(r, spec, key, len(h), "a one-column file")
