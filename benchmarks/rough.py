@@ -5,6 +5,8 @@ Usage:
     python benchmarks/rough.py --sizes 1000 4000 16000  # choose the sizes
     python benchmarks/rough.py --single 4000            # one size in this process: a JSON record on stdout
     python benchmarks/rough.py --write-surface          # rewrite cases/rough_surface.csv (4 001 points)
+    python benchmarks/rough.py --scene outline          # a closed outline from a file instead (see below)
+    python benchmarks/rough.py --write-outline          # rewrite cases/rough_rim.csv (2 001 vertices)
 
 The body is the case's 1 x 0.5 block whose base is a seeded self-affine profile
 (:func:`self_affine_profile`, Hurst exponent 0.8, 1e-3 from lowest to highest point),
@@ -31,6 +33,13 @@ the C heap kept for reuse as the ``contactfem`` command keeps it (:mod:`contactf
      touch of its memory, up to 2x the solve on a virtual machine), and the ratio of their
      medians is kept too (``median_solve_over_baseline``).
 
+``--scene outline`` sweeps cases/rough_rim.yaml instead: a half-disk of radius 1 whose rim
+is a closed outline of N vertices read from a file (``geometry.polygon.file``: x, y,
+part per line), roughened radially by the same synthesis (Hurst 0.3, 2e-3 high, largest
+at the bottom, :func:`write_outline`), pressed 2e-3 onto the plane by its straight top:
+an outline that is no graph h(x), validated, meshed and solved like any polygon. It
+writes benchmarks/results/rough_outline.json.
+
 The sweep writes benchmarks/results/rough.json (rewritten after every size, so an
 interrupted sweep keeps what it measured) with each size's record and the fitted growth
 exponents p of stage time (and peak memory) ~ points^p, by least squares on the logs.
@@ -54,6 +63,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 CASE_FILE = ROOT / "cases" / "rough.yaml"
 SURFACE_FILE = ROOT / "cases" / "rough_surface.csv"
+OUTLINE_CASE_FILE = ROOT / "cases" / "rough_rim.yaml"
+OUTLINE_FILE = ROOT / "cases" / "rough_rim.csv"
+SHIPPED_OUTLINE_POINTS = 2001
+#: The outline's roughness, from the smooth circle to the highest asperity.
+RIM_HEIGHT = 2.0e-3
+#: Its Hurst exponent: rougher than the block's profile, so that the bottom touches in patches
+#: (at 0.8 the disk's curvature hides the short wavelengths and the contact is one zone).
+RIM_HURST = 0.3
 DEFAULT_SIZES = [1000, 2000, 4000, 8000, 16000, 32000, 64000, 100000]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "rough.json"
 RECORD_PREFIX = "ROUGH-RECORD "
@@ -103,6 +120,35 @@ def write_surface(path: Path, points: int, seed: int = SEED) -> None:
     path.write_text(header + body + "\n", encoding="utf-8")
 
 
+def rim_outline(points: int, seed: int = SEED) -> tuple[np.ndarray, list[str]]:
+    """The rough half-disk's outline, counter-clockwise from (-1, 1): ``points`` vertices on
+    the rim r(θ) = 1 + h(t) sin²(πt), θ = π (1 + t), h a :func:`self_affine_profile` of
+    :data:`RIM_HEIGHT` and Hurst exponent :data:`RIM_HURST`, then the straight top back;
+    the rim's lower third is part ``rim``, the rest ``left`` and ``right``, the top ``top``
+    (the part of each vertex's edge)."""
+    t, h = self_affine_profile(points, hurst=RIM_HURST, height=RIM_HEIGHT, seed=seed)
+    radius = 1.0 + h * np.sin(np.pi * t) ** 2
+    theta = np.pi * (1.0 + t)
+    vertices = np.stack([radius * np.cos(theta), 1.0 + radius * np.sin(theta)], axis=1)
+    vertices[0], vertices[-1] = (-1.0, 1.0), (1.0, 1.0)
+    lower, upper = np.searchsorted(t, [1 / 3, 2 / 3])
+    parts = ["left"] * lower + ["rim"] * (upper - lower) + ["right"] * (points - 1 - upper) + ["top"]
+    return vertices, parts
+
+
+def write_outline(path: Path, points: int, seed: int = SEED) -> None:
+    vertices, parts = rim_outline(points, seed)
+    header = (f"# a rough half-disk's outline: {points} vertices, self-affine radial roughness (Hurst {RIM_HURST}, "
+              f"{RIM_HEIGHT:g} high), seed {seed}\n"
+              "# written by: python benchmarks/rough.py --write-outline\n"
+              "# the part of the edge from each vertex to the next; empty: the part above\n"
+              "x,y,part\n")
+    # A part only where it changes: the file says where each part starts.
+    starts = [part if i == 0 or parts[i - 1] != part else "" for i, part in enumerate(parts)]
+    body = "\n".join(f"{x:.17g},{y:.17g},{part}" for (x, y), part in zip(vertices.tolist(), starts))
+    path.write_text(header + body + "\n", encoding="utf-8")
+
+
 # --------------------------------------------------------------------------- one run
 
 
@@ -111,13 +157,13 @@ def peak_rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
-def case_text(csv: Path) -> str:
-    data = yaml.safe_load(CASE_FILE.read_text(encoding="utf-8"))
-    data["geometry"]["profile"]["file"] = str(csv)
+def case_text(csv: Path, scene: str = "profile") -> str:
+    data = yaml.safe_load((CASE_FILE if scene == "profile" else OUTLINE_CASE_FILE).read_text(encoding="utf-8"))
+    data["geometry"]["profile" if scene == "profile" else "polygon"]["file"] = str(csv)
     return yaml.safe_dump(data, sort_keys=False)
 
 
-def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
+def measure(points: int, directory: Path, method: str, repeat: int = 3, scene: str = "profile") -> dict:
     from performance import linear_system
 
     from contactfem.case import load_case
@@ -127,12 +173,12 @@ def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
     from contactfem.sequencing import patch_count
     from contactfem.solve import prepare, solve_case
 
-    csv = directory / f"surface-{points}.csv"
-    write_surface(csv, points)
-    case_path = directory / f"rough-{points}.yaml"
-    case_path.write_text(case_text(csv), encoding="utf-8")
+    csv = directory / f"{scene}-{points}.csv"
+    (write_surface if scene == "profile" else write_outline)(csv, points)
+    case_path = directory / f"rough-{scene}-{points}.yaml"
+    case_path.write_text(case_text(csv, scene), encoding="utf-8")
 
-    record: dict = {"points": points, "method": method, "csv_bytes": csv.stat().st_size}
+    record: dict = {"points": points, "scene": scene, "method": method, "csv_bytes": csv.stat().st_size}
     clock = time.perf_counter()
     case = load_case(case_path)
     record["validation_s"] = time.perf_counter() - clock
@@ -199,14 +245,14 @@ def measure(points: int, directory: Path, method: str, repeat: int = 3) -> dict:
     return record
 
 
-def single(points: int, method: str, keep_heap: bool = True) -> None:
+def single(points: int, method: str, keep_heap: bool = True, scene: str = "profile") -> None:
     from performance import heap_as_the_command
 
     heap_kept = heap_as_the_command(keep_heap)
     with tempfile.TemporaryDirectory(prefix="contactfem-rough-") as tmp:
-        measure(200, Path(tmp), method)  # warm-up, untimed
+        measure(200, Path(tmp), method, scene=scene)  # warm-up, untimed
         warm = peak_rss_gb()
-        record = measure(points, Path(tmp), method)
+        record = measure(points, Path(tmp), method, scene=scene)
         record["peak_rss_gb_warm"] = warm
         record["heap_kept"] = heap_kept
         # What each stage added above the interpreter and libraries.
@@ -219,9 +265,9 @@ def single(points: int, method: str, keep_heap: bool = True) -> None:
 # --------------------------------------------------------------------------- sweep
 
 
-def run_subprocess(points: int, method: str, timeout: float, keep_heap: bool = True) -> dict:
+def run_subprocess(points: int, method: str, timeout: float, keep_heap: bool = True, scene: str = "profile") -> dict:
     command = [sys.executable, str(Path(__file__).resolve()), "--single", str(points), "--method", method,
-               *([] if keep_heap else ["--plain-heap"])]
+               "--scene", scene, *([] if keep_heap else ["--plain-heap"])]
     started = time.perf_counter()
     try:
         done = subprocess.run(command, check=False, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
@@ -294,19 +340,28 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, default=DEFAULT_SIZES, help="profile points per run")
     parser.add_argument("--method", default="positive", choices=("positive", "standard"))
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--scene", default="profile", choices=("profile", "outline"),
+                        help="the rough block's profile (default) or the rough half-disk's outline file")
+    parser.add_argument("--out", type=Path, help="default: benchmarks/results/rough.json, or rough_outline.json")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per size")
     parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
     parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
     add_heap_option(parser)
     parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
+    parser.add_argument("--write-outline", action="store_true", help=f"rewrite {OUTLINE_FILE.relative_to(ROOT)}")
     args = parser.parse_args()
+    if args.out is None:
+        args.out = DEFAULT_OUT if args.scene == "profile" else DEFAULT_OUT.with_name("rough_outline.json")
     if args.write_surface:
         write_surface(SURFACE_FILE, SHIPPED_POINTS)
         print(f"wrote {SURFACE_FILE}")
         return
+    if args.write_outline:
+        write_outline(OUTLINE_FILE, SHIPPED_OUTLINE_POINTS)
+        print(f"wrote {OUTLINE_FILE}")
+        return
     if args.single is not None:
-        single(args.single, args.method, keep_heap=not args.plain_heap)
+        single(args.single, args.method, keep_heap=not args.plain_heap, scene=args.scene)
         return
     if args.table:
         print(table(json.loads(args.out.read_text())["records"]))
@@ -314,13 +369,15 @@ def main() -> None:
 
     from performance import machine_info
 
-    result = {"benchmark": "cases/rough.yaml with a self-affine profile of N points", "started":
+    benchmark = ("cases/rough.yaml with a self-affine profile of N points" if args.scene == "profile" else
+                 "cases/rough_rim.yaml with a rough outline of N vertices read from its file")
+    result = {"benchmark": benchmark, "scene": args.scene, "started":
               time.strftime("%Y-%m-%d %H:%M:%S %Z"), "command": " ".join([Path(sys.executable).name, *sys.argv]),
               "hurst": HURST, "height": HEIGHT, "seed": SEED, "sizes": args.sizes, "method": args.method,
               "heap": "glibc defaults" if args.plain_heap else "kept for reuse, as the command runs (contactfem.heap)",
               "machine": machine_info(), "records": []}
     for points in args.sizes:
-        record = run_subprocess(points, args.method, args.timeout, keep_heap=not args.plain_heap)
+        record = run_subprocess(points, args.method, args.timeout, keep_heap=not args.plain_heap, scene=args.scene)
         result["records"].append(record)
         result["growth_exponents"] = scaling(result["records"])
         args.out.parent.mkdir(parents=True, exist_ok=True)

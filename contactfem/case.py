@@ -22,7 +22,7 @@ take much memory, and every refusal stays one line:
   :data:`PATH_MAX` in all) and for NUL characters before anything opens them;
 - a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops;
   a profile file (``geometry.profile.file``) is read like the case file, at most
-  :data:`MAX_PROFILE_BYTES` of a regular file, and holds at most that many points.
+  :data:`MAX_DATA_FILE_BYTES` of a regular file, and holds at most that many points.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ import difflib
 import hashlib
 import math
 import os
+import re
 import stat
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -44,6 +45,7 @@ from contactfem.expressions import Expression, ExpressionError, compile_expressi
 from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
 from contactfem.linalg import BACKEND_CHOICES
 from contactfem.mesh.polygon import (
+    CLOCKWISE,
     Arc,
     Loop,
     circle_loop,
@@ -395,9 +397,15 @@ class _Reader:
             raise self.fail(key, value, f"expected one of {', '.join(choices)}")
         return value
 
+    NAME_EXPECTED = "a part name (a non-empty string of at most 64 printable characters)"
+
+    @staticmethod
+    def is_name(value: Any) -> bool:
+        return isinstance(value, str) and bool(value.strip()) and len(value) <= 64 and value.isprintable()
+
     def name(self, value: Any, key: str) -> str:
-        if not isinstance(value, str) or not value.strip() or len(value) > 64 or not value.isprintable():
-            raise self.fail(key, value, "expected a part name (a non-empty string of at most 64 printable characters)")
+        if not self.is_name(value):
+            raise self.fail(key, value, f"expected {self.NAME_EXPECTED}")
         return value
 
     def point(self, value: Any, key: str) -> tuple[float, float]:
@@ -838,8 +846,8 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
     if kind == "profile":
         return _profile(r, spec, key, source)
     if kind == "polygon":
-        spec = r.mapping(spec, key, ("vertices", "edges", "holes"), required=("vertices", "edges"))
-        outer = _loop(r, spec["vertices"], spec["edges"], key)
+        spec = r.mapping(spec, key, ("vertices", "edges", "file", "holes"))
+        outer = _listed_loop(r, spec, key, source, MAX_POLYGON_VERTICES)
         holes = []
         hole_list = spec.get("holes", [])
         if not isinstance(hole_list, list):
@@ -854,7 +862,9 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
                 raise r.fail(f"{key}.holes[{i}]", f"<{len(hole_list)} holes>",
                              f"the polygon and its holes have more than {MAX_POLYGON_VERTICES} vertices (a circle "
                              "counts 4); expected at most that many (use a gmsh mesh_file for more)")
-            holes.append(_hole(r, hole, f"{key}.holes[{i}]", outer))
+            holes.append(_hole(r, hole, f"{key}.holes[{i}]", outer, source, MAX_POLYGON_VERTICES - total))
+            if isinstance(hole, dict) and "file" in hole:
+                total += len(holes[-1].vertices)
         names = [*outer.edge_names]
         for hole in holes:
             names.extend(hole.edge_names)
@@ -990,33 +1000,16 @@ def _profile_expression(r: _Reader, spec: dict, key: str, limit: int) -> tuple[n
     return s, h
 
 
-#: The largest profile file, in bytes: room for MAX_POLYGON_VERTICES lines of two numbers
-#: written to full precision; at most this many bytes plus one are read.
-MAX_PROFILE_BYTES = 64 << 20
+#: The largest data file (a profile, an outline), in bytes: room for MAX_POLYGON_VERTICES
+#: lines of two numbers written to full precision; at most this many bytes plus one are read.
+MAX_DATA_FILE_BYTES = 64 << 20
 
 
 def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) -> tuple[np.ndarray, np.ndarray]:
     """The points of a CSV profile: two columns x, h, or one column of heights with ``spacing``."""
     fkey = f"{key}.file"
     text = spec["file"]
-    if not isinstance(text, str) or not text:
-        raise r.fail(fkey, text, "expected the path of a CSV file (x, h per line, or h per line with spacing)")
-    path = Path(text)
-    if not path.is_absolute():
-        path = source.parent / path
-    shown = shortened(str(path))
-    problem = path_problem(path)
-    if problem is not None:
-        raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
-    data = _read_profile_bytes(r, fkey, text, path)
-    r.inputs.append(data)
-    try:
-        content = data.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        line = data.count(b"\n", 0, error.start) + 1
-        raise r.fail(fkey, text, f"byte 0x{data[error.start]:02x} on line {line} is not UTF-8; expected "
-                     "a text file") from None
-    lines = content.splitlines()
+    lines = _data_file_lines(r, fkey, text, source, "a CSV file (x, h per line, or h per line with spacing)")
     table, line_of_row = _parse_columns(r, fkey, text, lines, limit)
     if table.shape[1] == 2:
         for option in ("spacing", "start"):
@@ -1034,6 +1027,29 @@ def _profile_file(r: _Reader, spec: dict, key: str, source: Path, limit: int) ->
     return s, h
 
 
+def _data_file_lines(r: _Reader, fkey: str, text: Any, source: Path, expected: str) -> list[str]:
+    """The lines of the data file a case names at ``fkey`` (a profile, an outline), read
+    within :data:`MAX_DATA_FILE_BYTES` and recorded for the case's hash."""
+    if not isinstance(text, str) or not text:
+        raise r.fail(fkey, text, f"expected the path of {expected}")
+    path = Path(text)
+    if not path.is_absolute():
+        path = source.parent / path
+    shown = shortened(str(path))
+    problem = path_problem(path)
+    if problem is not None:
+        raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
+    data = _read_data_bytes(r, fkey, text, path)
+    r.inputs.append(data)
+    try:
+        content = data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = data.count(b"\n", 0, error.start) + 1
+        raise r.fail(fkey, text, f"byte 0x{data[error.start]:02x} on line {line} is not UTF-8; expected "
+                     "a text file") from None
+    return content.splitlines()
+
+
 def _digest(text: bytes, inputs: list[bytes]) -> str:
     """SHA-256 of the case text, and of each data file it reads (so that a changed profile
     changes the case's hash); the text alone when it reads none."""
@@ -1043,8 +1059,8 @@ def _digest(text: bytes, inputs: list[bytes]) -> str:
     return digest.hexdigest()
 
 
-def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
-    """At most MAX_PROFILE_BYTES of a regular file, reading no more than one byte past it."""
+def _read_data_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
+    """At most MAX_DATA_FILE_BYTES of a regular file, reading no more than one byte past it."""
     shown = shortened(str(path))
     mode = _file_mode(r, fkey, text, path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -1057,8 +1073,8 @@ def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
         if not stat.S_ISREG(mode):
             kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
             raise r.fail(fkey, text, f"{shown} is {kind}; expected a CSV file")
-        while size <= MAX_PROFILE_BYTES:
-            chunk = os.read(fd, min(MAX_PROFILE_BYTES + 1 - size, 1 << 24))
+        while size <= MAX_DATA_FILE_BYTES:
+            chunk = os.read(fd, min(MAX_DATA_FILE_BYTES + 1 - size, 1 << 24))
             if not chunk:
                 break
             chunks.append(chunk)
@@ -1068,53 +1084,79 @@ def _read_profile_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
     finally:
         if fd is not None:
             os.close(fd)
-    if size > MAX_PROFILE_BYTES:
-        raise r.fail(fkey, text, f"{shown} is larger than {MAX_PROFILE_BYTES} bytes (64 MiB); expected a profile "
-                     f"of at most {MAX_POLYGON_VERTICES - 2} lines")
+    if size > MAX_DATA_FILE_BYTES:
+        raise r.fail(fkey, text, f"{shown} is larger than {MAX_DATA_FILE_BYTES} bytes (64 MiB); expected at most "
+                     f"{MAX_POLYGON_VERTICES} lines of points")
     return b"".join(chunks)
+
+
+class _DataLines:
+    """The data lines of a CSV file: ``#`` comments and blank lines skipped, the delimiter
+    (comma, semicolon or tab, else spaces) taken from the first data line, and that line
+    dropped as a header when its first ``numeric`` fields are not all numbers."""
+
+    def __init__(self, r: _Reader, fkey: str, text: str, lines: list[str], limit: int, numeric: int | None,
+                 expected: str) -> None:
+        self.lines = lines
+        indices = [i for i, line in enumerate(lines) if (start := line.lstrip()) and start[0] != "#"]
+        if not indices:
+            raise r.fail(fkey, text, f"the file holds no numbers; expected {expected}")
+        first = self.content(lines[indices[0]])
+        self.delimiter = next((d for d in (",", ";", "\t") if d in first), None)
+        if not all(is_number(f) for f in self.fields(lines[indices[0]])[:numeric]):
+            indices = indices[1:]  # a header
+        if len(indices) < 2:
+            raise r.fail(fkey, text, f"{len(indices)} data lines; expected at least 2 points")
+        if len(indices) > limit:
+            raise r.fail(fkey, text, f"{len(indices)} data lines; expected at most {limit} points")
+        self.indices = indices
+
+    @staticmethod
+    def content(line: str) -> str:
+        return line.split("#", 1)[0].strip()
+
+    def fields(self, line: str) -> list[str]:
+        return [f.strip() for f in self.content(line).split(self.delimiter)]
+
+    def line_of(self, row: int) -> int:
+        """The 1-based line number of data row ``row``."""
+        return self.indices[row] + 1
+
+
+def is_number(field: str) -> bool:
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
+
+
+def _checked_numbers(r: _Reader, fkey: str, text: str, table: np.ndarray, data: _DataLines) -> np.ndarray:
+    bad = np.flatnonzero(~np.all(np.isfinite(table) & (np.abs(table) <= SCALE_LIMIT), axis=1))
+    if bad.size:
+        raise r.fail(fkey, text, f"line {data.line_of(int(bad[0]))}: {table[bad[0]].tolist()}: expected finite "
+                     f"numbers within ±{SCALE_LIMIT:g}")
+    return table
 
 
 def _parse_columns(r: _Reader, fkey: str, text: str, lines: list[str], limit: int):
     """The numbers of a one- or two-column CSV (comma, semicolon, tab or spaces between
     them; ``#`` comments, blank lines and one header line allowed) as an (n, c) array,
     and a function from a row to its line number in the file."""
-    def content(line: str) -> str:
-        return line.split("#", 1)[0].strip()
-
-    data_lines = [i for i, line in enumerate(lines) if (start := line.lstrip()) and start[0] != "#"]
-    if not data_lines:
-        raise r.fail(fkey, text, "the file holds no numbers; expected lines x, h (or h with spacing)")
-    first = content(lines[data_lines[0]])
-    delimiter = next((d for d in (",", ";", "\t") if d in first), None)
-
-    def fields(line: str) -> list[str]:
-        return [f.strip() for f in content(line).split(delimiter)]
-
-    def is_number(field: str) -> bool:
-        try:
-            float(field)
-        except ValueError:
-            return False
-        return True
-
-    if not all(is_number(f) for f in fields(lines[data_lines[0]])):
-        data_lines = data_lines[1:]  # a header
-    if len(data_lines) < 2:
-        raise r.fail(fkey, text, f"{len(data_lines)} data lines; expected at least 2 points")
-    if len(data_lines) > limit:
-        raise r.fail(fkey, text, f"{len(data_lines)} data lines; expected at most {limit} points")
-    columns = len(fields(lines[data_lines[0]]))
+    data = _DataLines(r, fkey, text, lines, limit, None, "lines x, h (or h with spacing)")
+    data_lines = data.indices
+    columns = len(data.fields(lines[data_lines[0]]))
     if columns not in (1, 2):
         raise r.fail(fkey, text, f"line {data_lines[0] + 1} has {columns} columns; expected two (x, h) or one "
                      "(h, with spacing)")
     try:
-        table = np.loadtxt([lines[i] for i in data_lines], delimiter=delimiter, comments="#", ndmin=2,
+        table = np.loadtxt([lines[i] for i in data_lines], delimiter=data.delimiter, comments="#", ndmin=2,
                            dtype=np.float64)
         if table.shape != (len(data_lines), columns):
             raise ValueError("shape")
     except ValueError:
         for i in data_lines:
-            row = fields(lines[i])
+            row = data.fields(lines[i])
             if len(row) != columns:
                 raise r.fail(fkey, text, f"line {i + 1} has {len(row)} columns; expected {columns} like the "
                              "first line of numbers") from None
@@ -1122,11 +1164,70 @@ def _parse_columns(r: _Reader, fkey: str, text: str, lines: list[str], limit: in
             if bad is not None:
                 raise r.fail(fkey, text, f"line {i + 1}: {shortened(bad, 40)!r} is not a number") from None
         raise r.fail(fkey, text, "cannot read the numbers; expected lines x, h (or h with spacing)") from None
-    bad = np.flatnonzero(~np.all(np.isfinite(table) & (np.abs(table) <= SCALE_LIMIT), axis=1))
-    if bad.size:
-        raise r.fail(fkey, text, f"line {data_lines[bad[0]] + 1}: {table[bad[0]].tolist()}: expected finite numbers "
-                     f"within ±{SCALE_LIMIT:g}")
-    return table, lambda row: data_lines[row] + 1
+    return _checked_numbers(r, fkey, text, table, data), data.line_of
+
+
+OUTLINE_EXPECTED = "lines x, y, part (the part of the edge to the next point; empty: the part above)"
+
+
+def _outline_file(r: _Reader, text: Any, key: str, source: Path, limit: int) -> Loop:
+    """A closed straight-edged loop from a CSV file: per line a vertex x, y and the part of
+    the edge from it to the next vertex (the last to the first), which may be left empty
+    after the first line to continue the part above. Either orientation is accepted; the
+    loop is returned counter-clockwise (a clockwise file read backwards), and is simple."""
+    fkey = f"{key}.file"
+    lines = _data_file_lines(r, fkey, text, source, f"a CSV file of {OUTLINE_EXPECTED}")
+    data = _DataLines(r, fkey, text, lines, limit, 2, OUTLINE_EXPECTED)
+    # The numbers through loadtxt (C, reading the first two columns of every line); the
+    # names, one string per line, by counting delimiters: no split of the whole file.
+    texts = [lines[i] for i in data.indices]
+    if any("#" in line for line in texts):
+        texts = [line.split("#", 1)[0] for line in texts]
+    if data.delimiter is None:
+        rows = [line.split() for line in texts]
+        widths = np.fromiter(map(len, rows), dtype=np.int64, count=len(rows))
+        names = [row[2] if len(row) == 3 else "" for row in rows]
+    else:
+        delimiter = data.delimiter
+        widths = np.fromiter((line.count(delimiter) for line in texts), dtype=np.int64, count=len(texts)) + 1
+        names = [line.rpartition(delimiter)[2].strip() if width == 3 else ""
+                 for line, width in zip(texts, widths.tolist())]
+    wrong = np.flatnonzero((widths < 2) | (widths > 3))
+    if wrong.size:
+        raise r.fail(fkey, text, f"line {data.line_of(int(wrong[0]))} has {int(widths[wrong[0]])} columns; "
+                     f"expected {OUTLINE_EXPECTED}")
+    try:
+        table = np.loadtxt(texts, delimiter=data.delimiter, usecols=(0, 1), ndmin=2, dtype=np.float64)
+    except ValueError:
+        for row, line in enumerate(texts):
+            bad = next((f for f in data.fields(line)[:2] if not is_number(f)), None)
+            if bad is not None:
+                raise r.fail(fkey, text, f"line {data.line_of(row)}: {shortened(bad, 40)!r} is not a number") from None
+        raise r.fail(fkey, text, f"cannot read the numbers; expected {OUTLINE_EXPECTED}") from None
+    vertices = _checked_numbers(r, fkey, text, table, data)
+    names = np.array(names, dtype=object)
+    named = np.flatnonzero(names != "")
+    if named.size == 0 or named[0] != 0:
+        raise r.fail(fkey, text, f"line {data.line_of(0)} names no part; expected {OUTLINE_EXPECTED}")
+    for first in np.unique(names[named], return_index=True)[1]:
+        row = int(named[first])
+        if not r.is_name(names[row]):
+            raise r.fail(fkey, text, f"line {data.line_of(row)}: part {shortened(names[row], 40)!r}: expected "
+                         f"{r.NAME_EXPECTED}")
+    # An empty part continues the last named one above it.
+    names = names[named[np.searchsorted(named, np.arange(len(names)), side="right") - 1]]
+    problem = polygon_problems(vertices)
+    if problem == CLOCKWISE:
+        # Edge i of the reversed loop runs from vertex k-1-i to k-2-i: the file's edge k-2-i.
+        vertices = vertices[::-1].copy()
+        names = names[(len(names) - 2 - np.arange(len(names))) % len(names)]
+    elif problem is not None:
+        # Vertex i, and edge i from it to the next, are given on data line i.
+        located = re.sub(r"(?<=vertex )\d+|(?<=edges )\d+|(?<= and )\d+",
+                         lambda m: f"{m[0]} (line {data.line_of(int(m[0]))})", problem)
+        raise r.fail(fkey, text, f"the outline is not a simple polygon: {located}")
+    _check_extent(r, fkey, vertices)
+    return Loop(vertices=vertices, edge_names=tuple(names.tolist()))
 
 
 def _loop(r: _Reader, vertices: Any, edges: Any, key: str) -> Loop:
@@ -1233,11 +1334,26 @@ def _arc_by_angles(r: _Reader, arc: dict, key: str, center: tuple[float, float],
     return Arc(center=center, ccw=ccw)
 
 
-def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
-    data = r.mapping(data, key, ("circle", "vertices", "edges", "name"))
+def _listed_loop(r: _Reader, spec: dict, key: str, source: Path, limit: int) -> Loop:
+    """A polygonal loop as the case gives it: ``vertices`` and ``edges``, or an outline ``file``."""
+    if "file" in spec:
+        for listed in ("vertices", "edges"):
+            if listed in spec:
+                raise r.fail(f"{key}.{listed}", "...", "not with file: the file lists the vertices and their "
+                             "edges' parts")
+        return _outline_file(r, spec["file"], key, source, limit)
+    for listed in ("vertices", "edges"):
+        if listed not in spec:
+            raise CaseError(f"{r.filename}: {key}.{listed}: missing (a polygon is vertices and edges, or a file)")
+    return _loop(r, spec["vertices"], spec["edges"], key)
+
+
+def _hole(r: _Reader, data: Any, key: str, outer: Loop, source: Path, limit: int) -> Loop:
+    data = r.mapping(data, key, ("circle", "vertices", "edges", "file", "name"))
     if "circle" in data:
-        if "vertices" in data or "edges" in data:
-            raise r.fail(key, data, "a hole is either a circle or a polygon (vertices and edges), not both")
+        if "vertices" in data or "edges" in data or "file" in data:
+            raise r.fail(key, data, "a hole is either a circle or a polygon (vertices and edges, or a file), "
+                         "not both")
         circle = r.mapping(data["circle"], f"{key}.circle", ("center", "radius"), required=("center", "radius"))
         center = r.point(circle["center"], f"{key}.circle.center")
         radius = r.number(circle["radius"], f"{key}.circle.radius", low=0, low_open=True)
@@ -1253,11 +1369,11 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop) -> Loop:
         except MeshError as error:
             raise r.fail(f"{key}.circle", circle, str(error)) from None
     else:
-        if "vertices" not in data or "edges" not in data:
-            raise r.fail(key, data, "expected circle: {center, radius} or vertices and edges")
+        if not ("vertices" in data or "edges" in data or "file" in data):
+            raise r.fail(key, data, "expected circle: {center, radius}, vertices and edges, or file")
         if "name" in data:
             raise r.fail(f"{key}.name", data["name"], "a polygonal hole names each of its edges instead")
-        loop = _loop(r, data["vertices"], data["edges"], key)
+        loop = _listed_loop(r, data, key, source, limit)
         least = _extent(PolygonGeometry(outer, ())) / MAX_DIVISIONS
         span = float(np.ptp(loop.vertices, axis=0).min())
         if span < least:

@@ -196,7 +196,7 @@ def test_profile_file_paths_and_kinds(tmp_path):
 
 
 def test_profile_files_are_read_within_their_bounds(tmp_path, monkeypatch):
-    monkeypatch.setattr(case_module, "MAX_PROFILE_BYTES", 100)
+    monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 100)
     refused(tmp_path, {"file": "surface.csv", "depth": 1}, "larger than 100 bytes", csv="0,0\n" * 40)
     monkeypatch.setattr(case_module, "MAX_POLYGON_VERTICES", 12)
     refused(tmp_path, {"file": "surface.csv", "depth": 1}, "11 data lines; expected at most 10",

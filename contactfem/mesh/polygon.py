@@ -224,18 +224,19 @@ def loop_outline(loop: Loop, max_angle: float = OUTLINE_CHORD_ANGLE) -> np.ndarr
     points at most ``max_angle`` apart (the last point is not repeated)."""
     k = len(loop.vertices)
     chunks = []
-    for i in range(k):
+    following = 0  # the first vertex not yet in the outline
+    # Runs of straight edges are their vertices; only the arcs (a few) are visited.
+    for i in loop.arc_edges.tolist():
         start, end = loop.vertices[i], loop.vertices[(i + 1) % k]
         arc = loop.edge_arcs[i]
-        if arc is None:
-            chunks.append(start[None, :])
-            continue
         theta0, sweep = arc_sweep(start, end, arc)
         n = max(1, math.ceil(abs(sweep) / max_angle))
         theta = theta0 + sweep * np.arange(1, n) / n
         radius = float(np.linalg.norm(start - np.asarray(arc.center)))
         inner = np.asarray(arc.center) + radius * np.stack([np.cos(theta), np.sin(theta)], axis=1)
-        chunks.append(np.concatenate([start[None, :], inner]))
+        chunks += [loop.vertices[following:i + 1], inner]
+        following = i + 1
+    chunks.append(loop.vertices[following:])
     return np.concatenate(chunks)
 
 
@@ -607,6 +608,10 @@ def _window_pairs(low: np.ndarray, high: np.ndarray, since: np.ndarray, until: n
     return m[which], n
 
 
+#: What :func:`polygon_problems` says of a simple polygon listed clockwise.
+CLOCKWISE = "vertices are clockwise; list them counter-clockwise"
+
+
 def polygon_problems(vertices: np.ndarray) -> str | None:
     """Why the straight polygon through ``vertices`` is not a valid counter-clockwise boundary.
 
@@ -662,7 +667,7 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     if area2 == 0.0:
         return "zero area"
     if area2 < 0.0:
-        return "vertices are clockwise; list them counter-clockwise"
+        return CLOCKWISE
     return None
 
 
