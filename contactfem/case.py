@@ -78,7 +78,7 @@ MAX_DIVISIONS = 100_000
 #: the solution is pure locking. A warning starts far earlier (report.LOCKING_WARNING_RATIO).
 MAX_LAME_RATIO = 1e8
 #: The largest case file, in bytes. Cases are a few kB (a polygon of 2000 vertices is
-#: under 100 kB; longer outlines come from a profile file); the bound keeps a mistaken argument (a log, /dev/zero) from
+#: under 100 kB; longer outlines come from an outline or profile file); the bound keeps a mistaken argument (a log, /dev/zero) from
 #: being read whole.
 MAX_CASE_BYTES = 1 << 20
 #: The most YAML values (scalars, lists and mappings) a case may hold, each alias counted
@@ -532,7 +532,9 @@ def _read_bounded(path: Path, shown: str, what: str = "case") -> bytes:
         os.close(fd)
     if size > MAX_CASE_BYTES:
         raise CaseError(f"{shown}: the {what} file is larger than {MAX_CASE_BYTES} bytes (1 MiB); "
-                        f"expected a YAML {what} file of a few kB")
+                        f"expected a YAML {what} file of a few kB" +
+                        (" (long outlines and profiles go in files of their own: geometry.polygon.file, "
+                         "geometry.profile.file)" if what == "case" else ""))
     return b"".join(chunks)
 
 
@@ -690,8 +692,12 @@ class _CaseLoader(yaml.composer.Composer, _Events, yaml.constructor.SafeConstruc
                              f"{self.peek_event().start_mark.line + 1}); expected the case format's few levels")
             self._values += 1
             if self._values > MAX_YAML_VALUES:
-                raise _Limit(f"{self._where()}: the document holds more than {MAX_YAML_VALUES} values (line "
-                             f"{self.peek_event().start_mark.line + 1}); expected a case of at most that many")
+                where = self._where()
+                # A long outline or profile listed inline is what reaches the bound in practice.
+                hint = (" (list a long outline in a file: geometry.polygon.file, or geometry.profile.file)"
+                        if where.startswith("geometry.") else "")
+                raise _Limit(f"{where}: the document holds more than {MAX_YAML_VALUES} values (line "
+                             f"{self.peek_event().start_mark.line + 1}); expected a case of at most that many{hint}")
             start = self.peek_event().start_mark
             self.keys_at.setdefault((start.line, start.column), self._key())
             node = super().compose_node(parent, index)

@@ -220,3 +220,15 @@ def test_the_shipped_rough_rim_case_is_what_the_benchmark_writes(tmp_path):
     vertices, parts = rim_outline(SHIPPED_OUTLINE_POINTS)
     assert np.array_equal(case.geometry.outer.vertices, vertices)
     assert case.geometry.outer.edge_names == tuple(parts) and case.contact_parts == ("rim",)
+
+
+def test_an_outline_too_long_to_list_points_to_the_file(tmp_path):
+    """Listed inline, 40 000 vertices pass the case's bound on YAML values: the refusal says
+    where a long outline goes."""
+    angles = np.linspace(0, 2 * np.pi, 40_000, endpoint=False)
+    vertices = "[" + ",".join(f"[{np.cos(a):.5f},{np.sin(a):.5f}]" for a in angles) + "]"
+    text = f"geometry:\n  polygon:\n    vertices: {vertices}\n    edges: [rim]\n"
+    with pytest.raises(CaseError) as error:
+        parse_case(text, source=tmp_path / "body.yaml")
+    message = str(error.value)
+    assert "more than 100000 values" in message and "geometry.polygon.file" in message and "\n" not in message
