@@ -302,6 +302,8 @@ class Case:
     exact: ExactBlock | None = None
     units: Units = Units()
     load_path: LoadPath | None = None
+    #: The data files the geometry was read from (a profile, an outline), in the order read.
+    data_files: tuple[Path, ...] = ()
 
     def part(self, name: str) -> BoundaryPart:
         return next(p for p in self.parts if p.name == name)
@@ -336,8 +338,10 @@ class _Reader:
 
     def __init__(self, filename: str) -> None:
         self.filename = filename
-        #: The bytes of the data files the case reads (a profile's CSV), hashed with its text.
+        #: The bytes of the data files the case reads (a profile's CSV), hashed with its text,
+        #: and their paths.
         self.inputs: list[bytes] = []
+        self.input_paths: list[Path] = []
 
     def fail(self, key: str, value: Any, expected: str) -> CaseError:
         shown = _show(value)
@@ -618,6 +622,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
         source=source,
         text=text,
         digest=_digest(encoded, r.inputs),
+        data_files=tuple(r.input_paths),
         title=title,
         geometry=geometry,
         mesh=mesh,
@@ -1047,6 +1052,7 @@ def _data_file_lines(r: _Reader, fkey: str, text: Any, source: Path, expected: s
         raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
     data = _read_data_bytes(r, fkey, text, path)
     r.inputs.append(data)
+    r.input_paths.append(path)
     try:
         content = data.decode("utf-8-sig")
     except UnicodeDecodeError as error:

@@ -481,6 +481,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     summary = {
         "case": str(case_file),
         "title": case.title,
+        "geometry": _geometry_figures(case),
         "material": {"E": case.material.young, "nu": case.material.poisson, "plane": case.material.plane},
         "parts": {p.name: p.label for p in case.parts},
         "mesh": {"nodes": mesh.n_points, "triangles": mesh.n_triangles,
@@ -498,6 +499,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     if quiet:
         return
     click.echo(f"{case_file}: valid — {case.title}")
+    click.echo(f"  geometry   {_geometry_text(summary['geometry'])}")
     click.echo(f"  material   E = {case.material.young:g}, nu = {case.material.poisson:g}, plane {case.material.plane}")
     for part in case.parts:
         click.echo(f"  boundary   {part.name}: {part.label}")
@@ -834,6 +836,38 @@ def _estimate(case, problem) -> dict:
 
     backend = resolve_backend(case.solver.backend)
     return {"backend": backend, **estimate_cost(problem.n_unknowns, backend)}
+
+
+def _geometry_figures(case) -> dict:
+    """What the case's body is: its kind, its loops' vertices and the data files read."""
+    from contactfem.case import PolygonGeometry, RectangleGeometry
+
+    geometry = case.geometry
+    figures: dict = {"files": [str(path) for path in case.data_files]}
+    if isinstance(geometry, RectangleGeometry):
+        figures.update(kind="rectangle", lower=list(geometry.lower), upper=list(geometry.upper))
+    elif isinstance(geometry, PolygonGeometry):
+        loops = (geometry.outer, *geometry.holes)
+        figures.update(kind="polygon", vertices=int(sum(len(loop.vertices) for loop in loops)),
+                       holes=len(geometry.holes), arcs=int(sum(len(loop.arc_edges) for loop in loops)))
+    else:
+        figures.update(kind="mesh_file", files=[str(geometry.path)])
+    return figures
+
+
+def _geometry_text(figures: dict) -> str:
+    """The geometry of :func:`_geometry_figures` in words."""
+    if figures["kind"] == "rectangle":
+        (x0, y0), (x1, y1) = figures["lower"], figures["upper"]
+        text = f"rectangle [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}]"
+    elif figures["kind"] == "polygon":
+        holes, arcs = figures["holes"], figures["arcs"]
+        text = (f"polygon of {figures['vertices']} vertices" + (f", {holes} hole{'s' * (holes != 1)}" if holes else "")
+                + (f", {arcs} arc{'s' * (arcs != 1)}" if arcs else ""))
+    else:
+        return f"mesh file {figures['files'][0]}"
+    files = figures["files"]
+    return text + (f" (read from {', '.join(Path(f).name for f in files)})" if files else "")
 
 
 def _obstacle_text(obstacle: dict) -> str:

@@ -15,6 +15,7 @@ from that vertex to the next and an empty part continuing the one above. Checked
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -232,3 +233,20 @@ def test_an_outline_too_long_to_list_points_to_the_file(tmp_path):
         parse_case(text, source=tmp_path / "body.yaml")
     message = str(error.value)
     assert "more than 100000 values" in message and "geometry.polygon.file" in message and "\n" not in message
+
+
+def test_check_says_what_the_body_is_and_where_it_was_read():
+    from conftest import make_runner
+
+    from contactfem.cli import main
+
+    runner = make_runner()
+    shown = runner.invoke(main, ["check", str(ROOT / "cases" / "rough_rim.yaml")])
+    assert shown.exit_code == 0, shown.output
+    assert "  geometry   polygon of 2001 vertices (read from rough_rim.csv)\n" in shown.stdout
+    figures = json.loads(runner.invoke(main, ["check", str(ROOT / "cases" / "rough_rim.yaml"), "--json"]).stdout)
+    figures = figures["geometry"]
+    assert figures == {"kind": "polygon", "vertices": 2001, "holes": 0, "arcs": 0,
+                       "files": [str(ROOT / "cases" / "rough_rim.csv")]}
+    square = runner.invoke(main, ["check", str(ROOT / "cases" / "square.yaml")])
+    assert "  geometry   rectangle [0, 1] x [0, 1]\n" in square.stdout
