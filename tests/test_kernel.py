@@ -682,3 +682,56 @@ def test_columns_past_the_memory_bound_are_not_kept(monkeypatch, forward):
         assert (linear.factorizations, linear.column_solves) == (factorizations, columns)
         fresh_u, _ = ActiveSetSolver(contact, "cholmod").solve(target)
         assert np.abs(u - fresh_u).max() < 1e-10 * np.abs(fresh_u).max()
+
+
+@pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
+def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
+    """From FORWARD_COLUMNS_FROM unknowns forward columns are taken without sampling their
+    paths, and before any is stored the Schur blocks' cost was estimated with paths of √n
+    unknowns. On a long strip they are ten times that and more, and a first batch of
+    hundreds of columns so costed took seconds against a refactorisation's tenth of one.
+    The estimate now samples the paths when they could decide it, and only then: with the
+    strip's paths the large batch refactorises where √n would have updated, and a
+    refactorisation costlier than the longest possible paths leaves them unsampled."""
+    from conftest import case_from, square_case_dict
+
+    import contactfem.kernel as kernel
+    from contactfem.kernel import DENSE_FLOPS, ActiveSetSolver
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    strip = square_case_dict(8)
+    strip["geometry"]["rectangle"]["upper"] = [1, 1.0 / 200]
+    strip["mesh"]["divisions"] = [800, 4]
+    contact = prepare(case_from(strip)).contact_system(get_method("positive")).system
+    n = contact.stiffness.shape[0]
+    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # as above it: no path check
+    reference = solve_contact(contact, backend="cholmod").active.copy()
+    target = reference.copy()
+    target[np.random.default_rng(3).choice(len(target), 200, replace=False)] ^= True
+
+    def prepared() -> ActiveSetSolver:
+        linear = ActiveSetSolver(contact, "cholmod")
+        linear.solve(reference)
+        if not callable(getattr(linear.factor, "forward_seconds", None)):
+            pytest.skip("this CHOLMOD has no forward solves")
+        assert linear.forward and linear.path_share is None and linear.column_count == 0
+        return linear
+
+    linear = prepared()
+    free = linear.normal_dofs[~reference]
+    columns, _ = linear.factor.forward_sparse(
+        sp.csc_matrix((np.ones(len(free)), (free, np.arange(len(free)))), shape=(n, len(free))))
+    true_path = columns.nnz / len(free)
+    assert true_path > 12 * np.sqrt(n), (true_path, np.sqrt(n))
+    changed = int((target != reference).sum())
+    base = linear.factor.forward_seconds(changed) + changed**3 / 3 / DENSE_FLOPS + linear.solve_seconds
+    blocks = 2.0 * changed * changed / DENSE_FLOPS
+    # Between the √n estimate and the true paths' one: the sampled paths must decide.
+    linear.refactorization_seconds = base + blocks * np.sqrt(3 * np.sqrt(n) * true_path)
+    assert linear._refactorize_first(target) is True
+    assert 0.5 < linear.path_share * n / true_path < 2.0
+    # Costlier than even paths through every unknown: nothing to sample.
+    linear = prepared()
+    linear.refactorization_seconds = 2 * (base + blocks * n)
+    assert linear._refactorize_first(target) is False and linear.path_share is None
