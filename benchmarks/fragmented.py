@@ -18,6 +18,9 @@ refinements for shipped and overlap):
 - ``light``: the same block pushed down by 1e-4 only (:data:`LIGHT_PUSH`): a few patches
   at the highest asperities, which a cold start finds in a few cheap Schur steps from its
   first solve, so that a coarse level has little to save.
+- ``long``: a strip of length segments/1000 and depth 0.5 whose base is a rough profile
+  of that length (spacing 1e-3, rms 2e-4), pushed down by 5e-4: hundreds of patches on a
+  long, thin mesh whose elimination tree has long paths (:func:`long_case`).
 - ``wavy``: a 1 x (1/k) strip clamped on its left, resting on y <= 0, under the top traction
   (0, -1e4 (0.1 + sin(k x))): a contact patch per period, k/2π of them; 16 cells per
   period along x, 4 across (k = 2000 makes a strip of aspect 2000, too slender for double
@@ -59,11 +62,14 @@ from performance import (
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
-DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "light": [1000, 4000, 16000], "wavy": [200], "square": [256, 1024],
-                 "shipped": [3], "overlap": [2]}
-QUICK_SIZES = {"rough": [1000, 4000], "light": [1000], "wavy": [200], "square": [256], "shipped": [2], "overlap": [1]}
+DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "light": [1000, 4000, 16000], "long": [4000, 16000, 64000],
+                 "wavy": [200], "square": [256, 1024], "shipped": [3], "overlap": [2]}
+QUICK_SIZES = {"rough": [1000, 4000], "light": [1000], "long": [4000], "wavy": [200], "square": [256], "shipped": [2],
+               "overlap": [1]}
 #: The ``light`` scene's push: the rough block touches at its highest asperities only.
 LIGHT_PUSH = 1e-4
+#: The ``long`` scene's push: 200-450 patches at 4 000-16 000 segments.
+LONG_PUSH = 5e-4
 SEED = 20050101
 
 
@@ -85,24 +91,33 @@ def rough_profile(segments: int, hurst: float = 0.8, rms: float = 2e-4, seed: in
     return x, h * rms / h.std()
 
 
-def rough_case(segments: int, seed: int = SEED, push: float = 9e-4):
+def rough_case(segments: int, seed: int = SEED, push: float = 9e-4, length: float = 1.0, rms: float = 2e-4):
     from contactfem.case import PolygonGeometry, parse_case
     from contactfem.mesh.polygon import Loop
 
-    x, h = rough_profile(segments, seed=seed)
+    x, h = rough_profile(segments, seed=seed, rms=rms)
+    x = length * x
     data = {
         "title": f"rough base, {segments} segments, pushed {push:g}",
-        "geometry": {"polygon": {"vertices": [[0, 0], [1, 0], [1, 0.5], [0, 0.5]],
+        "geometry": {"polygon": {"vertices": [[0, 0], [length, 0], [length, 0.5], [0, 0.5]],
                                  "edges": ["base", "side", "top", "side"]}},
-        "mesh": {"size": 28.0 / segments},
+        "mesh": {"size": 28.0 * length / segments},
         "material": {"E": 1.0e6, "nu": 0.3},
         "boundary": {"top": {"displacement": [0, -push]}, "side": "free", "base": "contact"},
         "obstacle": {"point": [0, float(h.min())], "normal": [0, -1]},
     }
     case = parse_case(yaml.safe_dump(data), source=ROOT / "benchmarks" / f"rough-{segments}.yaml")
-    vertices = np.vstack([np.column_stack([x, h]), [[1.0, 0.5], [0.0, 0.5]]])
+    vertices = np.vstack([np.column_stack([x, h]), [[length, 0.5], [0.0, 0.5]]])
     names = ("base",) * segments + ("side", "top", "side")
     return replace(case, geometry=PolygonGeometry(Loop(vertices, names), ()))
+
+
+def long_case(segments: int, seed: int = SEED):
+    """A rough strip segments/1000 long (profile spacing 1e-3) and 0.5 deep, its profile
+    the rough block's synthesis over that window (rms 2e-4), pushed down by
+    :data:`LONG_PUSH`: the block's push of 9e-4 flattens a strip this thin over its whole
+    length (one patch from 64 000 segments)."""
+    return rough_case(segments, seed=seed, push=LONG_PUSH, length=segments / 1000)
 
 
 def wavy_case(wavenumber: int):
@@ -160,6 +175,8 @@ def scenes(name: str, size: int) -> list[tuple[str, object, int | None]]:
         return [(f"rough-{size}", rough_case(size), None)]
     if name == "light":
         return [(f"light-{size}", rough_case(size, push=LIGHT_PUSH), None)]
+    if name == "long":
+        return [(f"long-{size}", long_case(size), None)]
     if name == "wavy":
         return [(f"wavy-{size}", wavy_case(size), None)]
     if name == "square":
@@ -283,7 +300,7 @@ def table(records: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scenes", nargs="+", choices=list(DEFAULT_SIZES), default=["rough", "light", "wavy", "square", "shipped"])
+    parser.add_argument("--scenes", nargs="+", choices=list(DEFAULT_SIZES), default=["rough", "light", "long", "wavy", "square", "shipped"])
     parser.add_argument("--sizes", nargs="+", type=int, help="sizes for every scene chosen (default: per scene)")
     parser.add_argument("--quick", action="store_true", help="the small sizes only")
     parser.add_argument("--methods", nargs="+", choices=["positive", "standard"], default=["positive", "standard"])
