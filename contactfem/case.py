@@ -21,8 +21,9 @@ take much memory, and every refusal stays one line:
   text against the file system's limits (:data:`NAME_MAX` bytes per component,
   :data:`PATH_MAX` in all) and for NUL characters before anything opens them;
 - a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops;
-  a profile file (``geometry.profile.file``) is read like the case file, at most
-  :data:`MAX_DATA_FILE_BYTES` of a regular file, and holds at most that many points.
+  a profile or outline file (``geometry.profile.file``, ``geometry.polygon.file``) is read
+  like the case file, at most :data:`MAX_DATA_FILE_BYTES` of a regular file, and holds at
+  most that many points.
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ MAX_YAML_DEPTH = 32
 #: The most vertices of a polygon geometry, its holes included, or of a profile's outline.
 #: The simplicity check is a sweep, O(k log k) in time and O(k) in memory (about 2 s and
 #: 0.5 GB at this bound); inline YAML lists stay far below it (MAX_YAML_VALUES), a profile
-#: read from a file may reach it.
+#: or an outline read from a file may reach it.
 MAX_POLYGON_VERTICES = 1_000_000
 
 
