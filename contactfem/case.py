@@ -339,8 +339,8 @@ class _Reader:
 
     def __init__(self, filename: str) -> None:
         self.filename = filename
-        #: The bytes of the data files the case reads (a profile's CSV), hashed with its text,
-        #: and their paths.
+        #: The SHA-256 of each data file the case reads (a profile, an outline, a mesh),
+        #: hashed with its text, and their paths.
         self.inputs: list[bytes] = []
         self.input_paths: list[Path] = []
 
@@ -893,6 +893,8 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
     if not stat.S_ISREG(mode):
         kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
         raise r.fail(key, spec, f"{shortened(str(path))} is {kind}; expected a gmsh .msh file")
+    r.inputs.append(_file_digest(r, key, spec, path))
+    r.input_paths.append(path)
     return MeshFileGeometry(path), None
 
 
@@ -1052,7 +1054,7 @@ def _data_file_lines(r: _Reader, fkey: str, text: Any, source: Path, expected: s
     if problem is not None:
         raise r.fail(fkey, text, f"the path {'' if path == Path(text) else f'{shown} '}{problem}")
     data = _read_data_bytes(r, fkey, text, path)
-    r.inputs.append(data)
+    r.inputs.append(hashlib.sha256(data).digest())
     r.input_paths.append(path)
     try:
         content = data.decode("utf-8-sig")
@@ -1064,12 +1066,25 @@ def _data_file_lines(r: _Reader, fkey: str, text: Any, source: Path, expected: s
 
 
 def _digest(text: bytes, inputs: list[bytes]) -> str:
-    """SHA-256 of the case text, and of each data file it reads (so that a changed profile
-    changes the case's hash); the text alone when it reads none."""
+    """SHA-256 of the case text followed by the SHA-256 of each data file it reads
+    (``inputs``, in the order read), so that a changed profile, outline or mesh file changes
+    the case's hash; the text's alone when it reads none."""
     digest = hashlib.sha256(text)
-    for data in inputs:
-        digest.update(hashlib.sha256(data).digest())
+    for file_digest in inputs:
+        digest.update(file_digest)
     return digest.hexdigest()
+
+
+def _file_digest(r: _Reader, key: str, spec: Any, path: Path) -> bytes:
+    """SHA-256 of a file, read in blocks (a mesh file may be large)."""
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as stream:
+            for block in iter(lambda: stream.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as error:
+        raise r.fail(key, spec, f"cannot read {shortened(str(path))} ({_reason(error)})") from None
+    return digest.digest()
 
 
 def _read_data_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:

@@ -15,9 +15,10 @@ give its keys, by dotted path::
 
 A point is the base case's YAML mapping with its values set (a list element by
 ``key[i]``; missing mappings are created), dumped back to YAML: that text is the point's
-case, validated by :func:`contactfem.case.parse_case` like any file, and its SHA-256 names
-the point's stored record (``points/<sha256>.json``), so that a sweep run again solves only
-what is not stored yet.
+case, validated by :func:`contactfem.case.parse_case` like any file, and its SHA-256 with
+the data files it reads (the case's digest) names the point's stored record
+(``points/<sha256>.json``), so that a sweep run again solves only what is not stored yet,
+and a point whose profile, outline or mesh file changed anew.
 
 Each point is solved by :func:`solve_point`, in this process one after another or on a
 Dask cluster (an optional dependency, imported only by :func:`open_engine`). Nothing here
@@ -115,7 +116,8 @@ _STEP = re.compile(rf"({_NAME})|\[(\d+)\]")
 @dataclass(frozen=True)
 class SweepPoint:
     """One point: ``values`` by dotted key, its case ``text`` (None when the values could not
-    be set) and the text's SHA-256 ``digest``; ``problem`` is its one-line refusal, if any."""
+    be set) and its ``digest``, the case's (the text and the data files it reads), or the
+    text's SHA-256 when it is refused; ``problem`` is its one-line refusal, if any."""
 
     index: int  # 1-based, in the order of the grid or the list
     values: dict[str, Any]
@@ -282,17 +284,37 @@ def _point(base: Path, base_data: dict, values: dict[str, Any], index: int, name
             _assign(data, key, _unshared(value))
     except _Unassignable as problem:
         return SweepPoint(index, values, label, source, None, None, f"{name}: {problem}")
-    geometry = data.get("geometry")
-    if isinstance(geometry, dict) and isinstance(geometry.get("mesh_file"), str):
-        # The text must say which file it meshes wherever it is solved, and its hash must change with it.
-        geometry["mesh_file"] = str((base.parent / geometry["mesh_file"]).resolve())
+    # The text must say which files it reads wherever it is solved (a worker elsewhere).
+    _absolute_data_paths(data.get("geometry"), base.parent)
     text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
-    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
     try:
-        parse_case(text, source=source)
+        case = parse_case(text, source=source)
     except CaseError as error:
-        return SweepPoint(index, values, label, source, text, digest, str(error))
-    return SweepPoint(index, values, label, source, text, digest)
+        return SweepPoint(index, values, label, source, text, hashlib.sha256(text.encode("utf-8")).hexdigest(),
+                          str(error))
+    # The case's own digest covers the data files it reads (a profile, an outline, a mesh):
+    # a point whose surface file changed is another point, never a stored one reused.
+    return SweepPoint(index, values, label, source, text, case.digest)
+
+
+def _absolute_data_paths(geometry: Any, directory: Path) -> None:
+    """Make the data files a geometry names (mesh_file, a profile's or a polygon's or a
+    hole's file) absolute against ``directory``, in place; values of other types are left
+    to the case's validation."""
+    if not isinstance(geometry, dict):
+        return
+
+    def absolute(holder: Any, key: str) -> None:
+        if isinstance(holder, dict) and isinstance(holder.get(key), str) and holder[key]:
+            holder[key] = str((directory / holder[key]).resolve())
+
+    absolute(geometry, "mesh_file")
+    absolute(geometry.get("profile"), "file")
+    polygon = geometry.get("polygon")
+    absolute(polygon, "file")
+    if isinstance(polygon, dict) and isinstance(polygon.get("holes"), list):
+        for hole in polygon["holes"]:
+            absolute(hole, "file")
 
 
 class _Unassignable(Exception):
@@ -370,9 +392,16 @@ def solve_point(task: Mapping[str, Any]) -> dict:
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
             case = parse_case(task["text"], source=task["source"])
-            result = solve_case(case, accept_uncertified=True)
-            report = build_report(case, result)
-            record.update(_figures(case, result, report))
+            if case.digest != task["digest"]:
+                # Stored under the planned digest, this result would stand for data it was
+                # not solved from: not stored ("error"), the next run plans it anew.
+                files = ", ".join(path.name for path in case.data_files)
+                record.update(failure("error", f"{Path(task['source']).name}: a data file it reads ({files}) "
+                                               "changed since the sweep was planned; run the sweep again"))
+            else:
+                result = solve_case(case, accept_uncertified=True)
+                report = build_report(case, result)
+                record.update(_figures(case, result, report))
         except (CaseError, MeshError) as error:
             record.update(failure("invalid", str(error)))
         except ContactFemError as error:

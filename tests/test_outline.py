@@ -250,3 +250,18 @@ def test_check_says_what_the_body_is_and_where_it_was_read():
                        "files": [str(ROOT / "cases" / "rough_rim.csv")]}
     square = runner.invoke(main, ["check", str(ROOT / "cases" / "square.yaml")])
     assert "  geometry   rectangle [0, 1] x [0, 1]\n" in square.stdout
+
+
+def test_the_case_hash_covers_a_mesh_file(tmp_path):
+    """report.json's case.sha256 (and a sweep point's identity) covers every data file the
+    case reads, a gmsh mesh file too: the same text over another mesh is another case."""
+    from test_fuzz_input import square_msh
+
+    text = ("geometry: {mesh_file: body.msh}\nmaterial: {E: 1.0e6, nu: 0.3}\n"
+            "boundary: {left: clamped, bottom: contact}\nobstacle: {point: [0, 0], normal: [0, -1]}\n")
+    (tmp_path / "body.msh").write_bytes(square_msh())
+    first = parse_case(text, source=tmp_path / "body.yaml")
+    assert first.data_files == (tmp_path / "body.msh",)
+    assert parse_case(text, source=tmp_path / "body.yaml").digest == first.digest
+    (tmp_path / "body.msh").write_bytes(square_msh().replace(b"3 1 1 0", b"3 1 1.5 0"))
+    assert parse_case(text, source=tmp_path / "body.yaml").digest != first.digest
