@@ -22,8 +22,8 @@ take much memory, and every refusal stays one line:
   :data:`PATH_MAX` in all) and for NUL characters before anything opens them;
 - a polygon geometry has at most :data:`MAX_POLYGON_VERTICES` vertices over all its loops;
   a profile or outline file (``geometry.profile.file``, ``geometry.polygon.file``) is read
-  like the case file, at most :data:`MAX_DATA_FILE_BYTES` of a regular file, and holds at
-  most that many points.
+  like the case file, regular files of at most :data:`MAX_DATA_FILE_BYTES` in all, holding
+  at most that many points.
 """
 
 from __future__ import annotations
@@ -343,6 +343,8 @@ class _Reader:
         #: hashed with its text, and their paths.
         self.inputs: list[bytes] = []
         self.input_paths: list[Path] = []
+        #: Bytes read from data files so far, against MAX_DATA_FILE_BYTES for all of them.
+        self.data_bytes = 0
 
     def fail(self, key: str, value: Any, expected: str) -> CaseError:
         shown = _show(value)
@@ -1014,8 +1016,9 @@ def _profile_expression(r: _Reader, spec: dict, key: str, limit: int) -> tuple[n
     return s, h
 
 
-#: The largest data file (a profile, an outline), in bytes: room for MAX_POLYGON_VERTICES
-#: lines of two numbers written to full precision; at most this many bytes plus one are read.
+#: The most bytes of data files (a profile, an outline and its holes) a case may read, all
+#: of them together: room for MAX_POLYGON_VERTICES lines of two numbers written to full
+#: precision; at most this many bytes plus one are read.
 MAX_DATA_FILE_BYTES = 64 << 20
 
 
@@ -1088,8 +1091,11 @@ def _file_digest(r: _Reader, key: str, spec: Any, path: Path) -> bytes:
 
 
 def _read_data_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
-    """At most MAX_DATA_FILE_BYTES of a regular file, reading no more than one byte past it."""
+    """A regular file within what is left of the case's :data:`MAX_DATA_FILE_BYTES` for all
+    its data files (a polygon and its holes each from a file share it), reading no more than
+    one byte past that."""
     shown = shortened(str(path))
+    budget = MAX_DATA_FILE_BYTES - r.data_bytes
     mode = _file_mode(r, fkey, text, path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
     chunks, size = [], 0
@@ -1101,8 +1107,8 @@ def _read_data_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
         if not stat.S_ISREG(mode):
             kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file"
             raise r.fail(fkey, text, f"{shown} is {kind}; expected a CSV file")
-        while size <= MAX_DATA_FILE_BYTES:
-            chunk = os.read(fd, min(MAX_DATA_FILE_BYTES + 1 - size, 1 << 24))
+        while size <= budget:
+            chunk = os.read(fd, min(budget + 1 - size, 1 << 24))
             if not chunk:
                 break
             chunks.append(chunk)
@@ -1112,9 +1118,12 @@ def _read_data_bytes(r: _Reader, fkey: str, text: str, path: Path) -> bytes:
     finally:
         if fd is not None:
             os.close(fd)
-    if size > MAX_DATA_FILE_BYTES:
-        raise r.fail(fkey, text, f"{shown} is larger than {MAX_DATA_FILE_BYTES} bytes (64 MiB); expected at most "
-                     f"{MAX_POLYGON_VERTICES} lines of points")
+    if size > budget:
+        bound = f"{MAX_DATA_FILE_BYTES} bytes (64 MiB) all of a case's data files may hold"
+        room = bound if budget == MAX_DATA_FILE_BYTES else f"the {budget} bytes left of the {bound}"
+        raise r.fail(fkey, text, f"{shown} is larger than {room}; expected at most {MAX_POLYGON_VERTICES} lines "
+                     "of points in all")
+    r.data_bytes += size
     return b"".join(chunks)
 
 

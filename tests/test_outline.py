@@ -185,6 +185,13 @@ def test_outline_keys_and_paths(tmp_path):
 def test_outline_files_are_bounded_like_profiles(tmp_path, monkeypatch):
     monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 100)
     refused(tmp_path, {"file": "outline.csv"}, {"outline.csv": GOOD * 10}, "larger than 100 bytes")
+    # The bound is for all of a case's data files: an outline and a hole within it alone
+    # but not together are refused at the hole, before it is read whole.
+    outer = "0,0,base\n9,0,right\n9,9,top\n0,9,left\n"
+    hole = "4,4,bore\n5,4,\n5,5,\n4,5,\n" + "#" * 40 + "\n"
+    assert len(outer) < 100 and len(hole) < 100 < len(outer) + len(hole)
+    refused(tmp_path, {"file": "outer.csv", "holes": [{"file": "hole.csv"}]}, {"outer.csv": outer, "hole.csv": hole},
+            "geometry.polygon.holes[0].file", f"the {100 - len(outer)} bytes left of the 100 bytes")
     monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 1 << 20)
     monkeypatch.setattr(case_module, "MAX_POLYGON_VERTICES", 10)
     ring = "".join(f"{float(np.cos(a))!r},{float(np.sin(a))!r},{'r' if i == 0 else ''}\n"
