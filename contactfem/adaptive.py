@@ -24,6 +24,7 @@ from contactfem.mesh import Mesh
 from contactfem.mesh.adapt import bisect, dorfler_mark, label_longest_edge, min_angle
 from contactfem.mesh.transfer import interpolate_p1
 from contactfem.norms import exact_errors
+from contactfem.report import case_record
 from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, solve_case
 
@@ -53,7 +54,7 @@ class AdaptiveRun:
         case = self.case
         return {
             "schema_version": ADAPT_SCHEMA_VERSION,
-            "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+            "case": case_record(case),
             "units": case.units.to_dict(),
             "method": "positive",
             "estimator": "residual (Hild & Nicaise), energy-norm scaled; see contactfem/estimator.py",

@@ -32,6 +32,14 @@ SCHEMA_VERSION = 1
 LOCKING_WARNING_RATIO = 1e3
 
 
+def case_record(case: Case) -> dict:
+    """What every result file says of the case it solved: the file, its title, the SHA-256
+    of its text and the data files it reads, and those files (a profile, an outline, a
+    mesh), by path."""
+    return {"file": str(case.source), "title": case.title, "sha256": case.digest,
+            "data_files": [str(path) for path in case.data_files]}
+
+
 def build_report(case: Case, result: "SolveResult", extras: Mapping | None = None) -> dict:
     """The report.json content: deterministic but for the timings and the machine.
 
@@ -50,7 +58,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     report = {
         "schema_version": SCHEMA_VERSION,
         "contactfem_version": __version__,
-        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "case": case_record(case),
         "method": {"name": method.name, "equation": method.equation,
                    "multiplier": method.multiplier_symbol, "summary": method.summary},
         "material": {"E": material.young, "nu": material.poisson, "lambda": material.lame_lambda,

@@ -18,7 +18,7 @@ from contactfem.norms import (
     nodal_multiplier,
     observed_rates,
 )
-from contactfem.report import contact_zone, sign_conditions
+from contactfem.report import case_record, contact_zone, sign_conditions
 from contactfem.solve import Progress, SolveResult, prepare, solve_case
 
 #: Version of compare.json's layout (contactfem/schemas/compare.schema.json).
@@ -52,7 +52,7 @@ def compare_methods(case: Case, *, refine: int | None = None,
     gap = contact.gap - positive.solution.contact.normal_displacement
     figures = {
         "schema_version": COMPARE_SCHEMA_VERSION,
-        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "case": case_record(case),
         "units": case.units.to_dict(),
         "mesh": {"nodes": problem.mesh.n_points, "triangles": problem.mesh.n_triangles,
                  "unknowns": problem.n_unknowns, "contact_nodes": int(len(contact.nodes))},
@@ -187,7 +187,7 @@ def convergence_study(
                         "--extra 2 (or more) to check them")
     return {
         "schema_version": CONVERGENCE_SCHEMA_VERSION,
-        "case": {"file": str(case.source), "title": case.title, "sha256": case.digest},
+        "case": case_record(case),
         "units": case.units.to_dict(),
         "reference": "exact" if case.exact is not None else f"nested, {extra} refinement(s) finer",
         "reference_extra": None if case.exact is not None else extra,

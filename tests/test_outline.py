@@ -272,3 +272,25 @@ def test_the_case_hash_covers_a_mesh_file(tmp_path):
     assert parse_case(text, source=tmp_path / "body.yaml").digest == first.digest
     (tmp_path / "body.msh").write_bytes(square_msh().replace(b"3 1 1 0", b"3 1 1.5 0"))
     assert parse_case(text, source=tmp_path / "body.yaml").digest != first.digest
+
+
+def test_every_result_file_names_the_data_files_it_was_solved_from(tmp_path):
+    """report.json (as compare.json, convergence.json and adapt.json, through one record)
+    lists the data files beside the hash that covers them, and follows its schema."""
+    import jsonschema
+
+    from contactfem.cli import main
+    from contactfem.report import case_record
+
+    case = case_module.load_case(ROOT / "cases" / "rough_rim.yaml")
+    assert case_record(case)["data_files"] == [str(ROOT / "cases" / "rough_rim.csv")]
+    from conftest import make_runner
+
+    out = tmp_path / "out"
+    assert make_runner().invoke(main, ["solve", str(ROOT / "cases" / "rough_rim.yaml"), "--out", str(out),
+                                       "--quiet"]).exit_code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["case"] == {**case_record(case), "file": report["case"]["file"]}
+    schema = json.loads((ROOT / "contactfem" / "schemas" / "report.schema.json").read_text())
+    jsonschema.validate(report, schema)
+    assert case_record(case_module.load_case(ROOT / "cases" / "square.yaml"))["data_files"] == []
