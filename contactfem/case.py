@@ -50,7 +50,7 @@ from contactfem.mesh.polygon import (
     Arc,
     Loop,
     circle_loop,
-    first_crossing,
+    first_crossing_among,
     loop_outline,
     polygon_problems,
 )
@@ -867,6 +867,7 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
         if not isinstance(hole_list, list):
             raise r.fail(f"{key}.holes", hole_list, "expected a list of holes")
         total = len(outer.vertices)
+        extent = _extent(PolygonGeometry(outer, ())) if hole_list else 0.0
         for i, hole in enumerate(hole_list):
             if isinstance(hole, dict) and "circle" in hole:
                 total += 4
@@ -876,9 +877,11 @@ def _geometry(r: _Reader, data: Any, source: Path) -> tuple[Geometry, tuple[str,
                 raise r.fail(f"{key}.holes[{i}]", f"<{len(hole_list)} holes>",
                              f"the polygon and its holes have more than {MAX_POLYGON_VERTICES} vertices (a circle "
                              "counts 4); expected at most that many (use a gmsh mesh_file for more)")
-            holes.append(_hole(r, hole, f"{key}.holes[{i}]", outer, source, MAX_POLYGON_VERTICES - total))
+            holes.append(_hole(r, hole, f"{key}.holes[{i}]", extent, source, MAX_POLYGON_VERTICES - total))
             if isinstance(hole, dict) and "file" in hole:
                 total += len(holes[-1].vertices)
+        if holes:
+            _check_holes_inside(r, key, outer, holes)
         names = [*outer.edge_names]
         for hole in holes:
             names.extend(hole.edge_names)
@@ -1385,7 +1388,9 @@ def _listed_loop(r: _Reader, spec: dict, key: str, source: Path, limit: int) -> 
     return _loop(r, spec["vertices"], spec["edges"], key)
 
 
-def _hole(r: _Reader, data: Any, key: str, outer: Loop, source: Path, limit: int) -> Loop:
+def _hole(r: _Reader, data: Any, key: str, extent: float, source: Path, limit: int) -> Loop:
+    """One hole, valid on its own (``extent``: the body's, which bounds its size); where it
+    lies is checked with all of them (:func:`_check_holes_inside`)."""
     data = r.mapping(data, key, ("circle", "vertices", "edges", "file", "name"))
     if "circle" in data:
         if "vertices" in data or "edges" in data or "file" in data:
@@ -1395,7 +1400,7 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop, source: Path, limit: int
         center = r.point(circle["center"], f"{key}.circle.center")
         radius = r.number(circle["radius"], f"{key}.circle.radius", low=0, low_open=True)
         name = r.name(data.get("name", "hole"), f"{key}.name")
-        least = max(_extent(PolygonGeometry(outer, ())) / (2 * MAX_DIVISIONS), 1e-6 * math.hypot(*center),
+        least = max(extent / (2 * MAX_DIVISIONS), 1e-6 * math.hypot(*center),
                     1 / SCALE_LIMIT)
         if radius < least:
             raise r.fail(f"{key}.circle.radius", radius,
@@ -1411,23 +1416,35 @@ def _hole(r: _Reader, data: Any, key: str, outer: Loop, source: Path, limit: int
         if "name" in data:
             raise r.fail(f"{key}.name", data["name"], "a polygonal hole names each of its edges instead")
         loop = _listed_loop(r, data, key, source, limit)
-        least = _extent(PolygonGeometry(outer, ())) / MAX_DIVISIONS
+        least = extent / MAX_DIVISIONS
         span = float(np.ptp(loop.vertices, axis=0).min())
         if span < least:
             raise r.fail(f"{key}.vertices", loop.vertices.tolist(),
                          f"the hole is {span:.3g} across; expected at least the body's extent / {MAX_DIVISIONS} "
                          f"= {least:.3g}, the finest mesh size")
-    # Against the curves themselves, arcs included (sampled every degree: within 4e-5 of
-    # a radius), so that a hole in a round body's bulge is allowed and one that crosses
-    # an arc is refused.
-    outline, hole_outline = loop_outline(outer), loop_outline(loop)
-    crossing = first_crossing(outline, hole_outline)
-    if crossing is not None:
-        raise r.fail(key, crossing.tolist(), "the hole's boundary meets the body's outer boundary (arcs "
-                     "included) near this point; a hole must lie inside the body")
-    if not _points_inside(outline, hole_outline[:1])[0]:
-        raise r.fail(key, hole_outline[0].tolist(), "the hole lies outside the body's outer boundary (arcs included)")
     return loop
+
+
+def _check_holes_inside(r: _Reader, key: str, outer: Loop, holes: list[Loop]) -> None:
+    """Every hole inside the body, meeting neither its outer boundary nor another hole:
+    one sweep over all the loops (a body with hundreds of holes read from files), against
+    the curves themselves, arcs included (sampled every degree: within 4e-5 of a radius),
+    so that a hole in a round body's bulge is allowed and one that crosses an arc is
+    refused. (A hole inside another is left to the mesher's area check.)"""
+    outlines = [loop_outline(outer), *(loop_outline(hole) for hole in holes)]
+    found = first_crossing_among(outlines)
+    if found is not None:
+        point, i, j = found
+        if i == 0:
+            raise r.fail(f"{key}.holes[{j - 1}]", point.tolist(), "the hole's boundary meets the body's outer "
+                         "boundary (arcs included) near this point; a hole must lie inside the body")
+        raise r.fail(f"{key}.holes[{j - 1}]", point.tolist(), f"the hole's boundary meets that of holes[{i - 1}] "
+                     "near this point; holes must not touch or overlap")
+    outside = np.flatnonzero(~_points_inside(outlines[0], np.array([outline[0] for outline in outlines[1:]])))
+    if outside.size:
+        j = int(outside[0])
+        raise r.fail(f"{key}.holes[{j}]", outlines[j + 1][0].tolist(),
+                     "the hole lies outside the body's outer boundary (arcs included)")
 
 
 def _check_extent(r: _Reader, key: str, points: np.ndarray) -> None:
@@ -1442,14 +1459,25 @@ def _check_extent(r: _Reader, key: str, points: np.ndarray) -> None:
 
 
 def _points_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Even-odd rule, vectorised over points and edges."""
-    a = polygon
-    b = np.roll(polygon, -1, axis=0)
-    px, py = points[:, None, 0], points[:, None, 1]
-    crosses = (a[None, :, 1] > py) != (b[None, :, 1] > py)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_cross = a[None, :, 0] + (py - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
-    return (crosses & (px < x_cross)).sum(axis=1) % 2 == 1
+    """Even-odd rule: whether each of ``points`` (q, 2) lies inside the closed ``polygon``.
+
+    An edge is crossed by the ray from a point towards +x when the point's y lies in the
+    edge's half-open y-range [min, max) and the point is left of the edge there. The
+    points are sorted by y, so each edge meets only the points in its range (a slice of
+    them) instead of all of them: a body's outline of 10^5 edges against the first points
+    of hundreds of holes."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    low, high = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+    order = np.argsort(points[:, 1], kind="stable")
+    ys = points[order, 1]
+    start, stop = np.searchsorted(ys, low, side="left"), np.searchsorted(ys, high, side="left")
+    counts = stop - start
+    edge = np.repeat(np.arange(len(a)), counts)
+    point = order[np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts - start, counts)]
+    px, py = points[point, 0], points[point, 1]
+    x_cross = a[edge, 0] + (py - a[edge, 1]) * (b[edge, 0] - a[edge, 0]) / (b[edge, 1] - a[edge, 1])
+    crossings = np.bincount(point[px < x_cross], minlength=len(points))
+    return crossings % 2 == 1
 
 
 def _mesh_settings(r: _Reader, data: Any, geometry: Geometry) -> MeshSettings:

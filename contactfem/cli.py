@@ -866,8 +866,10 @@ def _geometry_text(figures: dict) -> str:
                 + (f", {arcs} arc{'s' * (arcs != 1)}" if arcs else ""))
     else:
         return f"mesh file {figures['files'][0]}"
-    files = figures["files"]
-    return text + (f" (read from {', '.join(Path(f).name for f in files)})" if files else "")
+    names = [Path(f).name for f in figures["files"]]
+    if len(names) > 3:  # a body with hundreds of holes from files: --json lists them all
+        names = [*names[:3], f"{len(names) - 3} more files"]
+    return text + (f" (read from {', '.join(names)})" if names else "")
 
 
 def _obstacle_text(obstacle: dict) -> str:

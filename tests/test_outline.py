@@ -16,6 +16,7 @@ from that vertex to the next and an empty part continuing the one above. Checked
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -180,6 +181,13 @@ def test_outline_keys_and_paths(tmp_path):
             "geometry.polygon.holes[0].name", "names each of its edges")
     refused(tmp_path, {**square, "holes": [{"file": "hole.csv"}]},
             {"hole.csv": "3,3,bore\n5,3,\n5,5,\n3,5,\n"}, "geometry.polygon.holes[0]", "meets the body's outer")
+    # Two holes that overlap: named by both, before any meshing.
+    refused(tmp_path, {**square, "holes": [{"file": "a.csv"}, {"file": "b.csv"}]},
+            {"a.csv": "1,1,a\n2,1,\n2,2,\n1,2,\n", "b.csv": "1.5,1.5,b\n2.5,1.5,\n2.5,2.5,\n1.5,2.5,\n"},
+            "geometry.polygon.holes[1]", "meets that of holes[0]")
+    refused(tmp_path, {**square, "holes": [{"file": "a.csv"}, {"file": "out.csv"}]},
+            {"a.csv": "1,1,a\n2,1,\n2,2,\n1,2,\n", "out.csv": "5,5,b\n6,5,\n6,6,\n5,6,\n"},
+            "geometry.polygon.holes[1]", "lies outside the body's outer boundary")
 
 
 def test_outline_files_are_bounded_like_profiles(tmp_path, monkeypatch):
@@ -294,3 +302,40 @@ def test_every_result_file_names_the_data_files_it_was_solved_from(tmp_path):
     schema = json.loads((ROOT / "contactfem" / "schemas" / "report.schema.json").read_text())
     jsonschema.validate(report, schema)
     assert case_record(case_module.load_case(ROOT / "cases" / "square.yaml"))["data_files"] == []
+
+
+def test_a_body_with_many_holes_from_files_is_checked_in_one_sweep(tmp_path):
+    """Forty holes read from files in a body whose base has 4 000 vertices: validated
+    together (the loops in one sweep, the holes' first points against the outline's edges
+    by sorted slices), meshed with every hole, and `check` names three files and counts
+    the rest."""
+    from conftest import make_runner
+
+    from contactfem.cli import main
+
+    x = np.linspace(0, 4, 4000)
+    h = 1e-4 * np.sin(37 * x)
+    base = [f"{a!r},{b!r},{'base' if i == 0 else ''}" for i, (a, b) in enumerate(zip(x.tolist(), h.tolist()))]
+    base[-1] = f"{float(x[-1])!r},{float(h[-1])!r},right"
+    (tmp_path / "outer.csv").write_text("\n".join(base + ["4.0,1.0,top", "0.0,1.0,left"]) + "\n")
+    holes = []
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    for i in range(40):
+        cx, cy = 0.25 + 0.5 * (i % 8), 0.15 + 0.17 * (i // 8)
+        ring = [f"{cx + 0.05 * math.cos(a)!r},{cy + 0.05 * math.sin(a)!r},{'pore' if j == 0 else ''}"
+                for j, a in enumerate(angles.tolist())]
+        (tmp_path / f"pore{i}.csv").write_text("\n".join(ring) + "\n")
+        holes.append({"file": f"pore{i}.csv"})
+    data = {**CASE, "geometry": {"polygon": {"file": "outer.csv", "holes": holes}}, "mesh": {"size": 0.1},
+            "boundary": {"top": {"displacement": [0, -1e-4]}, "base": "contact", "left": "free", "right": "free",
+                         "pore": "free"}}
+    (tmp_path / "porous.yaml").write_text(yaml.safe_dump(data))
+    case = case_module.load_case(tmp_path / "porous.yaml")
+    assert len(case.geometry.holes) == 40 and len(case.data_files) == 41
+    mesh = build_mesh(case)
+    pores = 40 * (0.5 * 40 * 0.05**2 * np.sin(2 * np.pi / 40))  # forty regular 40-gons
+    body = 4.0 - np.trapezoid(h, x)
+    assert mesh.triangle_areas().sum() == pytest.approx(body - pores, rel=1e-9)
+    shown = make_runner().invoke(main, ["check", str(tmp_path / "porous.yaml")])
+    assert shown.exit_code == 0, shown.output
+    assert "polygon of 5602 vertices, 40 holes (read from outer.csv, pore0.csv, pore1.csv, 38 more files)" in shown.stdout

@@ -284,6 +284,45 @@ def first_crossing(first: np.ndarray, second: np.ndarray) -> np.ndarray | None:
     return _first_crossing_by_pairs(first, second)
 
 
+def first_crossing_among(loops: list[np.ndarray]) -> tuple[np.ndarray, int, int] | None:
+    """A point where two of the closed polygons ``loops`` meet (touching counts) and the
+    two loops' indices i < j, or None: as :func:`first_crossing` for every pair, but in one
+    sweep over all of them, O(N log N) for N vertices in all (a body and its many holes).
+    Loops that are not simple themselves fall back to the pairs."""
+    loops = [np.asarray(loop, dtype=float) for loop in loops]
+
+    def by_pairs() -> tuple[np.ndarray, int, int] | None:
+        for j in range(1, len(loops)):
+            for i in range(j):
+                point = first_crossing(loops[i], loops[j])
+                if point is not None:
+                    return point, i, j
+        return None
+
+    if len(loops) < 2:
+        return None
+    if any(len(loop) < 3 or _folds(loop) is not None for loop in loops):
+        return by_pairs()
+    points = np.concatenate(loops)
+    owner = np.repeat(np.arange(len(loops)), [len(loop) for loop in loops])
+    order, _ = _lexicographic_ranks(points)
+    equal = np.flatnonzero(np.all(points[order[1:]] == points[order[:-1]], axis=1))
+    if equal.size:
+        a, b = owner[order[equal]], owner[order[equal + 1]]
+        across = np.flatnonzero(a != b)
+        if not across.size:
+            return by_pairs()  # a loop that repeats a vertex of its own
+        first = across[0]
+        return points[order[equal[first]]].copy(), int(min(a[first], b[first])), int(max(a[first], b[first]))
+    crossing = _sweep(loops)
+    if crossing is None:
+        return None
+    g, h = crossing
+    if owner[g] == owner[h]:
+        return by_pairs()  # a loop that crosses itself
+    return points[h].copy(), int(owner[g]), int(owner[h])
+
+
 def _first_crossing_by_pairs(first: np.ndarray, second: np.ndarray) -> np.ndarray | None:
     """:func:`first_crossing` over the edge pairs whose bounding boxes overlap, in blocks."""
     a, b = first, np.roll(first, -1, axis=0)
