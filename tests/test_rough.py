@@ -281,17 +281,22 @@ def test_the_sweep_finds_exactly_what_every_pair_finds():
     assert min(verdicts.values()) > 300, verdicts
 
 
+def random_star(rng: np.random.Generator, center, scale: float, most: int) -> np.ndarray:
+    """A star-shaped polygon of 3 to ``most`` - 1 vertices around ``center``, half the time
+    rounded to a grid of 1/4 (shared vertices and touching edges with its neighbours)."""
+    k = int(rng.integers(3, most))
+    angle = np.sort(rng.random(k)) * 2 * np.pi
+    r = scale * (1 + rng.random(k))
+    p = np.column_stack([center[0] + r * np.cos(angle), center[1] + r * np.sin(angle)])
+    return np.round(p * 4) / 4 if rng.random() < 0.5 else p
+
+
 def test_first_crossing_agrees_with_the_pairs():
     rng = np.random.default_rng(3)
     met = 0
     for _ in range(1000):
-        def star(center, scale):
-            k = int(rng.integers(3, 30))
-            angle = np.sort(rng.random(k)) * 2 * np.pi
-            r = scale * (1 + rng.random(k))
-            p = np.column_stack([center[0] + r * np.cos(angle), center[1] + r * np.sin(angle)])
-            return np.round(p * 4) / 4 if rng.random() < 0.5 else p
-        a, b = star((0, 0), 3), star(rng.random(2) * 8 - 4, rng.random() * 2 + 0.1)
+        a = random_star(rng, (0, 0), 3, 30)
+        b = random_star(rng, rng.random(2) * 8 - 4, rng.random() * 2 + 0.1, 30)
         if polygon_problems(a) or polygon_problems(b):
             continue
         expected = _first_crossing_by_pairs(a, b)
@@ -311,13 +316,8 @@ def test_one_sweep_over_many_loops_finds_what_their_pairs_find():
     rng = np.random.default_rng(11)
     met = 0
     for _ in range(600):
-        def star(center, scale):
-            k = int(rng.integers(3, 20))
-            angle = np.sort(rng.random(k)) * 2 * np.pi
-            r = scale * (1 + rng.random(k))
-            p = np.column_stack([center[0] + r * np.cos(angle), center[1] + r * np.sin(angle)])
-            return np.round(p * 4) / 4 if rng.random() < 0.5 else p
-        loops = [star(rng.random(2) * 10 - 5, rng.random() * 1.5 + 0.2) for _ in range(int(rng.integers(2, 7)))]
+        loops = [random_star(rng, rng.random(2) * 10 - 5, rng.random() * 1.5 + 0.2, 20)
+                 for _ in range(int(rng.integers(2, 7)))]
         if any(polygon_problems(loop) for loop in loops):
             continue
         pairs = [(i, j) for j in range(len(loops)) for i in range(j)
