@@ -303,7 +303,8 @@ class Case:
     exact: ExactBlock | None = None
     units: Units = Units()
     load_path: LoadPath | None = None
-    #: The data files the geometry was read from (a profile, an outline), in the order read.
+    #: The data files the geometry was read from (a profile, an outline and its holes' files,
+    #: a mesh), in the order read.
     data_files: tuple[Path, ...] = ()
 
     def part(self, name: str) -> BoundaryPart:

@@ -843,7 +843,7 @@ def _geometry_figures(case) -> dict:
     from contactfem.case import PolygonGeometry, RectangleGeometry
 
     geometry = case.geometry
-    figures: dict = {"files": [str(path) for path in case.data_files]}
+    figures: dict = {"files": [str(path) for path in case.data_files]}  # a mesh file among them
     if isinstance(geometry, RectangleGeometry):
         figures.update(kind="rectangle", lower=list(geometry.lower), upper=list(geometry.upper))
     elif isinstance(geometry, PolygonGeometry):
@@ -851,7 +851,7 @@ def _geometry_figures(case) -> dict:
         figures.update(kind="polygon", vertices=int(sum(len(loop.vertices) for loop in loops)),
                        holes=len(geometry.holes), arcs=int(sum(len(loop.arc_edges) for loop in loops)))
     else:
-        figures.update(kind="mesh_file", files=[str(geometry.path)])
+        figures.update(kind="mesh_file")
     return figures
 
 

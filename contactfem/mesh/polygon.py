@@ -257,44 +257,24 @@ def loop_signed_area(loop: Loop) -> float:
 def first_crossing(first: np.ndarray, second: np.ndarray) -> np.ndarray | None:
     """A point where the closed polygons ``first`` (k, 2) and ``second`` (l, 2) meet
     (touching counts), or None: a vertex both share, or the start of an edge of ``second``
-    that meets one of ``first``. One sweep over both (:func:`_sweep`), O((k + l) log(k + l));
-    a polygon that is not simple itself falls back to testing the pairs whose bounding
-    boxes overlap."""
-    first, second = np.asarray(first, dtype=float), np.asarray(second, dtype=float)
-    if len(first) < 3 or len(second) < 3:
-        return _first_crossing_by_pairs(first, second)
-    both = np.concatenate([first, second])
-    order, _ = _lexicographic_ranks(both)
-    ordered = both[order]
-    equal = np.flatnonzero(np.all(ordered[1:] == ordered[:-1], axis=1))
-    if equal.size:
-        in_second = order >= len(first)
-        shared = equal[in_second[equal] != in_second[equal + 1]]
-        if shared.size:
-            return ordered[shared[0]].copy()
-        return _first_crossing_by_pairs(first, second)
-    if _folds(first) is not None or _folds(second) is not None:
-        return _first_crossing_by_pairs(first, second)
-    crossing = _sweep([first, second])
-    if crossing is None:
-        return None
-    g, h = crossing
-    if g < len(first) <= h:
-        return second[h - len(first)].copy()
-    return _first_crossing_by_pairs(first, second)
+    that meets one of ``first`` (:func:`first_crossing_among` of the two)."""
+    found = first_crossing_among([first, second])
+    return None if found is None else found[0]
 
 
 def first_crossing_among(loops: list[np.ndarray]) -> tuple[np.ndarray, int, int] | None:
     """A point where two of the closed polygons ``loops`` meet (touching counts) and the
-    two loops' indices i < j, or None: as :func:`first_crossing` for every pair, but in one
-    sweep over all of them, O(N log N) for N vertices in all (a body and its many holes).
-    Loops that are not simple themselves fall back to the pairs."""
+    two loops' indices i < j, or None: a vertex two loops share, or the start of an edge of
+    the later loop that meets one of the earlier. One sweep over all of them
+    (:func:`_sweep`), O(N log N) for N vertices in all (a body and its many holes); loops
+    that are not simple themselves fall back to testing, pair of loops by pair, the edge
+    pairs whose bounding boxes overlap."""
     loops = [np.asarray(loop, dtype=float) for loop in loops]
 
     def by_pairs() -> tuple[np.ndarray, int, int] | None:
         for j in range(1, len(loops)):
             for i in range(j):
-                point = first_crossing(loops[i], loops[j])
+                point = _first_crossing_by_pairs(loops[i], loops[j])
                 if point is not None:
                     return point, i, j
         return None
