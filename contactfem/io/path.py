@@ -34,6 +34,7 @@ import numpy as np
 
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.series import series_files, series_xml
+from contactfem.io.table import csv_table
 from contactfem.io.vtu import solution_grids, write_grid
 from contactfem.result import Solution
 
@@ -50,15 +51,6 @@ PATH_STEP_FILES = "path-*.vtu"
 def step_label(index: int, count: int) -> str:
     """The label of step ``index`` (from 0) in file names: 1-based, zero-padded to sort."""
     return f"{index + 1:0{len(str(count))}d}"
-
-
-def path_table(curves: Mapping[str, Sequence[float]]) -> str:
-    """path.csv: the curves as columns, one row per step."""
-    names = list(curves)
-    rows = [",".join(names)]
-    rows += [",".join(str(value) if isinstance(value, (int, np.integer)) else repr(float(value)) for value in values)
-             for values in zip(*(curves[n] for n in names))]
-    return "\n".join(rows) + "\n"
 
 
 class PathWriter:
@@ -128,7 +120,7 @@ class PathWriter:
         finally:
             self.close()
         self.written.append(self.directory / PATH_H5)
-        self.written.append(atomic_write_text(self.directory / PATH_CSV, path_table(curves)))
+        self.written.append(atomic_write_text(self.directory / PATH_CSV, csv_table(curves)))
         self.written.append(atomic_write_text(self.directory / PATH_PVD,
                                               series_xml(PATH_STEM, self.labels, self.factors)))
         return self.written

@@ -20,6 +20,7 @@ import numpy as np
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.hdf5 import SOLUTION_H5, write_hdf5
 from contactfem.io.path import PATH_CSV, PATH_H5, PATH_PVD, PATH_STEP_FILES, PathWriter
+from contactfem.io.table import csv_table
 from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, SOLUTION_VTU, write_vtu
 from contactfem.io.xdmf import COMPANION_H5, XDMF_FILE, write_xdmf
 from contactfem.result import Solution
@@ -135,15 +136,11 @@ def contact_table(solution: Solution) -> str:
     """contact.csv: one row per contact node along ΓC, sorted by its position along the obstacle."""
     contact = solution.contact
     points = solution.mesh.points[contact.nodes]
-    columns = {
+    return csv_table({
         "abscissa": contact.abscissa, "x": points[:, 0], "y": points[:, 1],
         "pressure": contact.multiplier, "nodal_force": contact.nodal_force, "gap": contact.gap,
         "normal_displacement": contact.normal_displacement, "active": contact.active.astype(int),
-    }
-    rows = [",".join(columns)]
-    rows += [",".join(repr(float(v)) if name != "active" else str(int(v)) for name, v in zip(columns, values))
-             for values in zip(*columns.values())]
-    return "\n".join(rows) + "\n"
+    })
 
 
 def _write_csv(data: ResultData, directory: Path) -> list[Path]:
