@@ -30,6 +30,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
+from contactfem.kernel import PathStarts
 from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
@@ -335,3 +336,39 @@ def patch_count(active: np.ndarray) -> int:
     """Runs of consecutive active nodes (the contact nodes are numbered along ΓC)."""
     a = np.asarray(active, dtype=bool)
     return int(a[0]) + int(np.count_nonzero(a[1:] & ~a[:-1])) if len(a) else 0
+
+
+class PredictedStarts(PathStarts):
+    """Where each step of a load path on a fine mesh starts: from the set a coarser level
+    predicts at the step's factor (``predict``, which solves that level there) or from the
+    set extrapolated from the steps before, whichever missed fewer nodes of the last step
+    that had both. Extrapolation is exact where the zone stays put (a traction on the
+    square, a punch's face) and costs nothing; where asperities come into contact step by
+    step it predicts every node whose gap the push would close at the last steps' rate,
+    and the zone's stiffening makes that a large overshoot (769 predicted wrong against
+    47 from the coarser level, 140 active, on a 16 000-point rough profile at the second
+    of ten steps). The first step, and any after extrapolation missed a node, asks the
+    coarser level; a tie goes to extrapolation."""
+
+    def __init__(self, predict: Callable[[float], np.ndarray | None]) -> None:
+        self.predict = predict
+        self.prefer_coarse = True
+        self.candidates: dict[str, np.ndarray] = {}
+        #: Steps started from each kind of set.
+        self.started = {"coarse": 0, "extrapolated": 0}
+
+    def choose(self, factor: float, extrapolated: np.ndarray | None) -> np.ndarray | None:
+        self.candidates = {} if extrapolated is None else {"extrapolated": extrapolated}
+        if self.prefer_coarse or extrapolated is None:
+            predicted = self.predict(factor)
+            if predicted is not None:
+                self.candidates["coarse"] = predicted
+                self.started["coarse"] += 1
+                return predicted
+        self.started["extrapolated"] += extrapolated is not None
+        return None
+
+    def settled(self, active: np.ndarray) -> None:
+        missed = {name: int(np.count_nonzero(guess != active)) for name, guess in self.candidates.items()}
+        if "extrapolated" in missed:
+            self.prefer_coarse = missed["extrapolated"] > missed.get("coarse", 0)

@@ -25,6 +25,7 @@ from contactfem.kernel import (
     ActiveSetSolver,
     Iteration,
     KernelResult,
+    PathSolver,
     Status,
     default_c,
     solve_contact,
@@ -42,6 +43,7 @@ from contactfem.sequencing import (
     contact_layer,
     layer_depth,
     layer_pays,
+    PredictedStarts,
     patch_count,
     predict_active_set,
     starting_set,
@@ -315,9 +317,8 @@ def solve_load_path(
         f"backend {backend}")
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    first = dataclasses.replace(reduced, system=reduced.system.scaled(factors[0]))
-    initial_active, sequencing = _predict_from_coarser(case, problem.scaled(factors[0]), lambda: (first, c), say,
-                                                       factors[0])
+    coarse_path = _coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
+    starts = None if coarse_path is None else PredictedStarts(coarse_path.predict)
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     solved = factorizations = 0
@@ -325,7 +326,7 @@ def solve_load_path(
     last: KernelResult | None = None
     started = clock
     path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
-                      max_iterations=case.solver.max_iterations, backend=backend, initial_active=initial_active)
+                      max_iterations=case.solver.max_iterations, backend=backend, starts=starts)
     for index, (factor, kernel) in enumerate(zip(factors, path)):
         seconds = time.perf_counter() - started
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
@@ -348,7 +349,76 @@ def solve_load_path(
                           f"(factor {factors[solved - 1]:g}): {last.message}")
     return PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds, factorizations=factorizations,
                       timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess},
-                      sequencing=sequencing)
+                      sequencing={} if coarse_path is None else {**coarse_path.record(),
+                                                                  "started_from": dict(starts.started)})
+
+
+class CoarsePath:
+    """A load path's coarser level: the case on a coarser mesh (:func:`contactfem.sequencing.coarser`),
+    solved with one linear solver at whichever factors the finer path asks for (:meth:`predict`),
+    its own steps started from the level below it (:class:`contactfem.sequencing.PredictedStarts`)."""
+
+    def __init__(self, fine: DiscreteProblem, problem: DiscreteProblem, reduced: ReducedSystem, path: PathSolver,
+                 c: float, below: "CoarsePath | None", seconds: float) -> None:
+        self.fine, self.problem, self.reduced, self.path, self.c, self.below = fine, problem, reduced, path, c, below
+        self.failed = False
+        self.iterations = self.factorizations = self.steps = 0
+        #: This level's preparation and steps, the levels below included.
+        self.seconds = seconds
+
+    def predict(self, factor: float) -> np.ndarray | None:
+        """The finer level's active set predicted from this level solved at ``factor``; None
+        once a step of this level has failed (the finer path then extrapolates)."""
+        if self.failed:
+            return None
+        started = time.perf_counter()
+        try:
+            kernel = self.path.step(factor)
+        except SolverError:
+            kernel = None
+        self.failed = kernel is None or kernel.status is not Status.CONVERGED
+        active = None
+        if not self.failed:
+            self.steps += 1
+            self.iterations += kernel.iterations
+            self.factorizations += kernel.factorizations
+            fields = _contact_fields(self.problem, self.reduced.displacement(kernel.displacement), kernel)
+            active = predict_active_set(self.fine.contact, fields, self.c)
+        self.seconds += time.perf_counter() - started
+        return active
+
+    def record(self) -> dict:
+        """What the coarser levels cost along the path, as a single solve's ``sequencing`` record."""
+        return {"coarse_unknowns": self.problem.n_unknowns,
+                "levels": 1 + (self.below.record()["levels"] if self.below is not None else 0),
+                "coarse_steps": self.steps, "coarse_iterations": self.iterations,
+                "coarse_factorizations": self.factorizations, "seconds": self.seconds}
+
+
+def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: float,
+                 max_iterations: int) -> CoarsePath | None:
+    """The coarser levels of a load path on ``problem`` (its contact indicator weighted by
+    ``c``), or None where a single solve would not sequence either: a small problem, no
+    coarser mesh, a level that does not pay for itself, one the mesher refuses."""
+    if not worth_sequencing(problem.n_unknowns):
+        return None
+    started = time.perf_counter()
+    coarse = coarser(case, problem.refinements)
+    if coarse is None:
+        return None
+    coarse_case, coarse_refine = coarse
+    try:
+        coarse_problem = prepare(coarse_case, refine=coarse_refine)
+    except ContactFemError:
+        return None
+    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
+        return None
+    reduced = coarse_problem.contact_system(get_method(SEQUENCING_METHOD))
+    coarse_c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
+    below = _coarse_path(coarse_case, coarse_problem, coarse_c, tolerance, max_iterations)
+    path = PathSolver(reduced.system, backend=_serial_backend(coarse_case), c=coarse_c, tolerance=tolerance,
+                      max_iterations=max_iterations, starts=None if below is None else PredictedStarts(below.predict))
+    return CoarsePath(problem, coarse_problem, reduced, path, c, below, time.perf_counter() - started)
 
 
 #: The share of this machine's memory the steps of a load path kept whole may hold.
