@@ -1094,14 +1094,17 @@ class ActiveSetSolver:
         # backend when it can say (forward_seconds: CHOLMOD called directly, which has two
         # routes), else from measured batches, taken until then as a quarter of a full
         # solve (CHOLMOD's blocked sparse solve through cvxopt's interface: 0.24).
-        # Along a load path too: a set that two steps share costs no solve from the third
-        # on (see _changed_solution), and under a rough profile, where thousands of nodes
-        # join along the path, the full columns' memory bound made every step refactorise
-        # 5-9 times (10 steps at 104 000 unknowns: 52 factorisations, 2 with forward
-        # columns; the Hertz platen's 20 steps at 247 000 unknowns: 6.0-6.3 s against
-        # 11.9 with full ones).
-        forward_from = (SIMPLICIAL_FORWARD_COLUMNS_FROM if getattr(self.factor, "simplicial", False)
-                        else FORWARD_COLUMNS_FROM)
+        # Along a load path too, from 5 000 unknowns whatever the factor (if the paths are
+        # short): a set that two steps share costs no solve from the third on (see
+        # _changed_solution), and under a rough profile, where thousands of nodes join along
+        # the path, full columns made every step refactorise 5-9 times (20 steps on the
+        # rough block refined once, 98 920 unknowns, supernodal: 51 factorisations and
+        # 8.1 s, 2 and 4.7 s with forward columns; 10 steps at 104 000 unknowns under a
+        # 16 000-point profile: 52 factorisations, 2). The Hertz platen's 20 steps, a few
+        # nodes joining at each, took 6.0-6.3 s against 11.9 at 247 000 unknowns, but
+        # 1.8-2.1 s against 1.5-1.6 at 62 000.
+        forward_from = (SIMPLICIAL_FORWARD_COLUMNS_FROM
+                        if getattr(self.factor, "simplicial", False) or self.scalable else FORWARD_COLUMNS_FROM)
         self.forward = callable(getattr(self.factor, "forward_sparse", None)) and k.shape[0] >= forward_from
         if self.forward and k.shape[0] < FORWARD_COLUMNS_FROM:
             self.forward = self._short_paths(active)
