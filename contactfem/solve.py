@@ -319,6 +319,11 @@ def solve_load_path(
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     coarse_path = _coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
     starts = None if coarse_path is None else PredictedStarts(coarse_path.predict)
+    if coarse_path is not None:
+        levels = coarse_path.record()["levels"]
+        say(f"  each step starts from the same path on {coarse_path.problem.n_unknowns} unknowns "
+            f"({levels} coarser level{'s' if levels > 1 else ''}) or from the last steps extrapolated, "
+            "whichever predicted the step before better")
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     solved = factorizations = 0
