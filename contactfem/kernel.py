@@ -603,8 +603,10 @@ class PathSolver:
         if result.status is Status.CONVERGED:
             self.starts.settled(result.active)
             self.active = result.active
-            self.history = [*self.history[-1:],
-                            (factor, result.nodal_force, result.displacement[self.normal_dofs] - self.gap)]
+            state = (factor, result.nodal_force, result.displacement[self.normal_dofs] - self.gap)
+            # Two states at one factor extrapolate nowhere: a repeated factor replaces its state.
+            kept = self.history[:-1] if self.history and self.history[-1][0] == factor else self.history
+            self.history = [*kept[-1:], state]
         return result
 
 

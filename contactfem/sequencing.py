@@ -356,10 +356,15 @@ class PredictedStarts(PathStarts):
         self.candidates: dict[str, np.ndarray] = {}
         #: Steps started from each kind of set.
         self.started = {"coarse": 0, "extrapolated": 0}
+        self.factor: float | None = None
+        self.repeated = False
 
     def choose(self, factor: float, extrapolated: np.ndarray | None) -> np.ndarray | None:
+        # At a repeated factor the last set (what extrapolation gives there) is the answer,
+        # and the step judges neither prediction.
+        self.repeated, self.factor = factor == self.factor, factor
         self.candidates = {} if extrapolated is None else {"extrapolated": extrapolated}
-        if self.prefer_coarse or extrapolated is None:
+        if (self.prefer_coarse and not self.repeated) or extrapolated is None:
             predicted = self.predict(factor)
             if predicted is not None:
                 self.candidates["coarse"] = predicted
@@ -370,5 +375,5 @@ class PredictedStarts(PathStarts):
 
     def settled(self, active: np.ndarray) -> None:
         missed = {name: int(np.count_nonzero(guess != active)) for name, guess in self.candidates.items()}
-        if "extrapolated" in missed:
+        if "extrapolated" in missed and not self.repeated:
             self.prefer_coarse = missed["extrapolated"] > missed.get("coarse", 0)

@@ -333,4 +333,28 @@ def test_the_start_of_a_step_is_the_prediction_that_missed_fewer_nodes():
     assert np.array_equal(starts.choose(1.0, coarse), coarse) and asked == [0.25, 0.5, 1.0]
     starts.settled(coarse)
     assert starts.choose(1.25, coarse) is None
-    assert starts.started == {"coarse": 3, "extrapolated": 2}
+    starts.settled(right)  # extrapolation missed two nodes: the coarser level next
+    # A repeated factor starts from extrapolation (its last set) and judges nothing.
+    assert starts.choose(1.25, right) is None and asked == [0.25, 0.5, 1.0]
+    starts.settled(right)
+    assert np.array_equal(starts.choose(1.5, right), coarse) and asked == [0.25, 0.5, 1.0, 1.5]
+    assert starts.started == {"coarse": 4, "extrapolated": 3}
+
+
+def test_a_repeated_factor_starts_from_its_own_set_and_judges_nothing():
+    """A factor given twice: its second step starts from the first one's set (one Newton
+    step), its two identical states are not extrapolated from, and the step after it still
+    starts from the coarser level, where extrapolating from 0 through 0.5 would overshoot
+    the rough block's zone. Every step is the same solve whichever path reached it."""
+    data, source = rough_path([0.5, 0.5, 1.0])
+    repeated = solve_load_path(parse_case(yaml.safe_dump(data), source=source))
+    data, source = rough_path([0.5, 1.0])
+    plain = solve_load_path(parse_case(yaml.safe_dump(data), source=source))
+    assert repeated.steps[1].kernel.iterations == 1
+    assert repeated.sequencing["started_from"] == {"coarse": 2, "extrapolated": 1}
+    assert repeated.steps[2].kernel.iterations == plain.steps[1].kernel.iterations
+    for mine, theirs in ((repeated.steps[0], plain.steps[0]), (repeated.steps[1], plain.steps[0]),
+                         (repeated.steps[2], plain.steps[1])):
+        assert np.array_equal(mine.solution.contact.active, theirs.solution.contact.active)
+        force = abs(theirs.solution.contact.nodal_force.sum())
+        assert abs(mine.solution.contact.nodal_force.sum() - theirs.solution.contact.nodal_force.sum()) <= 1e-10 * force
