@@ -545,9 +545,9 @@ def solve_contact(
 
 class PathStarts:
     """Where each step of a load path starts (see :class:`PathSolver`): ``choose`` is given
-    the step's factor and the set extrapolated from the steps before (None before two are
-    solved) and returns the starting set (None: the extrapolated one); ``settled`` is told
-    the set the step settled on. This one always extrapolates."""
+    the step's factor and the set expected from the steps before (:meth:`PathSolver.extrapolated`,
+    None at the first step) and returns the starting set (None: the expected one); ``settled``
+    is told the set the step settled on. This one always takes the expected set."""
 
     def choose(self, factor: float, extrapolated: np.ndarray | None) -> np.ndarray | None:
         return None
