@@ -131,19 +131,16 @@ def solve_case(
     progress: Progress | None = None,
     problem: DiscreteProblem | None = None,
     accept_uncertified: bool = False,
-    load_factor: float = 1.0,
     coarse_levels: dict | None = None,
 ) -> SolveResult:
     """Mesh, assemble and solve ``case`` with ``method`` (default: the case's).
 
     A ``problem`` already assembled for this case (see :func:`prepare`) skips meshing and
-    assembly, which is how ``compare`` solves both methods on one system; it is taken as
-    given, while ``load_factor`` scales the loads of the coarser meshes that predict its
-    active set (a problem scaled by that factor, the first step of a load path). With
+    assembly, which is how ``compare`` solves both methods on one system. With
     ``accept_uncertified``, a solve whose active set settled but whose iterate fails the
     kernel's certificate is returned (``result.kernel.status`` says so) rather than raised,
     so that its figures can be reported. ``coarse_levels``, a dict shared by solves of one
-    ``problem`` at one ``load_factor`` (``compare``'s two methods), keeps the coarse level
+    ``problem`` (``compare``'s two methods), keeps the coarse level
     of mesh sequencing that the first of them meshes and solves, and the next reuse it: it
     is the same whatever the fine method (it is solved with :data:`SEQUENCING_METHOD`).
 
@@ -163,8 +160,7 @@ def solve_case(
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, load_factor,
-                                                 coarse_levels)
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, coarse_levels)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -178,7 +174,7 @@ def solve_case(
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
-                   load_factor: float = 1.0, coarse_levels: dict | None = None,
+                   coarse_levels: dict | None = None,
                    ) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
@@ -208,7 +204,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             solver_soon = pool.submit(_analysed, solver())
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
-            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, load_factor, coarse_levels))
+            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, coarse_levels))
         reduced, c = fine_soon.result()
         linear = solver_soon.result()
     numbers = itertools.count(1)
@@ -473,13 +469,11 @@ class CoarseSolve:
 
 
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[], tuple[ReducedSystem, float]],
-                          say: Progress, factor: float = 1.0,
-                          coarse_levels: dict | None = None) -> tuple[np.ndarray | None, dict]:
+                          say: Progress, coarse_levels: dict | None = None) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively),
     corrected in a layer along ΓC of the fine kernel's system, and its cost. ``fine`` gives
     that system and its c once a coarse level has solved (they may be made meanwhile).
 
-    ``factor`` multiplies the loads of the coarse solve (the first step of a load path).
     ``coarse_levels`` keeps the coarse level's problem and solve, or gives them when an
     earlier solve of ``problem`` kept them (see :func:`solve_case`).
     """
@@ -490,7 +484,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
             return dataclasses.replace(kept["solve"], reused=True)
         # Only the contact fields and the displacement are read: no stresses.
         coarse, kernel, sequencing = _contact_solve(coarse_case, coarse_problem, get_method(SEQUENCING_METHOD),
-                                                    _serial_backend(coarse_case), lambda message: None, factor)
+                                                    _serial_backend(coarse_case), lambda message: None)
         displacement = coarse.displacement(kernel.displacement)
         kept["solve"] = CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
                                     coarse_problem.mesh, displacement)
@@ -498,8 +492,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
 
     def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
         if "problem" not in kept:
-            coarse_problem = prepare(coarse_case, refine=refine)
-            kept["problem"] = coarse_problem.scaled(factor) if factor != 1.0 else coarse_problem
+            kept["problem"] = prepare(coarse_case, refine=refine)
         return kept["problem"]
 
     def correct(coarse: CoarseSolve, active: np.ndarray) -> tuple[np.ndarray, dict]:
