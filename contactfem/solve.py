@@ -323,7 +323,8 @@ def solve_load_path(
     gradients = shape_gradients(problem.mesh.points, problem.mesh.triangles)[0]
     steps: list[SolveResult] = []
     solved = factorizations = 0
-    postprocess = 0.0
+    # What the caller's on_step took (writing each step's files) is its own, not the solve's.
+    postprocess = handed_over = 0.0
     last: KernelResult | None = None
     started = clock
     path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
@@ -340,16 +341,19 @@ def solve_load_path(
                            timings={"solve": seconds, "postprocess": time.perf_counter() - post})
         postprocess += step.timings["postprocess"]
         if on_step is not None:
+            handed = time.perf_counter()
             on_step(index, factor, step)
+            handed_over += time.perf_counter() - handed
         steps = [*steps, step] if keep_steps else [step]
         started = time.perf_counter()
-    seconds = time.perf_counter() - clock
+    seconds = time.perf_counter() - clock - handed_over
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if solved < len(factors) or last.status not in accepted:
         raise SolverError(f"{case.source.name}: method {method_name}: load step {solved} of {len(factors)} "
                           f"(factor {factors[solved - 1]:g}): {last.message}")
     return PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds, factorizations=factorizations,
-                      timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess},
+                      timings={**timings, "solve": seconds - postprocess, "postprocess": postprocess,
+                               **({"write_steps": handed_over} if on_step is not None else {})},
                       sequencing={} if coarse_path is None else {**coarse_path.record(),
                                                                   "started_from": dict(starts.started)})
 

@@ -358,3 +358,17 @@ def test_a_repeated_factor_starts_from_its_own_set_and_judges_nothing():
         assert np.array_equal(mine.solution.contact.active, theirs.solution.contact.active)
         force = abs(theirs.solution.contact.nodal_force.sum())
         assert abs(mine.solution.contact.nodal_force.sum() - theirs.solution.contact.nodal_force.sum()) <= 1e-10 * force
+
+
+def test_the_time_spent_writing_steps_is_not_the_solves():
+    """What on_step takes (the command writes each step's files there) is timed as
+    write_steps, not as the path's contact solve."""
+    import time
+
+    def slow_writer(index, factor, step):
+        time.sleep(0.25)
+
+    path = solve_load_path(case_of(square_path([0.25, 0.5, 0.75, 1.0])), on_step=slow_writer)
+    assert path.timings["write_steps"] >= 1.0
+    assert path.timings["solve"] < 1.0 and path.seconds < 1.0
+    assert "write_steps" not in solve_load_path(case_of(square_path([0.5, 1.0]))).timings
