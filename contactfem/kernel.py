@@ -838,10 +838,8 @@ class ActiveSetSolver:
         self._masked_matrix: sp.csr_matrix | None = None
         self._probe: np.ndarray | None = None  # the singularity probe, restricted to each set's equations
         self._masked_fixed: np.ndarray | None = None
-        #: A changed set's solution as an affine function of the load factor (see
-        #: _changed_solution): (reference and change, "point", f1, u1) once solved at one
-        #: factor, (…, "parts", U1, U0) once met at two.
-        self._affine: tuple | None = None
+        #: The last changed set's solution, an affine function of the load factor (see _changed_solution).
+        self._affine: _AffineSolution | None = None
 
     def analyse(self) -> None:
         """Order and analyse the pattern every set is factorised in, ahead of the first set
@@ -1028,18 +1026,17 @@ class ActiveSetSolver:
         if not self.scalable or (len(released) == 0 and len(added) == 0):
             return self._solve_changed(released, added, self.base, self.load, self.values, self.gap[added])
         key = (self.factorizations, released.tobytes(), added.tobytes())
-        known = self._affine if self._affine is not None and self._affine[0] == key else None
-        if known is not None and known[1] == "parts":
-            return self.load_factor * known[2] + known[3]
-        if known is not None and known[2] != self.load_factor and known[2] != 0.0:
+        known = self._affine if self._affine is not None and self._affine.key == key else None
+        if known is not None and known.at_gaps is not None:
+            return self.load_factor * known.per_factor + known.at_gaps
+        if known is not None and known.factor not in (self.load_factor, 0.0):
             gaps = self.values - self.support_values  # the reference's gaps, no prescribed values
             at_gaps = self._solve_changed(released, added, self.base_parts[1], np.zeros_like(self.load), gaps,
                                           self.gap[added])
-            per_factor = (known[3] - at_gaps) / known[2]
-            self._affine = (key, "parts", per_factor, at_gaps)
-            return self.load_factor * per_factor + at_gaps
+            known.per_factor, known.at_gaps = (known.solution - at_gaps) / known.factor, at_gaps
+            return self.load_factor * known.per_factor + at_gaps
         u = self._solve_changed(released, added, self.base, self.load, self.values, self.gap[added])
-        self._affine = (key, "point", self.load_factor, u.copy())
+        self._affine = _AffineSolution(key, self.load_factor, u.copy())
         return u
 
     def _factorize(self, active: np.ndarray) -> None:
@@ -1375,6 +1372,19 @@ class ActiveSetSolver:
         u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
         u[dofs_r] = u_r
         return u
+
+
+@dataclass(eq=False)
+class _AffineSolution:
+    """A changed set's solution along a load path (:meth:`ActiveSetSolver._changed_solution`):
+    ``solution`` at ``factor``, and once met at a second factor u = f ``per_factor`` + ``at_gaps``.
+    ``key`` names the reference factorisation and the change."""
+
+    key: tuple
+    factor: float
+    solution: np.ndarray
+    per_factor: np.ndarray | None = None
+    at_gaps: np.ndarray | None = None
 
 
 class _ModeHolder:

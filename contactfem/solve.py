@@ -405,19 +405,11 @@ def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: floa
     """The coarser levels of a load path on ``problem`` (its contact indicator weighted by
     ``c``), or None where a single solve would not sequence either: a small problem, no
     coarser mesh, a level that does not pay for itself, one the mesher refuses."""
-    if not worth_sequencing(problem.n_unknowns):
-        return None
     started = time.perf_counter()
-    coarse = coarser(case, problem.refinements)
-    if coarse is None:
+    level = coarser_level(case, problem, lambda coarse_case, refine: prepare(coarse_case, refine=refine))
+    if level is None:
         return None
-    coarse_case, coarse_refine = coarse
-    try:
-        coarse_problem = prepare(coarse_case, refine=coarse_refine)
-    except ContactFemError:
-        return None
-    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
-        return None
+    coarse_case, coarse_problem = level
     reduced = coarse_problem.contact_system(get_method(SEQUENCING_METHOD))
     coarse_c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     below = _coarse_path(coarse_case, coarse_problem, coarse_c, tolerance, max_iterations)
@@ -567,6 +559,28 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     }
 
 
+def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable[[Case, int], DiscreteProblem],
+                  ) -> tuple[Case, DiscreteProblem] | None:
+    """The coarser level that predicts ``problem``'s active set (its case, and its problem
+    from ``prepare_coarse``), or None when the problem is small, no coarser mesh exists,
+    the mesher or the contact checks refuse the decimated boundary, or the level is not
+    expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
+    from its unknowns once it is meshed)."""
+    if not worth_sequencing(problem.n_unknowns):
+        return None
+    coarse = coarser(case, problem.refinements)
+    if coarse is None:
+        return None
+    coarse_case, coarse_refine = coarse
+    try:
+        coarse_problem = prepare_coarse(coarse_case, coarse_refine)
+    except ContactFemError:
+        return None
+    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
+        return None
+    return coarse_case, coarse_problem
+
+
 def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], float], say: Progress,
                          prepare_coarse: Callable[[Case, int], DiscreteProblem],
                          solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
@@ -577,24 +591,14 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
     fine mesh: the predicted active set and what it cost. ``c`` gives the fine kernel's c,
     asked for once the coarse level has solved.
 
-    (None, {}) when the problem is small, no coarser mesh exists, the coarse level is not
-    expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
-    from its unknowns once it is meshed), or meshing or solving it fails: a prediction is
+    (None, {}) when there is no :func:`coarser_level` or solving it fails: a prediction is
     only a starting point, and without one the kernel starts cold.
     """
-    if not worth_sequencing(problem.n_unknowns):
-        return None, {}
     started = time.perf_counter()
-    coarse = coarser(case, problem.refinements)
-    if coarse is None:
+    level = coarser_level(case, problem, prepare_coarse)
+    if level is None:
         return None, {}
-    coarse_case, coarse_refine = coarse
-    try:
-        coarse_problem = prepare_coarse(coarse_case, coarse_refine)
-    except ContactFemError:
-        return None, {}  # a decimated boundary the mesher or the contact checks refuse
-    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
-        return None, {}
+    coarse_case, coarse_problem = level
     try:
         coarse_result = solve_coarse(coarse_case, coarse_problem)
     except SolverError:
