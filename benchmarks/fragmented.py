@@ -211,21 +211,32 @@ def one_linear_solve(problem, backend: str) -> float:
     """Seconds to factorise the kernel's stiffness with its supports and solve once. A body
     held by contact alone (a force-driven platen, a Hertz disk under its load) has no such
     solve: its normals at the contact nodes that start closest are fixed as well, as many
-    as there are free rigid motions, which the kernel's every active set does too."""
+    as there are free rigid motions, which the kernel's every active set does too. A body
+    its supports leave numerically free (a strip 1/3200 thick clamped at one end) has its
+    touching normals fixed as well, as the kernel's first set then does."""
     from dataclasses import replace
 
     import numpy as np
 
+    from contactfem.errors import SolverError
     from contactfem.linalg import factorize
     from contactfem.methods import get_method
 
+    def fixing(system, nodes):
+        """``system`` with the normals of ``nodes`` fixed at their gaps too (once each)."""
+        dofs = np.concatenate([system.fixed_dofs, np.asarray(system.normal_dofs)[nodes]])
+        values = np.concatenate([system.fixed_values, np.asarray(system.gap)[nodes]])
+        dofs, first = np.unique(dofs, return_index=True)
+        return replace(system, fixed_dofs=dofs, fixed_values=values[first], free_modes=None)
+
     system = problem.contact_system(get_method("positive")).system
     if system.free_modes is not None:
-        closest = np.argsort(system.gap, kind="stable")[:system.free_modes.shape[1]]
-        dofs = np.concatenate([system.fixed_dofs, np.asarray(system.normal_dofs)[closest]])
-        values = np.concatenate([system.fixed_values, np.asarray(system.gap)[closest]])
-        order = np.argsort(dofs)
-        system = replace(system, fixed_dofs=dofs[order], fixed_values=values[order], free_modes=None)
+        system = fixing(system, np.argsort(system.gap, kind="stable")[:system.free_modes.shape[1]])
+    try:
+        matrix, _ = linear_system(system)
+        factorize(matrix, backend)
+    except SolverError:
+        system = fixing(system, np.flatnonzero(np.asarray(system.gap) <= 0.0))
     matrix, rhs = linear_system(system)
     started = time.perf_counter()
     factorize(matrix, backend).solve(rhs)
