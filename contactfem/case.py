@@ -247,7 +247,7 @@ class ExactBlock:
 class SolverSettings:
     method: str
     tolerance: float
-    max_iterations: int
+    max_iterations: int | None  # None: auto (see contactfem.kernel.default_max_iterations)
     c: float | None
     backend: str
 
@@ -1753,7 +1753,12 @@ def _solver(r: _Reader, data: Any) -> SolverSettings:
     method = r.choice(data.get("method", "positive"), "solver.method", METHOD_NAMES)
     tolerance = r.number(data.get("tolerance", 1e-10), "solver.tolerance", low=1e-15, high=1e-2,
                          expected="must be in [1e-15, 1e-2]")
-    max_iterations = r.integer(data.get("max_iterations", 50), "solver.max_iterations", low=1, high=10_000)
+    # auto: one Newton step per contact node, at least 50 (kernel.default_max_iterations).
+    max_iterations = data.get("max_iterations", "auto")
+    if max_iterations != "auto":
+        if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or not 1 <= max_iterations <= 10_000:
+            raise r.fail("solver.max_iterations", max_iterations, "expected an integer in [1, 10000] or auto")
+    max_iterations = None if max_iterations == "auto" else max_iterations
     c = data.get("c", "auto")
     c = None if c == "auto" else r.number(c, "solver.c", low=1 / SCALE_LIMIT, high=SCALE_LIMIT,
                                           expected=f"must be in [{1 / SCALE_LIMIT:g}, {SCALE_LIMIT:g}] or auto")

@@ -868,7 +868,7 @@ def _reason_name(PETSc, reason: int) -> str:
     return names.get(reason, str(reason))
 
 
-def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: float, max_iterations: int,
+def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: float, max_iterations: int | None,
                           initial_active: np.ndarray | None = None,
                           on_iteration: Callable[[Iteration], None] | None = None,
                           second_guess: Callable[[], np.ndarray | None] | None = None,

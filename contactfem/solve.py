@@ -401,7 +401,7 @@ class CoarsePath:
 
 
 def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: float,
-                 max_iterations: int) -> CoarsePath | None:
+                 max_iterations: int | None) -> CoarsePath | None:
     """The coarser levels of a load path on ``problem`` (its contact indicator weighted by
     ``c``), or None where a single solve would not sequence either: a small problem, no
     coarser mesh, a level that does not pay for itself, one the mesher refuses."""
@@ -500,7 +500,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
 
 
 def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
-                     max_iterations: int, backend: str) -> tuple[np.ndarray, dict]:
+                     max_iterations: int | None, backend: str) -> tuple[np.ndarray, dict]:
     """The predicted ``active`` set corrected on the fine mesh in a layer along ΓC, and what
     that cost; ``active`` itself (and an empty record) when the layer is not expected to
     pay (:func:`contactfem.sequencing.layer_pays`) or its solve fails.

@@ -47,7 +47,7 @@ obstacle:                    # the rigid half-plane below y = 0
 solver:
   method: positive           # positive (method 4, lambda >= 0) | standard (method 5)
   tolerance: 1.0e-10
-  max_iterations: 50
+  max_iterations: auto         # Newton steps allowed: one per contact node, at least 50
 
 output:
   directory: results/{stem}  # relative to the working directory

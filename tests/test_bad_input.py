@@ -325,6 +325,23 @@ def test_solver_tolerance_out_of_range(tmp_path):
     solve_variant(tmp_path, lambda d: d["solver"].update(tolerance=0.5), "solver.tolerance = 0.5", "1e-2")
 
 
+@pytest.mark.parametrize("value", [0, 10_001, "many", 2.5, True])
+def test_solver_max_iterations_out_of_range(tmp_path, value):
+    solve_variant(tmp_path, lambda d: d["solver"].update(max_iterations=value), "solver.max_iterations",
+                  "expected an integer in [1, 10000] or auto")
+
+
+def test_solver_max_iterations_auto_or_integer():
+    """auto (also the default) leaves the cap to the kernel (one step per contact node, at
+    least 50); an integer is kept."""
+    from conftest import case_from, square_case_dict
+
+    for given, expected in (("auto", None), (None, None), (7, 7), (10_000, 10_000)):
+        data = square_case_dict(4)
+        data["solver"] = {} if given is None else {"max_iterations": given}
+        assert case_from(data).solver.max_iterations == expected
+
+
 def test_obstacle_normal_not_unit(tmp_path):
     solve_variant(tmp_path, lambda d: d["obstacle"].update(normal=[0, -2]), "obstacle.normal", "-2", "unit")
 

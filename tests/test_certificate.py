@@ -327,6 +327,36 @@ def test_a_strip_that_only_contact_holds_is_solved_from_a_cold_start(method):
     np.testing.assert_allclose(result.displacement, again.displacement, rtol=0, atol=2 * precision * scale)
 
 
+def test_a_strip_peeling_off_in_bending_creeps_to_its_answer_within_the_default_cap():
+    """1 x 0.01 (400 x 4 cells), clamped at one end, resting on the plane under a pressure
+    that pulls it up on a third of its length: every release puts the next node in tension,
+    so the zone creeps to its edges a node per edge per step. The default cap, one step per
+    contact node (401 here) and at least 50, lets it finish (51 steps: the old cap of 50
+    stopped it one short); the answer is certified and is the one a start from the final
+    set gives. A cap that stops it says that the zone was creeping and what to raise."""
+    from contactfem.kernel import MIN_ITERATIONS, default_max_iterations
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    data = slender(1e-2, (400, 4), [0.0, "-1.0*(0.5 + sin(10*x))"])
+    system = prepare(case_from(data)).contact_system(get_method("positive")).system
+    m = len(system.normal_dofs)
+    assert default_max_iterations(m) == m > MIN_ITERATIONS and default_max_iterations(10) == MIN_ITERATIONS
+    result = solve_contact(system)
+    assert_certified(system, result)
+    assert result.iterations > MIN_ITERATIONS
+    tail = result.history[-10:-1]
+    assert all(0 < step.added + step.removed <= 4 for step in tail)  # a node per edge per step
+    again = solve_contact(system, initial_active=result.active)
+    assert again.iterations == 1
+    scale = np.abs(again.displacement).max()
+    np.testing.assert_allclose(result.displacement, again.displacement, rtol=0, atol=1e-10 * scale)
+    stopped = solve_contact(system, max_iterations=20)
+    assert stopped.status is Status.MAX_ITERATIONS
+    assert "creeping" in stopped.message and "solver.max_iterations" in stopped.message
+    assert "\n" not in stopped.message
+
+
 # --- huge prescribed values ----------------------------------------------------------------------
 
 def test_a_huge_rigid_motion_is_not_certified():
