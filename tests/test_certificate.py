@@ -357,6 +357,28 @@ def test_a_strip_peeling_off_in_bending_creeps_to_its_answer_within_the_default_
     assert "\n" not in stopped.message
 
 
+def test_the_least_index_safeguard_counts_only_its_own_sets_as_a_cycle():
+    """1 x 0.001 (200 x 2 cells), clamped at one end, under a pressure that lifts it in
+    seven places: Newton creeps, then repeats a set at step 32 and the least-index rule
+    takes over. Its single changes pass through a set that plain Newton had visited, which
+    is no cycle of the rule (Murty's rule never repeats its own sets on a P-matrix
+    problem); the old kernel stopped there as cycling. Now it settles, certified, on the
+    answer a start from its final set gives."""
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    data = slender(1e-3, (200, 2), [0.0, "-1.0*(0.3 + sin(20*x))"])
+    system = prepare(case_from(data)).contact_system(get_method("positive")).system
+    result = solve_contact(system)
+    assert_certified(system, result)
+    assert result.cycle_detected_at is not None and "least-index" in result.message
+    again = solve_contact(system, initial_active=result.active)
+    assert again.iterations == 1
+    precision = max(result.certificate.scales["relative_precision"], again.certificate.scales["relative_precision"])
+    scale = np.abs(again.displacement).max()
+    np.testing.assert_allclose(result.displacement, again.displacement, rtol=0, atol=max(2 * precision, 1e-10) * scale)
+
+
 # --- huge prescribed values ----------------------------------------------------------------------
 
 def test_a_huge_rigid_motion_is_not_certified():
