@@ -120,6 +120,18 @@ def test_a_platen_pulling_the_body_away_is_refused(tmp_path):
     refused(tmp_path, hertz_pressed({"force": -FORCE}), "boundary.top platen", "pulls the body away")
 
 
+def test_a_body_held_only_by_a_platen_force_and_contact_is_refused_for_sliding(tmp_path):
+    """The wedge with its left side free too: a force-driven platen on top, the floor below
+    and nothing else, so no prescribed support at all. Frictionless platen and floor leave
+    the horizontal translation free: refused in one line naming it, as a pressure would be.
+    (With no prescribed support the support matrix was an integer array, and summing the
+    platen's constraints into it raised a numpy casting error with a traceback.)"""
+    data = wedge({"left": "free", "top": {"platen": {"force": FORCE}}})
+    refused(tmp_path, data, "a translation along (1, 0)", "contact with the obstacle cannot hold it")
+    data["boundary"]["left"] = "symmetry"  # held sideways: it solves
+    solved(data)
+
+
 @pytest.mark.parametrize("drive, fragment", [
     ({"force": "lots"}, "top.platen.force"),
     ({"push": 1.0}, "unknown key"),

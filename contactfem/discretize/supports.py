@@ -276,8 +276,10 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
         # fast path (8 ms instead of 17 for the 64 000 contact nodes of a force-driven block).
         outer = (rows[:, :, None] * rows[:, None, :]).reshape(len(rows), 9)
         owner = piece_of[where]
+        # float: bincount of no rows returns integers whatever its weights (a body held by
+        # a force-driven platen and contact only has no prescribed support at all).
         return np.stack([np.bincount(owner, weights=outer[:, k], minlength=n_pieces) for k in range(9)],
-                        axis=1).reshape(n_pieces, 3, 3)
+                        axis=1).reshape(n_pieces, 3, 3).astype(float)
 
     def loose(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         eigenvalues, eigenvectors = np.linalg.eigh(gram)
