@@ -25,6 +25,7 @@ from contactfem.kernel import (
     ActiveSetSolver,
     Iteration,
     KernelResult,
+    STALL_ITERATIONS,
     PathSolver,
     Status,
     default_c,
@@ -209,6 +210,16 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         linear = solver_soon.result()
     numbers = itertools.count(1)
 
+    def stalled_guess() -> np.ndarray | None:
+        # A start without a prediction (a small problem) that has not settled: a body in
+        # bending peeling off creeps a node per edge per step, which a coarser level does
+        # at a quarter of the size (kernel.STALL_ITERATIONS).
+        say(f"  not settled after {STALL_ITERATIONS} steps: predicting from a coarser mesh")
+        active, cost = _predict_from_coarser(case, problem, lambda: (reduced, c), say, coarse_levels, forced=True)
+        if active is not None:
+            sequencing["stalled"] = {"at": STALL_ITERATIONS, **cost}
+        return active
+
     def on_iteration(record: Iteration) -> None:
         say(
             f"  Newton {next(numbers)}: {record.active} active (+{record.added} -{record.removed}), "
@@ -225,6 +236,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         backend=backend,
         on_iteration=on_iteration,
         second_guess=second_guess,
+        stalled_guess=stalled_guess if initial_active is None else None,
         linear=linear,
     )
     return reduced, kernel, sequencing
@@ -465,7 +477,8 @@ class CoarseSolve:
 
 
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[], tuple[ReducedSystem, float]],
-                          say: Progress, coarse_levels: dict | None = None) -> tuple[np.ndarray | None, dict]:
+                          say: Progress, coarse_levels: dict | None = None,
+                          forced: bool = False) -> tuple[np.ndarray | None, dict]:
     """The initial active set from the same case solved on a coarser mesh (recursively),
     corrected in a layer along ΓC of the fine kernel's system, and its cost. ``fine`` gives
     that system and its c once a coarse level has solved (they may be made meanwhile).
@@ -496,7 +509,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
         return correct_in_layer(reduced, coarse, active, c, case.solver.tolerance, case.solver.max_iterations,
                                 _serial_backend(case))
 
-    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct)
+    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced)
 
 
 def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
@@ -560,13 +573,14 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
 
 
 def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable[[Case, int], DiscreteProblem],
-                  ) -> tuple[Case, DiscreteProblem] | None:
+                  forced: bool = False) -> tuple[Case, DiscreteProblem] | None:
     """The coarser level that predicts ``problem``'s active set (its case, and its problem
     from ``prepare_coarse``), or None when the problem is small, no coarser mesh exists,
     the mesher or the contact checks refuse the decimated boundary, or the level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
-    from its unknowns once it is meshed)."""
-    if not worth_sequencing(problem.n_unknowns):
+    from its unknowns once it is meshed). ``forced``: whatever the size and the cost model
+    (a cold start that stalled), as long as the coarser mesh is smaller."""
+    if not forced and not worth_sequencing(problem.n_unknowns):
         return None
     coarse = coarser(case, problem.refinements)
     if coarse is None:
@@ -576,7 +590,8 @@ def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable
         coarse_problem = prepare_coarse(coarse_case, coarse_refine)
     except ContactFemError:
         return None
-    if not coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns):
+    if not (coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns)
+            or forced and coarse_problem.n_unknowns < problem.n_unknowns):
         return None
     return coarse_case, coarse_problem
 
@@ -585,17 +600,17 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
                          prepare_coarse: Callable[[Case, int], DiscreteProblem],
                          solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
                          correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
-                         ) -> tuple[np.ndarray | None, dict]:
+                         forced: bool = False) -> tuple[np.ndarray | None, dict]:
     """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
     process, or across MPI ranks), and optionally to ``correct`` its prediction on the
     fine mesh: the predicted active set and what it cost. ``c`` gives the fine kernel's c,
     asked for once the coarse level has solved.
 
-    (None, {}) when there is no :func:`coarser_level` or solving it fails: a prediction is
-    only a starting point, and without one the kernel starts cold.
+    (None, {}) when there is no :func:`coarser_level` (``forced``: see there) or solving it
+    fails: a prediction is only a starting point, and without one the kernel starts cold.
     """
     started = time.perf_counter()
-    level = coarser_level(case, problem, prepare_coarse)
+    level = coarser_level(case, problem, prepare_coarse, forced)
     if level is None:
         return None, {}
     coarse_case, coarse_problem = level
@@ -603,7 +618,14 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
         coarse_result = solve_coarse(coarse_case, coarse_problem)
     except SolverError:
         return None, {}
-    if coarse_result.kernel.status is not Status.CONVERGED:
+    coarse_kernel = coarse_result.kernel
+    settled = coarse_kernel.status is Status.CONVERGED
+    # A coarse level that stopped unsettled (its own cap, a cycle) still predicts, if its last
+    # iterate is finite: a prediction is only a start, which the fine level corrects and
+    # certifies. A strip 1 x 0.001 peeling off, 800 x 2 cells, whose 200 x 1 level creeps
+    # past its own cap, went on cold without one and did not settle in 800 steps.
+    if not settled and not (forced and np.isfinite(coarse_kernel.displacement).all()
+                            and np.isfinite(coarse_kernel.multiplier).all()):
         return None, {}
     active = predict_active_set(problem.contact, coarse_result.contact, c())
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
@@ -619,6 +641,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
         "coarse_factorizations": coarse_result.kernel.factorizations,
         "predicted_active": int(active.sum()),
         "levels": 1 + coarse_result.sequencing.get("levels", 0),
+        **({} if settled else {"coarse_status": coarse_kernel.status.value}),
         **({"coarse_reused": True} if coarse_result.reused else {}),
         **corrected,
         "seconds": time.perf_counter() - started,

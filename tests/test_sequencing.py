@@ -475,3 +475,64 @@ def test_compare_meshes_and_solves_the_coarse_levels_once_for_both_methods(monke
     np.testing.assert_array_equal(alone.kernel.active, standard.kernel.active)
     u, w = alone.solution.displacement, standard.solution.displacement
     assert np.abs(u - w).max() <= 1e-10 * np.abs(u).max()
+
+
+def _peeling_strip(thickness: float, cells: tuple[int, int], wavenumber: int, offset: float = 0.3) -> dict:
+    """A 1 x ``thickness`` strip clamped on its left, resting on the plane, under a pressure
+    offset + sin(k x) that pulls it up in places: a body in bending peeling off."""
+    data = square_case_dict()
+    data["geometry"] = {"rectangle": {"lower": [0, 0], "upper": [1, thickness]}}
+    data["mesh"] = {"divisions": list(cells)}
+    data["boundary"]["top"] = {"traction": [0.0, f"-1.0*({offset} + sin({wavenumber}*x))"]}
+    return data
+
+
+def test_a_kernel_that_has_not_settled_asks_for_its_stalled_guess_once():
+    """The guess is asked at STALL_ITERATIONS only, and only by a solve still changing its
+    set there: the square settles first and never asks; a strip 1 x 0.01 peeling off (51
+    steps cold) asks once, and from the answer's own set it settles in the step after."""
+    from contactfem.kernel import STALL_ITERATIONS, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    asked = []
+    square = prepare(case_from(square_case_dict(16))).contact_system(get_method("positive")).system
+    settled = solve_contact(square, stalled_guess=lambda: asked.append("square"))
+    assert settled.iterations < STALL_ITERATIONS and asked == []
+
+    strip = prepare(case_from(_peeling_strip(1e-2, (400, 4), 10, offset=0.5))).contact_system(
+        get_method("positive")).system
+    answer = solve_contact(strip)
+    assert answer.status.value == "converged" and answer.iterations > 3 * STALL_ITERATIONS
+
+    def guess():
+        asked.append("strip")
+        return answer.active
+
+    guided = solve_contact(strip, stalled_guess=guess)
+    assert asked == ["strip"]
+    assert guided.status.value == "converged" and guided.iterations == STALL_ITERATIONS + 1
+    np.testing.assert_array_equal(guided.active, answer.active)
+
+
+def test_a_small_cold_start_that_stalls_is_predicted_from_a_coarser_mesh():
+    """A strip 1 x 0.001 at 400 x 2 cells (2 400 unknowns, below the size that sequences):
+    cold, it creeps past the default cap of a step per contact node (and settles after 2 666
+    steps). At STALL_ITERATIONS it is solved on 100 x 1 cells (a quarter, itself a creep of
+    169 steps there) and settles a few steps after, certified: the answer, the contact
+    problem's solution being unique."""
+    from contactfem.kernel import STALL_ITERATIONS, Status, solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare, solve_case
+
+    case = case_from(_peeling_strip(1e-3, (400, 2), 30))
+    problem = prepare(case)
+    assert problem.n_unknowns < 5_000
+    cold = solve_contact(problem.contact_system(get_method("positive")).system)
+    assert cold.status is Status.MAX_ITERATIONS and "raise solver.max_iterations" in cold.message
+    outcome = solve_case(case, problem=problem)
+    kernel = outcome.kernel
+    assert kernel.status is Status.CONVERGED and kernel.certificate.passed
+    stalled = outcome.sequencing["stalled"]
+    assert stalled["at"] == STALL_ITERATIONS and stalled["coarse_unknowns"] < problem.n_unknowns / 2
+    assert kernel.iterations <= STALL_ITERATIONS + 10
