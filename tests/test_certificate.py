@@ -395,6 +395,27 @@ def test_a_huge_rigid_motion_is_not_certified():
     np.testing.assert_allclose(result.displacement, 1e45, rtol=1e-14)
 
 
+def test_a_body_lifted_off_the_obstacle_unloaded_says_why_it_is_not_certified():
+    """The square with its top moved 1e-3 up and nothing else on it: it leaves the plane and
+    moves rigidly, so its true forces are zero and the computed ones are round-off, which
+    the certificate cannot resolve (the verdict of the 1e45 translation above). The message
+    says so instead of leaving "forces lost in cancellation" to be guessed at; a body with a
+    load on it, lifted or not, gets no such line."""
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    data = square_case_dict(8)
+    data["boundary"].update(left="free", top={"displacement": [0.0, 1.0e-3]})
+    system = prepare(case_from(data)).contact_system(get_method("positive")).system
+    result = solve_contact(system)
+    assert result.status is Status.NOT_CERTIFIED and not result.active.any()
+    assert result.certificate.failed[0] == "force_resolution"
+    assert "moves rigidly, free of stress" in result.message and "\n" not in result.message
+    data["boundary"].update(right={"traction": [1.0e4, 0.0]})  # pulled sideways: resolvable forces
+    loaded = solve_contact(prepare(case_from(data)).contact_system(get_method("positive")).system)
+    assert "moves rigidly" not in loaded.message
+
+
 def test_a_huge_prescribed_motion_against_the_obstacle_is_certified():
     """The same chain pushed 1e45 into an obstacle at 0: the forces are 1e45 times the
     series stiffness and fully resolved."""
