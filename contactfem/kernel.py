@@ -322,10 +322,11 @@ MIN_ITERATIONS = 50
 #: Steps at the cap that a creeping zone is recognised from (see :func:`_creeping`).
 CREEP_WINDOW = 5
 #: Steps after which a solve that has not settled asks for its ``stalled_guess`` (a coarser
-#: level's prediction, for a problem too small to have started from one): cold starts settle
-#: in at most 10-12 steps on the shipped cases and rough profiles, while a strip 1 x 0.001
-#: peeling off, 400 x 2 cells, had not settled after 400; from a prediction of the same
-#: case on 100 x 1 cells (itself 78 steps at a quarter of the size) it took 4 more.
+#: level's prediction, for a problem too small to have started from one): the cold starts
+#: of the fragmented benchmark's scenes settle in 6-12 steps (a wavy traction's in 23, on
+#: a mesh large enough to start from a prediction anyway), while a strip 1 x 0.001 peeling
+#: off, 400 x 2 cells, had not settled after 400; from the prediction of the same case on
+#: 100 x 1 cells (169 steps there, on a sixth of the unknowns) it took 2 more.
 STALL_ITERATIONS = 15
 
 
@@ -335,8 +336,8 @@ def default_max_iterations(contact_nodes: int) -> int:
     one end under a wavy pressure) releases one node per patch edge per step, each release
     putting the next node in tension: its zone creeps to its edges in as many steps as the
     edges move nodes, 51 at 400 cells along it, 59 at 1 600 and 234 for a strip 1 x 0.001,
-    cheap steps (a Schur update of a few nodes each). A monotone creep ends within that
-    many steps; a set that repeats is caught by the cycle safeguard whatever the cap."""
+    each step changing a few nodes. A monotone creep ends within that many steps; a set
+    that repeats is caught by the cycle safeguard whatever the cap."""
     return max(MIN_ITERATIONS, int(contact_nodes))
 
 
