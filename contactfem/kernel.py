@@ -64,6 +64,10 @@ REFINEMENT_STEPS = 3
 #: bounds: ≤ 2e-12 on the shipped cases and the square up to 131 000 unknowns, 2e-5 on
 #: a 1:1000 strip of 1000 × 4 cells; the square translated by a prescribed 1e45 gives 1.8.
 FORCE_RESOLUTION_LIMIT = 1e-3
+#: The strain whose force over the body (its largest stiffness entry times its size) is the
+#: force scale of an unloaded iterate whose forces are all round-off (see
+#: ActiveSetSolver.measure): forces below 1e-3 of it, a strain of 1e-10, count as zero.
+ZERO_FORCE_STRAIN = 1e-7
 #: Rate assumed for the dense Schur complement's LU (flop/s), in the cost model that
 #: chooses between Schur updates and a refactorisation; measured 5–15e9 on 2 cores.
 DENSE_FLOPS = 5e9
@@ -138,6 +142,11 @@ class ContactSystem:
     free_modes : (n, j), optional
         Rigid motions the supports leave free and only contact holds (K r = 0); None when
         the supports hold the body. Every active set the kernel solves then holds them.
+    length_scale : float, optional
+        The body's size, in the case's length unit: with the stiffness it gives the force
+        scale of an iterate that carries no force at all (no load, no contact force), whose
+        computed forces are round-off of an exact zero (see :meth:`ActiveSetSolver.measure`).
+        None: no such scale, and such an iterate is not certified.
     """
 
     stiffness: sp.spmatrix
@@ -148,6 +157,7 @@ class ContactSystem:
     fixed_dofs: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     fixed_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     free_modes: np.ndarray | None = None
+    length_scale: float | None = None
 
     def scaled(self, factor: float) -> "ContactSystem":
         """The system with its load and prescribed values multiplied by ``factor`` (a step
@@ -911,6 +921,11 @@ class ActiveSetSolver:
         self.absolute = sp.csr_matrix((np.abs(k.data), k.indices, k.indptr), shape=k.shape)
         self.absolute_row_sums = self.absolute @ np.ones(n)
         self.gamma = roundoff_bound(int(np.diff(k.indptr).max(initial=0)) + 2)
+        #: The force that strains the body by its whole size (largest stiffness entry times
+        #: its size), the force scale of an iterate without any force (see measure); 0 without
+        #: a length scale.
+        self.force_unit = (float(np.abs(k.diagonal()).max(initial=0.0)) * float(system.length_scale)
+                           if getattr(system, "length_scale", None) else 0.0)
         self._masked_matrix: sp.csr_matrix | None = None
         self._probe: np.ndarray | None = None  # the singularity probe, restricted to each set's equations
         self._masked_fixed: np.ndarray | None = None
@@ -964,13 +979,24 @@ class ActiveSetSolver:
             terms = (absolute + np.abs(self.load) + np.abs(contact))[equations]
             force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
                      + np.abs(nodal_force).max(initial=0.0))
+            roundoff = self.gamma * terms.max(initial=0.0)
+            if not np.any(self.load) and force * FORCE_RESOLUTION_LIMIT < roundoff:
+                # Nothing loads the body, and its forces (K u, the contact's) are round-off:
+                # a block lifted off the plane by its prescribed top, a load path's steps
+                # before contact or the one where a node just grazes it. The exact forces
+                # are zero, and round-off gives them no scale of their own; they are
+                # measured against the force of a strain of ZERO_FORCE_STRAIN over the body,
+                # so certified if round-off stays below 1e-3 of that: a rigid motion of up to
+                # some 1e3-1e4 body sizes (the rough block lifted by 1e3 of its sizes is, by
+                # 1e4 not; the square by 1e4 is, by 1e5 not; a translation by 1e45 never).
+                force = max(force, ZERO_FORCE_STRAIN * self.force_unit)
             force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
             displacement = max(np.abs(u).max(initial=0.0), np.abs(self.gap).max(initial=0.0))
             displacement = max(displacement, np.finfo(float).tiny) if np.isfinite(displacement) else np.inf
             return Scales(
                 force=float(force),
                 displacement=float(displacement),
-                roundoff=float(self.gamma * terms.max(initial=0.0) / force),
+                roundoff=float(roundoff / force),
                 equilibrium=float(np.abs(residual).max(initial=0.0) / force),
             )
 

@@ -90,6 +90,28 @@ def test_a_proportional_path_is_homogeneous_and_needs_one_factorisation(monkeypa
     assert sum(step.kernel.column_solves for step in path.steps[1:]) == 0
 
 
+def test_a_push_that_reaches_the_obstacle_midway_is_certified_at_every_step():
+    """cases/punch.yaml pushed in 3 steps: the first third moves the punch down without
+    touching the plane (no load, no contact: a rigid motion whose forces are round-off of
+    zero), the second brings one node exactly onto it with a round-off force, the third
+    presses. Every step is certified (the first two against the body's force unit, see
+    kernel.ZERO_FORCE_STRAIN); the path stopped at its first step as not certified before.
+    The last step is the direct solve of the full push."""
+    data = yaml.safe_load((CASES / "punch.yaml").read_text(encoding="utf-8"))
+    data.pop("output", None)
+    data["load_path"] = {"steps": 3}
+    case = case_of(data)
+    path = solve_load_path(case)
+    assert [step.kernel.status for step in path.steps] == [Status.CONVERGED] * 3
+    assert all(step.kernel.certificate.passed for step in path.steps)
+    assert [int(step.kernel.active.sum()) for step in path.steps][:2] == [0, 1]
+    direct = solve_case(case_of({key: value for key, value in data.items() if key != "load_path"}))
+    np.testing.assert_array_equal(path.steps[-1].kernel.active, direct.kernel.active)
+    scale = np.abs(direct.solution.displacement).max()
+    np.testing.assert_allclose(path.steps[-1].solution.displacement, direct.solution.displacement,
+                               rtol=0, atol=1e-9 * scale)
+
+
 def test_a_step_that_does_not_converge_is_named():
     data = hertz_pressed({"force": FORCE})
     data["load_path"] = {"steps": 3}
