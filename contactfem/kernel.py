@@ -557,8 +557,8 @@ def solve_contact(
                     f"but the result is not certified: {certificate.message}"
                 )
                 if certificate.failed[0] == "force_resolution" and not active.any() and not np.any(linear.load):
-                    # A block lifted off the plane by its prescribed top: its true forces are
-                    # zero, and the computed ones are round-off, which cannot be certified.
+                    # An unloaded rigid motion too large for the body's own force unit to
+                    # resolve its round-off (see measure: a translation by 1e45).
                     message += ("; nothing loads the body and nothing touches the obstacle: it moves rigidly, "
                                 "free of stress, and its forces are round-off alone")
             break
@@ -925,7 +925,7 @@ class ActiveSetSolver:
         #: its size), the force scale of an iterate without any force (see measure); 0 without
         #: a length scale.
         self.force_unit = (float(np.abs(k.diagonal()).max(initial=0.0)) * float(system.length_scale)
-                           if getattr(system, "length_scale", None) else 0.0)
+                           if system.length_scale else 0.0)
         self._masked_matrix: sp.csr_matrix | None = None
         self._probe: np.ndarray | None = None  # the singularity probe, restricted to each set's equations
         self._masked_fixed: np.ndarray | None = None

@@ -622,7 +622,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
     settled = coarse_kernel.status is Status.CONVERGED
     # A coarse level that stopped unsettled (its own cap, a cycle) still predicts, if its last
     # iterate is finite: a prediction is only a start, which the fine level corrects and
-    # certifies. A strip 1 x 0.001 peeling off, 800 x 2 cells, whose 200 x 1 level creeps
+    # certifies. A strip 1 x 0.001 peeling off, 800 x 2 cells, whose 400 x 1 level creeps
     # past its own cap, went on cold without one and did not settle in 800 steps.
     if not settled and not (forced and np.isfinite(coarse_kernel.displacement).all()
                             and np.isfinite(coarse_kernel.multiplier).all()):
