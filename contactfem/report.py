@@ -54,6 +54,8 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     diameters = mesh.triangle_diameters()
     # The push and the reactions (one product K u) serve both balances below.
     forces = contact_and_reactions(problem, solution.displacement, contact.nodal_force)
+    certificate_force = kernel.certificate.scales.get("force", 0.0) if kernel.certificate is not None else 0.0
+    force_unit = float(certificate_force) if np.isfinite(certificate_force) else 0.0
     material = case.material
     report = {
         "schema_version": SCHEMA_VERSION,
@@ -101,12 +103,12 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             "normal": float(contact.nodal_force.sum()),
             "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
         },
-        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces),
+        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces, force_unit),
         "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
-                                           {part.name: part.label for part in case.parts}, forces),
+                                           {part.name: part.label for part in case.parts}, forces, force_unit),
         "platens": platen_figures(problem, solution.displacement, forces[1]),
         "errors": exact_errors(problem, solution),
-        "warnings": material_warnings(case.material),
+        "warnings": material_warnings(case.material) + contact_warnings(problem, contact),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
         **(extras or {}),
     }
@@ -139,6 +141,18 @@ def material_warnings(material) -> list[str]:
             "or treat the result with care"
         ]
     return []
+
+
+def contact_warnings(problem: DiscreteProblem, contact) -> list[str]:
+    """A warning when no contact node touches the obstacle: the body did not reach it, so
+    the contact condition shaped nothing (a load too light, or a gap the case did not mean)."""
+    if len(contact.nodes) == 0 or contact.active.any():
+        return []
+    remaining = contact.gap - contact.normal_displacement
+    nearest = int(np.argmin(remaining))
+    where = ", ".join(f"{value:.6g}" for value in problem.mesh.points[contact.nodes[nearest]])
+    return [f"no contact node touches the obstacle: the nearest, at ({where}), stays {remaining[nearest]:.3g} "
+            "from it, so the contact condition shaped nothing"]
 
 
 def sign_conditions(
@@ -212,12 +226,14 @@ def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:
 
 
 def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
-                forces: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+                forces: tuple[np.ndarray, np.ndarray] | None = None, force_unit: float = 0.0) -> dict:
     """Force and moment balance: applied loads + contact force + support reactions = 0.
 
     The reactions are what the supports must add for K u to balance: R = K u − F − f_c
     on the prescribed unknowns and at the nodes of symmetry lines, f_c = −n Λ being the
-    obstacle's push on each contact node.
+    obstacle's push on each contact node. The residuals are relative to the resultants'
+    magnitudes, and to ``force_unit`` at least (the certificate's force scale): a body
+    that nothing loads or touches has round-off for forces, which are no scale of their own.
     """
     points = problem.mesh.points
     contact_force, reactions = forces or contact_and_reactions(problem, displacement, nodal_force)
@@ -231,7 +247,7 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     total = np.add(np.add(applied, contact), support)
     length = np.ptp(points, axis=0).max()
     scale = np.abs(applied) + np.abs(contact) + np.abs(support)
-    force_scale = max(scale[0], scale[1], scale[2] / length, np.finfo(float).tiny)
+    force_scale = max(scale[0], scale[1], scale[2] / length, force_unit, np.finfo(float).tiny)
     return {
         "applied": applied,
         "contact": contact,
@@ -336,13 +352,15 @@ def _resultant(points: np.ndarray, centre: np.ndarray, force: np.ndarray, nodes:
 
 
 def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
-                    labels: Mapping[str, str], forces: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
+                    labels: Mapping[str, str], forces: tuple[np.ndarray, np.ndarray] | None = None,
+                    force_unit: float = 0.0) -> dict:
     """Force and moment of every boundary part on the body, and of the body force.
 
     Applied surface forces on the natural parts, reactions on the supports (clamped,
     prescribed, symmetry lines: K u − F − f_c on their held unknowns) and the obstacle's
     push on the contact parts (−n Λ). Moments are about ``equilibrium``'s point (the nodes' centroid).
-    The entries sum to zero up to the solve's residual: ``total`` is that sum.
+    The entries sum to zero up to the solve's residual: ``total`` is that sum, relative
+    to the parts' forces and to ``force_unit`` at least (see :func:`equilibrium`).
     """
     mesh = problem.mesh
     points = mesh.points
@@ -378,7 +396,8 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     entries["body force"] = {"condition": "volume", **resultant(body)}
     force = np.sum([entry["force"] for entry in entries.values()], axis=0)
     moment = float(sum(entry["moment"] for entry in entries.values()))
-    scale = max(sum(float(np.hypot(*entry["force"])) for entry in entries.values()), np.finfo(float).tiny)
+    scale = max(sum(float(np.hypot(*entry["force"])) for entry in entries.values()), force_unit,
+                np.finfo(float).tiny)
     length = float(np.ptp(points, axis=0).max())
     return {"moment_about": centre.tolist(), "parts": entries,
             "total": {"force": force.tolist(), "moment": moment,

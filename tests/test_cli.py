@@ -181,6 +181,22 @@ def test_version():
     assert __version__ in result.stdout
 
 
+def test_python_dash_m_runs_the_command_line(tmp_path):
+    """``python -m contactfem`` is the same command: it solves, and refuses bad input in one
+    line with exit code 2."""
+    import subprocess
+    import sys
+
+    solved = subprocess.run([sys.executable, "-m", "contactfem", "solve", str(ROOT / "cases" / "square.yaml"),
+                             "--out", str(tmp_path / "out"), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert solved.returncode == 0, solved.stderr
+    assert (tmp_path / "out" / "report.json").is_file()
+    missing = subprocess.run([sys.executable, "-m", "contactfem", "solve", str(tmp_path / "none.yaml")],
+                             capture_output=True, text=True, timeout=300)
+    assert missing.returncode == 2
+    assert len(missing.stderr.strip().splitlines()) == 1 and "none.yaml" in missing.stderr
+
+
 def test_refine_quadruples_triangles(tmp_path):
     case = ROOT / "cases" / "square.yaml"
     solve(case, tmp_path / "coarse", "--quiet")

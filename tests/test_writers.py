@@ -775,6 +775,52 @@ def test_forces_of_every_boundary_part_balance_and_name_their_condition(tmp_path
         assert len(table) - 1 == report["mesh"]["contact_nodes"]
 
 
+def test_a_body_that_touches_nothing_reports_its_balance_against_the_force_unit_and_warns(tmp_path):
+    """A body lifted off the plane (the square's top moved up) or pushed short of it
+    (a star-shaped polygon whose lowest point stays above a tilted plane) moves rigidly:
+    nothing loads it and its forces are round-off. The balances in report.json are then
+    relative to the certificate's force scale (the force of a strain of 1e-7 over the
+    body): within the nodes' count times its round-off bound, not 1.0 (round-off over
+    itself); and a warning says that no
+    node touched, naming the nearest one and its remaining gap."""
+    import json
+
+    import yaml
+    from click.testing import CliRunner
+
+    from contactfem.cli import main
+
+    star = {"title": "a star short of a tilted plane",
+            "geometry": {"polygon": {"vertices": [[0, 0.5], [1, 0.9], [0.8, 2.0], [0, 2.5], [-1.2, 2.2], [-1, 0.9]],
+                                     "edges": ["base", "rim", "rim", "rim", "rim", "base"]}},
+            "mesh": {"size": 0.1}, "material": {"E": 1.0e10, "nu": 0.0, "plane": "stress"},
+            "boundary": {"base": "contact", "rim": {"displacement": [0, -1.0e-3]}},
+            "obstacle": {"point": [0, 0], "normal": [0.1, -0.994987437]}}
+    square = yaml.safe_load((Path(__file__).resolve().parents[1] / "cases" / "square.yaml").read_text(encoding="utf-8"))
+    square["boundary"] = {"bottom": "contact", "top": {"displacement": [0.0, 1.0e-2]}}
+    for name, data in (("star", star), ("lifted", square)):
+        case = tmp_path / f"{name}.yaml"
+        case.write_text(yaml.safe_dump(data), encoding="utf-8")
+        out = tmp_path / name
+        result = CliRunner().invoke(main, ["solve", str(case), "--out", str(out), "--quiet"])
+        assert result.exit_code == 0, result.output
+        report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+        assert report["contact_zone"]["active_nodes"] == 0
+        assert report["solver"]["certificate"]["passed"]
+        scales = report["solver"]["certificate"]["scales"]
+        total = report["boundary_forces"]["total"]
+        # A sum over the nodes of forces each within the certificate's round-off bound of the unit.
+        bound = report["mesh"]["nodes"] * scales["roundoff"]
+        assert np.hypot(*total["force"]) <= bound * scales["force"]
+        assert report["equilibrium"]["relative_force_residual"] <= bound < 1e-6
+        assert total["relative_force_residual"] <= bound
+        warning = [w for w in report["warnings"] if w.startswith("no contact node touches the obstacle")]
+        assert len(warning) == 1, report["warnings"]
+        gaps = np.loadtxt(out / "contact.csv", delimiter=",", skiprows=1, usecols=(5, 6))
+        nearest = (gaps[:, 0] - gaps[:, 1]).min()
+        assert nearest > 0 and f"stays {nearest:.3g} from it" in warning[0]
+
+
 def test_hdf5_stores_the_exact_pressure_only_when_given(tmp_path: Path) -> None:
     solution = _solution()
     assert "exact_pressure" not in read_hdf5(_write_h5(solution, tmp_path / "plain.h5"))["contact"]
