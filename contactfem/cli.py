@@ -513,7 +513,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
                    "(every load, prescribed displacement and platen drive times each factor)")
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
-               f"{cost['backend']} (measured on 2 cores; ±50%)")
+               f"{cost['backend']} (measured on 2 cores; ±50%), of {cost['limit']}")
 
 
 @main.command()
@@ -831,11 +831,13 @@ def _csv(rows: list[dict]) -> str:
 
 
 def _estimate(case, problem) -> dict:
-    from contactfem.estimate import estimate_cost
+    from contactfem.estimate import estimate_cost, memory_limit
     from contactfem.linalg import resolve_backend
 
     backend = resolve_backend(case.solver.backend)
-    return {"backend": backend, **estimate_cost(problem.n_unknowns, backend)}
+    limit = memory_limit()
+    return {"backend": backend, **estimate_cost(problem.n_unknowns, backend),
+            "limit_bytes": limit.bytes, "limit": limit.source}
 
 
 def _geometry_figures(case) -> dict:

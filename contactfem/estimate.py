@@ -13,6 +13,9 @@ assembly and writing add about 25%. Expect ±50% on other machines.
 from __future__ import annotations
 
 import os
+import resource
+from dataclasses import dataclass
+from pathlib import Path
 
 REFERENCE_UNKNOWNS = 2.1e6
 # petsc: MUMPS on one rank (benchmarks/results/petsc_scaling.json: 26.6 s, 4.35 GB at 2.1M).
@@ -49,3 +52,112 @@ def machine_memory() -> int:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
         return 16 * 2**30
+
+
+#: Address space a solve maps beyond its resident peak: the shared libraries (VTK, CHOLMOD,
+#: two OpenBLAS copies), thread stacks, and a buffer per BLAS thread. Measured as VmPeak −
+#: VmHWM of `contactfem solve` on the square at 5 000 to 1.3 million unknowns on a 2-core
+#: machine: 0.57–0.59 GB whatever the size; 0.50 GB with one BLAS thread, 0.58 with two.
+#: Under an address-space limit (``ulimit -v``; Grid Engine's h_vmem) a solve needs its
+#: estimated peak plus this; short of it a library's allocation fails where it cannot say
+#: so (OpenBLAS or CHOLMOD crashed the process at 0.6 GiB for a 0.85 GiB solve, VTK failed
+#: to load at 1.2 GiB).
+ADDRESS_SPACE_BASE = 0.50e9
+ADDRESS_SPACE_PER_BLAS_THREAD = 0.08e9
+#: A cgroup limit at or above this is no limit (cgroup v1 writes 2^63 rounded to a page).
+_UNLIMITED = 2**60
+
+
+@dataclass(frozen=True)
+class MemoryLimit:
+    """The memory a solve in this process may use, in bytes, and what sets it (``source``,
+    for messages: "this machine's 23.5 GiB", "this process's cgroup limit of 8 GiB", ...)."""
+
+    bytes: int
+    source: str
+
+
+def memory_limit(proc: Path = Path("/proc/self"), cgroups: Path = Path("/sys/fs/cgroup")) -> MemoryLimit:
+    """The tightest of this machine's physical memory, this process's cgroup memory limit
+    (v2 ``memory.max`` or v1 ``memory.limit_in_bytes``, of its cgroup and every parent: a
+    batch job's or a container's) and its address-space limit (``RLIMIT_AS``) less
+    :func:`address_space_overhead`. What a solve is refused against before it starts."""
+    physical = machine_memory()
+    limits = [MemoryLimit(physical, f"this machine's {physical / 2**30:.3g} GiB")]
+    cgroup = _cgroup_limit(proc, cgroups)
+    if cgroup is not None and cgroup < physical:
+        limits.append(MemoryLimit(cgroup, f"this process's cgroup memory limit of {cgroup / 2**30:.3g} GiB"))
+    soft = _address_space_limit()
+    if soft is not None:
+        overhead = address_space_overhead()
+        usable = max(int(soft - overhead), 0)
+        limits.append(MemoryLimit(usable, f"the {usable / 2**30:.3g} GiB this process's address-space limit of "
+                                          f"{soft / 2**30:.3g} GiB (ulimit -v) leaves beside "
+                                          f"{overhead / 1e9:.2g} GB of libraries and threads"))
+    return min(limits, key=lambda limit: limit.bytes)
+
+
+def _address_space_limit() -> int | None:
+    """This process's soft address-space limit in bytes (None: unlimited)."""
+    soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
+def address_space_overhead() -> float:
+    """Bytes of address space a solve maps beyond its resident peak (:data:`ADDRESS_SPACE_BASE`
+    and a buffer per BLAS thread: as many as OpenBLAS starts, the CPUs this process may run
+    on unless OPENBLAS_NUM_THREADS or OMP_NUM_THREADS says fewer)."""
+    try:
+        threads = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        threads = os.cpu_count() or 1
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+        value = os.environ.get(name, "").strip()
+        if value.isdigit() and int(value) > 0:
+            threads = min(threads, int(value))
+            break
+    return ADDRESS_SPACE_BASE + ADDRESS_SPACE_PER_BLAS_THREAD * (max(threads, 1) - 1)
+
+
+def _cgroup_limit(proc: Path, cgroups: Path) -> int | None:
+    """The least memory limit of this process's cgroup and its parents, in bytes (None: none
+    set, or no cgroup file system to read)."""
+    try:
+        lines = (proc / "cgroup").read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return None
+    found: list[int] = []
+    for line in lines:
+        fields = line.split(":", 2)
+        if len(fields) != 3:
+            continue
+        _hierarchy, controllers, path = fields
+        if controllers == "":  # v2: one unified hierarchy
+            root, name = cgroups, "memory.max"
+        elif "memory" in controllers.split(","):  # v1: the memory controller's own
+            root, name = cgroups / "memory", "memory.limit_in_bytes"
+        else:
+            continue
+        # The process's own cgroup and each parent up to the mount (inside a container the
+        # mount is the container's cgroup, and the path seen from outside may not exist).
+        directory = root / path.lstrip("/")
+        while True:
+            value = _limit_in(directory / name)
+            if value is not None:
+                found.append(value)
+            if directory == root or root not in directory.parents:
+                break
+            directory = directory.parent
+    return min(found) if found else None
+
+
+def _limit_in(file: Path) -> int | None:
+    """A cgroup limit file's bytes, or None for 'max', an unlimited value or no readable file."""
+    try:
+        text = file.read_text(encoding="ascii", errors="replace").strip()
+    except OSError:
+        return None
+    if not text.isdigit():
+        return None  # "max", or nothing usable
+    value = int(text)
+    return value if 0 < value < _UNLIMITED else None

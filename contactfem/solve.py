@@ -438,17 +438,18 @@ def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
     """Refuse, before solving, a path whose steps' fields (displacement, stresses, von Mises,
     contact fields), all kept, would not fit in a quarter of memory (``contactfem solve``
     writes each step as it is solved and keeps none)."""
-    from contactfem.estimate import machine_memory
+    from contactfem.estimate import memory_limit
 
     mesh = problem.mesh
     per_step = 8 * (2 * mesh.n_points + 5 * mesh.n_triangles + 6 * len(problem.contact.nodes))
     steps = len(case.load_path.factors)
-    allowed = PATH_MEMORY_SHARE * machine_memory()
+    limit = memory_limit()
+    allowed = PATH_MEMORY_SHARE * limit.bytes
     if steps * per_step > allowed:
         raise CaseError(
             f"{case.source.name}: load_path: {steps} steps of this mesh ({problem.n_unknowns} unknowns) would hold "
-            f"about {steps * per_step / 2**30:.3g} GiB of fields, more than a quarter of this machine's memory "
-            f"({allowed / 2**30:.3g} GiB); use at most {max(1, int(allowed // per_step))} steps or a coarser mesh")
+            f"about {steps * per_step / 2**30:.3g} GiB of fields, more than a quarter ({allowed / 2**30:.3g} GiB) of "
+            f"{limit.source}; use at most {max(1, int(allowed // per_step))} steps or a coarser mesh")
 
 
 def _serial_backend(case: Case) -> str:

@@ -562,13 +562,21 @@ obstacle: {point: [0, 0], normal: [0, -1]}
 """
 
 
+def a_machine_of(monkeypatch, memory: int) -> None:
+    """This process as on a machine of ``memory`` bytes, with no cgroup or address-space limit
+    (whatever limits the test runner has)."""
+    import contactfem.estimate as estimate
+
+    monkeypatch.setattr(estimate, "machine_memory", lambda: memory)
+    monkeypatch.setattr(estimate, "_cgroup_limit", lambda proc, cgroups: None)
+    monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
+
+
 def test_a_sliver_that_needs_far_more_triangles_than_its_size_says_is_refused_within_memory(tmp_path, monkeypatch):
     """A triangle 1e-8 high: its size says about a thousand triangles, a 30-degree quality mesh
     needs millions. Triangle is capped at what the machine can solve (here a 1 GiB machine),
     and the case is refused in one line naming the key."""
-    import contactfem.discretize.meshing as meshing
-
-    monkeypatch.setattr(meshing, "machine_memory", lambda: 2**30)
+    a_machine_of(monkeypatch, 2**30)
     path = tmp_path / CASE_NAME
     path.write_text(SLIVER, encoding="utf-8")
     assert_one_line(invoke("check", path), CASE_NAME, "geometry.polygon", "feature far smaller than the mesh size")
@@ -580,10 +588,8 @@ def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeyp
     the others) exceeds the machine's memory; here a machine of 4 GiB."""
     import json
 
-    import contactfem.discretize.meshing as meshing
-
     memory = 4 * 2**30
-    monkeypatch.setattr(meshing, "machine_memory", lambda: memory)
+    a_machine_of(monkeypatch, memory)
     path = tmp_path / CASE_NAME
     path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32"), encoding="utf-8")
     result = invoke("check", path, "--refine", refine, "--json")
@@ -595,4 +601,104 @@ def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeyp
         assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB")
     else:
         assert result.exit_code == 0, result.stderr
-        assert json.loads(result.stdout)["estimate"]["bytes"] <= memory
+        estimate = json.loads(result.stdout)["estimate"]
+        assert estimate["bytes"] <= memory == estimate["limit_bytes"]
+        assert estimate["limit"] == "this machine's 4 GiB"
+
+
+# --------------------------------------------------------------------------- memory limits
+
+
+def write_lines(path: Path, text: str) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="ascii")
+    return path
+
+
+def test_the_memory_limit_is_the_tightest_of_the_machine_and_its_cgroups(tmp_path, monkeypatch):
+    """A batch job's or a container's cgroup limit, v2 (memory.max) or v1
+    (memory.limit_in_bytes), on the process's own cgroup or any parent, bounds what a solve
+    may use; 'max', v1's 2^63 and unreadable files are no limit."""
+    import contactfem.estimate as estimate
+
+    monkeypatch.setattr(estimate, "machine_memory", lambda: 64 * 2**30)
+    monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
+    proc, cgroups = tmp_path / "proc", tmp_path / "cgroup"
+    # v2: the job's step says max, the job 2 GiB, the root nothing.
+    write_lines(proc / "cgroup", "0::/job/step\n")
+    write_lines(cgroups / "job" / "memory.max", f"{2 * 2**30}\n")
+    write_lines(cgroups / "job" / "step" / "memory.max", "max\n")
+    limit = estimate.memory_limit(proc, cgroups)
+    assert limit.bytes == 2 * 2**30 and limit.source == "this process's cgroup memory limit of 2 GiB"
+    # A tighter step wins; a limit above the machine's memory is the machine's.
+    write_lines(cgroups / "job" / "step" / "memory.max", f"{2**30}\n")
+    assert estimate.memory_limit(proc, cgroups).bytes == 2**30
+    write_lines(cgroups / "job" / "memory.max", f"{128 * 2**30}\n")
+    write_lines(cgroups / "job" / "step" / "memory.max", "max\n")
+    assert estimate.memory_limit(proc, cgroups).source == "this machine's 64 GiB"
+    # v1: the memory controller's hierarchy, unlimited written as 2^63 rounded to a page.
+    write_lines(proc / "cgroup", "5:cpu,cpuacct:/other\n4:memory:/slurm/uid_1/job_7\n0::/\n")
+    write_lines(cgroups / "memory" / "slurm" / "memory.limit_in_bytes", "9223372036854771712\n")
+    write_lines(cgroups / "memory" / "slurm" / "uid_1" / "job_7" / "memory.limit_in_bytes", f"{3 * 2**30}\n")
+    assert estimate.memory_limit(proc, cgroups).bytes == 3 * 2**30
+    # Inside a container the path seen may not exist below the mount: its root file counts.
+    write_lines(proc / "cgroup", "0::/seen/from/outside\n")
+    write_lines(cgroups / "memory.max", f"{5 * 2**30}\n")
+    assert estimate.memory_limit(proc, cgroups).bytes == 5 * 2**30
+    # Nothing readable, or nonsense: the machine's memory.
+    for text in ("", "garbage\n", "0::/job/step\n"):
+        write_lines(proc / "cgroup", text)
+        (cgroups / "memory.max").write_text("banana\n", encoding="ascii")
+        (cgroups / "job" / "memory.max").write_text("-1\n", encoding="ascii")
+        assert estimate.memory_limit(proc, cgroups).source == "this machine's 64 GiB"
+    assert estimate.memory_limit(tmp_path / "no_proc", tmp_path / "no_cgroups").source == "this machine's 64 GiB"
+
+
+def test_a_cgroup_limit_refuses_a_mesh_the_machine_could_hold(tmp_path, monkeypatch):
+    """check and solve refuse, in one line naming the limit, a mesh whose estimated peak
+    exceeds the cgroup's limit though not the machine's memory; nothing is written."""
+    import contactfem.estimate as estimate
+
+    monkeypatch.setattr(estimate, "machine_memory", lambda: 64 * 2**30)
+    monkeypatch.setattr(estimate, "_cgroup_limit", lambda proc, cgroups: 2**30)
+    monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
+    path = tmp_path / CASE_NAME
+    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 512"), encoding="utf-8")
+    assert_one_line(invoke("check", path), CASE_NAME, "more than this process's cgroup memory limit of 1 GiB")
+    out = tmp_path / "out"
+    assert_one_line(invoke("solve", path, "--out", out), CASE_NAME, "cgroup memory limit")
+    assert not out.exists()
+
+
+def test_an_address_space_limit_refuses_in_one_line_what_would_crash_the_solve(tmp_path):
+    """Under ``ulimit -v`` a solve that does not fit used to die in a library: the square at
+    400 x 400 (0.85 GiB estimated) crashed the process (SIGSEGV in CHOLMOD) at 0.6 GiB and
+    failed to load VTK with a traceback at 1.2 GiB. The limit less the address space a solve
+    maps beyond its peak (libraries, threads) now bounds the estimate: refused with exit
+    code 2 in one line, nothing written; the shipped square still solves under it."""
+    import resource
+    import subprocess
+    import sys
+
+    from contactfem.estimate import address_space_overhead
+
+    limit = int(address_space_overhead() + 0.5 * 2**30)
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    def command(*args: object) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "contactfem", *map(str, args)], capture_output=True,
+                              text=True, timeout=600, preexec_fn=limited)
+
+    big = tmp_path / "big.yaml"
+    big.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 400"), encoding="utf-8")
+    out = tmp_path / "big_out"
+    refused = command("solve", big, "--out", out)
+    assert refused.returncode == 2, refused.stderr
+    lines = refused.stderr.strip().splitlines()
+    assert len(lines) == 1 and "big.yaml" in lines[0] and "(ulimit -v)" in lines[0], refused.stderr
+    assert not out.exists()
+    solved = command("solve", ROOT / "cases" / "square.yaml", "--out", tmp_path / "square", "--quiet")
+    assert solved.returncode == 0, solved.stderr
+    assert (tmp_path / "square" / "report.json").is_file() and (tmp_path / "square" / "solution.vtu").is_file()

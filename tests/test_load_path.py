@@ -206,9 +206,13 @@ def test_a_path_whose_steps_would_not_fit_in_memory_is_refused_before_solving(mo
     import contactfem.estimate as estimate
 
     data = square_path([0.5, 1.0])
+    data["mesh"]["divisions"] = 128  # the mesh fits in 1 GiB (0.23 GB), 1 000 steps' fields (1.6 GB) do not
     data["load_path"] = {"steps": 1000}
-    monkeypatch.setattr(estimate, "machine_memory", lambda: 64 * 2**20)  # 64 MiB
-    with pytest.raises(CaseError, match=r"load_path: 1000 steps of this mesh .* use at most \d+ steps"):
+    monkeypatch.setattr(estimate, "machine_memory", lambda: 2**30)
+    monkeypatch.setattr(estimate, "_cgroup_limit", lambda proc, cgroups: None)
+    monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
+    with pytest.raises(CaseError, match=r"load_path: 1000 steps of this mesh .* of this machine's 1 GiB; "
+                                        r"use at most \d+ steps"):
         solve_load_path(case_of(data))
 
 

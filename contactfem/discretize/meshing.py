@@ -6,7 +6,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError, MeshError
-from contactfem.estimate import largest_mesh_points, machine_memory
+from contactfem.estimate import largest_mesh_points, memory_limit
 from contactfem.mesh import (
     Mesh,
     check_mesh,
@@ -174,7 +174,8 @@ def _backend(case: Case) -> str:
 def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
     """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before
     refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
-    ``contactfem check`` prints) says this machine's memory cannot hold."""
+    ``contactfem check`` prints) says the memory this process may use cannot hold
+    (:func:`~contactfem.estimate.memory_limit`: the machine's, a cgroup's, ``ulimit -v``)."""
     from contactfem.estimate import estimate_cost, unknowns_of_triangles
 
     if base is None:
@@ -184,12 +185,12 @@ def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -
     backend = _backend(case)
     unknowns = unknowns_of_triangles(triangles)
     needed = estimate_cost(unknowns, backend)["bytes"]
-    memory = machine_memory()
-    if needed > memory:
+    limit = memory_limit()
+    if needed > limit.bytes:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
             f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
-            f"this machine's {memory / 2**30:.3g} GiB; use fewer divisions, a larger mesh.size or fewer refinements"
+            f"{limit.source}; use fewer divisions, a larger mesh.size or fewer refinements"
         )
 
 
@@ -205,7 +206,7 @@ def _mesh_geometry(case: Case) -> Mesh:
         mesh = triangulate_domain(
             geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
             size=_contact_grading(case) if settings.contact_size is not None else None,
-            max_points=largest_mesh_points(_backend(case), machine_memory()),
+            max_points=largest_mesh_points(_backend(case), memory_limit().bytes),
         )
     else:
         assert isinstance(geometry, MeshFileGeometry)
