@@ -294,8 +294,12 @@ def run_case(case: Extreme, workdir: Path) -> Outcome:
         if figures[key] > max(tolerance, EQUILIBRIUM_TOLERANCE):
             problems.append(f"{key} {figures[key]:.2e}")
     expect = case.expect
-    if "warning" in expect and bool(figures["warnings"]) != expect["warning"]:
+    locking = [w for w in figures["warnings"] if w.startswith("nearly incompressible")]
+    if "warning" in expect and bool(locking) != expect["warning"]:
         problems.append(f"warnings {figures['warnings']} (expected {'one' if expect['warning'] else 'none'})")
+    untouched = [w for w in figures["warnings"] if w.startswith("no contact node touches")]
+    if bool(untouched) != (figures["active_nodes"] == 0):
+        problems.append(f"warnings {figures['warnings']} with {figures['active_nodes']} active nodes")
     if expect.get("active") == "all" and figures["active_nodes"] != figures["contact_nodes"]:
         problems.append(f"{figures['active_nodes']} of {figures['contact_nodes']} active, expected all")
     if expect.get("active") == "some" and figures["active_nodes"] == 0:

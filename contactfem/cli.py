@@ -101,6 +101,16 @@ def _interruptible(command):
             click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
                        "a larger mesh.size or fewer refinements)", err=True)
             sys.exit(EXIT_FAILURE)
+        except ImportError as error:
+            # The writers and pictures load their libraries (h5py, matplotlib, Dask) only when
+            # they run, so one missing from the install, or one that cannot be mapped under an
+            # address-space limit, fails late: the stage that needed it says so.
+            text = str(error).strip()
+            reason = text.splitlines()[0] if text else type(error).__name__
+            outcome = ("the results were switched in before it and are complete" if interrupts.switched()
+                       else "no result was switched in, earlier results are unchanged")
+            click.echo(f"error: cannot load {error.name or 'a library'} ({reason}); {outcome}", err=True)
+            sys.exit(EXIT_FAILURE)
         except Exception as error:
             # A signal that lands inside the interpreter's own locking (a worker thread being
             # started waits on a Condition) surfaces as another error, raised while its

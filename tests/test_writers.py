@@ -333,6 +333,38 @@ def test_vtk_writer_failure_is_an_output_error(tmp_path: Path) -> None:
     assert _temporaries(tmp_path) == []
 
 
+@pytest.mark.parametrize("blocked, message", [
+    ("vtkmodules.vtkIOXML", "cannot load VTK, which writes the VTU files"),
+    ("h5py", "cannot load h5py (import of h5py halted; None in sys.modules); no result was switched in"),
+])
+def test_a_library_that_cannot_be_loaded_is_one_line_and_nothing_is_switched_in(tmp_path: Path, blocked,
+                                                                               message) -> None:
+    """The writers import their libraries (VTK, h5py) only to write, so one may fail late:
+    missing from the install, or unmappable under an address-space limit (``ulimit -v`` of
+    1.2 GiB on a 0.85 GiB solve printed VTK's ImportError with a traceback after the solve).
+    `solve` exits 1 with one line naming it, and the earlier result in the directory stays
+    whole."""
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out"
+    first = subprocess.run([sys.executable, "-m", "contactfem", "solve", str(root / "cases" / "square.yaml"),
+                            "--out", str(out), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    before = {path.name: path.read_bytes() for path in out.iterdir()}
+    script = textwrap.dedent(f"""
+        import sys
+        sys.modules[{blocked!r}] = None  # its import now raises ImportError
+        from contactfem.cli import main
+        main(["solve", {str(root / "cases" / "square.yaml")!r}, "--out", {str(out)!r}, "--overwrite",
+              "--method", "standard"], prog_name="contactfem")
+        """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 1, run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+    assert message in lines[0], lines[0]
+    assert {path.name: path.read_bytes() for path in out.iterdir()} == before
+
+
 def _vtk_read(path: Path) -> dict:
     """The file as VTK's own XML reader (the one ParaView uses) gives it back."""
     from vtkmodules.util.numpy_support import vtk_to_numpy

@@ -244,8 +244,26 @@ def _checked(grid: Grid) -> dict:
     }
 
 
+def _load_vtk() -> None:
+    """Import the VTK modules the writer uses, or raise :class:`OutputError` saying why not.
+    VTK is imported only to write (a solve that writes no VTU never loads it), so it may
+    fail late: a library missing from the install, or one that cannot be mapped under an
+    address-space limit (``ulimit -v``)."""
+    try:
+        import vtkmodules.util.misc  # noqa: F401
+        import vtkmodules.util.numpy_support  # noqa: F401
+        import vtkmodules.vtkCommonCore  # noqa: F401
+        import vtkmodules.vtkCommonDataModel  # noqa: F401
+        import vtkmodules.vtkCommonMisc  # noqa: F401
+        import vtkmodules.vtkIOXML  # noqa: F401
+    except ImportError as error:
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise OutputError(f"cannot load VTK, which writes the VTU files: {reason}") from None
+
+
 def _vtk_grid(arrays: dict):
     """A vtkUnstructuredGrid over the numpy arrays themselves (no copies)."""
+    _load_vtk()
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkUnstructuredGrid
