@@ -12,8 +12,11 @@ assembly and writing add about 25%. Expect ±50% on other machines.
 
 from __future__ import annotations
 
+import contextvars
 import os
 import resource
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,11 +80,27 @@ class MemoryLimit:
     source: str
 
 
+#: A budget set by the code that runs the solve (a sweep's worker: its own memory limit,
+#: which its nanny enforces by killing it, no cgroup or rlimit the process could read).
+_BUDGET: contextvars.ContextVar[MemoryLimit | None] = contextvars.ContextVar("memory_budget", default=None)
+
+
+@contextmanager
+def memory_budget(limit: MemoryLimit) -> Iterator[None]:
+    """Within the block, :func:`memory_limit` is at most ``limit``."""
+    token = _BUDGET.set(limit)
+    try:
+        yield
+    finally:
+        _BUDGET.reset(token)
+
+
 def memory_limit(proc: Path = Path("/proc/self"), cgroups: Path = Path("/sys/fs/cgroup")) -> MemoryLimit:
     """The tightest of this machine's physical memory, this process's cgroup memory limit
     (v2 ``memory.max`` or v1 ``memory.limit_in_bytes``, of its cgroup and every parent: a
     batch job's or a container's) and its address-space limit (``RLIMIT_AS``) less
-    :func:`address_space_overhead`. What a solve is refused against before it starts."""
+    :func:`address_space_overhead`, and the budget of :func:`memory_budget` if one is set.
+    What a solve is refused against before it starts."""
     physical = machine_memory()
     limits = [MemoryLimit(physical, f"this machine's {physical / 2**30:.3g} GiB")]
     cgroup = _cgroup_limit(proc, cgroups)
@@ -94,6 +113,9 @@ def memory_limit(proc: Path = Path("/proc/self"), cgroups: Path = Path("/sys/fs/
         limits.append(MemoryLimit(usable, f"the {usable / 2**30:.3g} GiB this process's address-space limit of "
                                           f"{soft / 2**30:.3g} GiB (ulimit -v) leaves beside "
                                           f"{overhead / 1e9:.2g} GB of libraries and threads"))
+    budget = _BUDGET.get()
+    if budget is not None:
+        limits.append(budget)
     return min(limits, key=lambda limit: limit.bytes)
 
 

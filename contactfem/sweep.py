@@ -48,7 +48,7 @@ import signal
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,6 +69,7 @@ from contactfem.case import (
     shortened,
 )
 from contactfem.errors import CaseError, ContactFemError, MeshError, SolverError
+from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
 from contactfem.solve import solve_case
 
@@ -378,6 +379,22 @@ def _shown_value(value: Any) -> str:
 # --------------------------------------------------------------------------- one point
 
 
+def worker_memory_limit() -> MemoryLimit | None:
+    """The memory limit of the Dask worker running this point (None: not in a worker, or it
+    has none). Its nanny kills a worker past it, so the size guard refuses against it: a
+    point too large for its worker is recorded as invalid at once instead of killing three
+    workers in turn."""
+    try:
+        from distributed import get_worker
+
+        limit = get_worker().memory_manager.memory_limit
+    except (ImportError, ValueError, AttributeError):
+        return None
+    if not limit:
+        return None
+    return MemoryLimit(int(limit), f"this sweep worker's memory limit of {limit / 2**30:.3g} GiB")
+
+
 def solve_point(task: Mapping[str, Any]) -> dict:
     """Solve one point (``task``: its case ``text``, ``source`` and ``digest``) and return its record.
 
@@ -399,7 +416,8 @@ def solve_point(task: Mapping[str, Any]) -> dict:
                 record.update(failure("error", f"{Path(task['source']).name}: a data file it reads ({files}) "
                                                "changed since the sweep was planned; run the sweep again"))
             else:
-                result = solve_case(case, accept_uncertified=True)
+                with memory_budget(limit) if (limit := worker_memory_limit()) is not None else nullcontext():
+                    result = solve_case(case, accept_uncertified=True)
                 report = build_report(case, result)
                 record.update(_figures(case, result, report))
         except (CaseError, MeshError) as error:
