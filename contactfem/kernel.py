@@ -561,6 +561,14 @@ def solve_contact(
                     # resolve its round-off (see measure: a translation by 1e45).
                     message += ("; nothing loads the body and nothing touches the obstacle: it moves rigidly, "
                                 "free of stress, and its forces are round-off alone")
+                elif certificate.failed[0] == "force_resolution":
+                    # |K| |u| / S_F: the forces the displacement would make were it all strain.
+                    ratio = certificate.scales["roundoff"] / linear.gamma
+                    message += (f"; the displacement (up to {certificate.scales['displacement']:.3g}) would make "
+                                f"forces {ratio:.1e} times the body's were it all strain: it is mostly a rigid "
+                                "motion (a gap crossed by a body that contact alone holds, a prescribed "
+                                "translation) whose strains double precision cannot resolve; close the gap in "
+                                "the geometry or load the body more")
             break
         key = np.packbits(new_active).tobytes()
         if key in seen and not safeguard:

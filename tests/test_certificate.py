@@ -569,3 +569,28 @@ def test_a_tiny_or_huge_c_gives_the_answer_of_c_one_through_the_command_line(tmp
     assert reports[c]["solver"]["certificate"]["passed"]
     assert reports[c]["contact_zone"] == reports[1.0]["contact_zone"]
     assert reports[c]["contact_force"]["normal"] == pytest.approx(reports[1.0]["contact_force"]["normal"], rel=1e-10)
+
+
+def test_a_gap_crossed_under_a_force_too_small_to_resolve_is_refused_naming_the_rigid_motion():
+    """A block that contact alone holds along the obstacle's normal (a symmetry side and a
+    platen force on top), 1e-3 above the plane: it crosses the gap rigidly, then presses.
+    Under 1e3 its strains are resolved and it is certified, pressing along its whole base.
+    Under 1e-12 its strains are 1e-18 against a rigid motion of 1e-3, below double
+    precision (forces of |K||u| are 1e15 times the body's): not certified, and the message
+    says the displacement is mostly a rigid motion and what to do."""
+    from contactfem.solve import solve_case
+
+    for force, certified in ((1.0e3, True), (1.0e-12, False)):
+        data = square_case_dict(8)
+        data["boundary"] = {"left": "symmetry", "top": {"platen": {"force": force}}, "bottom": "contact"}
+        data["obstacle"] = {"point": [0.0, -1.0e-3], "normal": [0.0, -1.0]}
+        result = solve_case(case_from(data), accept_uncertified=True)
+        kernel = result.kernel
+        if certified:
+            assert kernel.status is Status.CONVERGED, kernel.message
+            assert kernel.active.all()
+            assert result.solution.contact.nodal_force.sum() == pytest.approx(force, rel=1e-10)
+        else:
+            assert kernel.status is Status.NOT_CERTIFIED and kernel.certificate.failed[0] == "force_resolution"
+            assert "mostly a rigid motion" in kernel.message and "close the gap in the geometry" in kernel.message
+            assert "\n" not in kernel.message
