@@ -706,6 +706,7 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
     progress = _progress(quiet)
     try:
         case = _load(case_file)
+        _refuse_unknowns_beyond_memory(case, max_unknowns)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-adapt")
         with claimed_directory(directory, markers=(ADAPT_JSON, *RESULT_MARKERS), overwrite=overwrite) as claim:
             run = adaptive_loop(case, theta=theta, target=target, max_unknowns=max_unknowns,
@@ -838,6 +839,21 @@ def _csv(rows: list[dict]) -> str:
     lines = [",".join(keys)]
     lines += [",".join(str(row[k]) for k in keys) for row in rows]
     return "\n".join(lines) + "\n"
+
+
+def _refuse_unknowns_beyond_memory(case, max_unknowns: int) -> None:
+    """adapt grows its mesh up to --max-unknowns, meshes the size guard never sees: the budget
+    itself must fit the memory this process may use, or nothing starts."""
+    from contactfem.estimate import estimate_cost, largest_mesh_points, memory_limit
+    from contactfem.linalg import resolve_backend
+
+    backend = resolve_backend(case.solver.backend)
+    needed = estimate_cost(max_unknowns, backend)["bytes"]
+    limit = memory_limit()
+    if needed > limit.bytes:
+        raise CaseError(f"--max-unknowns {max_unknowns}: a mesh of that many unknowns needs about "
+                        f"{needed / 2**30:.3g} GiB with {backend}, more than {limit.source}; at most "
+                        f"{2 * largest_mesh_points(backend, limit.bytes)} fit")
 
 
 def _estimate(case, problem) -> dict:

@@ -702,3 +702,21 @@ def test_an_address_space_limit_refuses_in_one_line_what_would_crash_the_solve(t
     solved = command("solve", ROOT / "cases" / "square.yaml", "--out", tmp_path / "square", "--quiet")
     assert solved.returncode == 0, solved.stderr
     assert (tmp_path / "square" / "report.json").is_file() and (tmp_path / "square" / "solution.vtu").is_file()
+
+
+def test_an_adapt_budget_beyond_memory_is_refused_before_anything_starts(tmp_path, monkeypatch):
+    """adapt refines its meshes itself (bisection), where the size guard does not look:
+    --max-unknowns must fit the memory this process may use. On a machine of 2 GiB, 5
+    million unknowns (about 11 GiB estimated) are refused in one line naming the option, the
+    limit and the most that fit, and nothing is written."""
+    from contactfem.estimate import estimate_cost
+    from contactfem.linalg import resolve_backend
+
+    a_machine_of(monkeypatch, 2 * 2**30)
+    out = tmp_path / "out"
+    line = assert_one_line(invoke("adapt", ROOT / "cases" / "square.yaml", "--max-unknowns", 5_000_000,
+                                  "--out", out), "--max-unknowns 5000000", "more than this machine's 2 GiB")
+    fit = int(line.rsplit("at most ", 1)[1].split()[0])
+    backend = resolve_backend("auto")
+    assert estimate_cost(fit, backend)["bytes"] <= 2 * 2**30 < estimate_cost(fit + 1000, backend)["bytes"]
+    assert not out.exists()
