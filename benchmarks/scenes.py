@@ -1,0 +1,277 @@
+"""Scenes nobody chose: random bodies, obstacles and loads through ``contactfem solve``.
+
+Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--out FILE.json]
+
+Each scene is drawn from its seed (the same seed, the same case):
+
+- bodies: rectangles of aspect 1/200 to 20, a third of them with a circular hole; star
+  polygons of 6 to 40 vertices (graded onto their base or not); half-disks; profiles that
+  are sums of sines, of 100 to 2 000 points; sizes from 1e-3 to 1e3;
+- material: E from 1e-2 to 1e11, ν from 0 to 0.4999, plane strain or stress;
+- obstacle: a line tilted by up to some 30°, through the body's farthest point along its
+  normal, touching, short of it or overlapping; a fifth of the rectangles and profiles
+  on a finite table instead;
+- supports and loads: a pushed or sheared top, a pressure or a platen force with a
+  symmetry side (a body that contact alone holds along the normal), a platen driven by
+  displacement, its weight, a cantilever under a wavy traction, a traction that lifts;
+- either method; 15% as load paths of 2 to 6 steps.
+
+A scene's contact parts are the edges that face the obstacle (a star's base), as a user
+would mark them. Each solve runs in its own process (``python -m contactfem solve``) and
+counts as:
+
+- ``certified``: exit 0, report.json's certificate passed, and the resultant of all forces
+  on the body within what the certificate implies: a sum over the unknowns of nodal
+  residuals each within max(tolerance, round-off bound) of the force scale;
+- ``refused``: exit 2 with one line (a body left free to slide, a table beside the body);
+- ``failed``: anything else (exit 1, a traceback, a crash, exit 0 not certified, more than
+  one line) — the figure that must stay 0.
+
+``--more`` also runs one of ``compare``, ``converge --levels 2`` or ``adapt`` on each
+certified scene, which must exit 0. Writes JSON (per scene: seed, case, outcome, seconds,
+Newton steps, active nodes) and prints the counts; exits 1 if any scene failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import random
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+MODES = ("push", "push", "pressure", "platen", "weight", "cantilever", "shear", "lift", "platen_displacement")
+
+
+def _log_uniform(rng: random.Random, low: float, high: float) -> float:
+    return 10 ** rng.uniform(math.log10(low), math.log10(high))
+
+
+def scene(seed: int) -> dict:
+    """The case (as a YAML mapping) of scene ``seed``."""
+    rng = random.Random(seed)
+    young = _log_uniform(rng, 1e-2, 1e11)
+    strain = _log_uniform(rng, 1e-7, 3e-2)
+    data: dict = {
+        "title": f"scene {seed}",
+        "material": {"E": young, "nu": rng.choice([0.0, 0.3, rng.uniform(0, 0.49), 0.4999]),
+                     "plane": rng.choice(["strain", "stress"])},
+        "solver": {"method": rng.choice(["positive", "standard"])},
+    }
+    size = _log_uniform(rng, 1e-3, 1e3)
+    tilt = rng.choice([0.0, 0.0, rng.gauss(0, 3), rng.gauss(0, 10)])
+    kind = rng.choice(["rectangle", "rectangle", "star", "profile", "half-disk"])
+    if kind == "half-disk":
+        tilt = 0.0  # its quarter arcs end tangent to a level obstacle and face away from a tilted one
+    angle = math.radians(tilt)
+    normal = (math.sin(angle), -math.cos(angle))
+    side = None
+    if kind == "rectangle":
+        length, height = size, size / _log_uniform(rng, 0.05, 200)
+        nx = rng.randint(4, 200)
+        ny = max(1, min(200, round(nx * height / length)))
+        data["geometry"] = {"rectangle": {"lower": [0, 0], "upper": [length, height]}}
+        data["mesh"] = {"divisions": [nx, ny]}
+        if rng.random() < 0.3:
+            radius = 0.25 * min(length, height)
+            data["geometry"] = {"polygon": {
+                "vertices": [[0, 0], [length, 0], [length, height], [0, height]],
+                "edges": ["bottom", "right", "top", "left"],
+                "holes": [{"circle": {"center": [length / 2, height / 2], "radius": radius}, "name": "hole"}]}}
+            data["mesh"] = {"size": min(length, height) / rng.choice([8, 16, 32])}
+        base, top, side, width = "bottom", "top", "left", length
+        outline = [(0.0, 0.0), (length, 0.0)]
+    elif kind == "star":
+        corners = rng.randint(6, 40)
+        points = []
+        for i in range(corners):
+            at = -math.pi / 2 + 2 * math.pi * i / corners
+            radius = size * rng.uniform(0.6, 1.0)
+            points.append([radius * math.cos(at), size + radius * math.sin(at)])
+        lowest = min(p[1] for p in points)
+        points = [[x, y - lowest] for x, y in points]
+        edges = []
+        for i in range(corners):
+            (x0, y0), (x1, y1) = points[i], points[(i + 1) % corners]
+            outward = (y1 - y0, -(x1 - x0))  # counter-clockwise loop
+            facing = (outward[0] * normal[0] + outward[1] * normal[1]) / math.hypot(*outward)
+            edges.append("base" if facing > 0.3 else "rim")
+        data["geometry"] = {"polygon": {"vertices": points, "edges": edges}}
+        data["mesh"] = {"size": size / rng.choice([5, 10, 20])}
+        if rng.random() < 0.5:
+            data["mesh"].update(contact_size=size / 200, grading=0.3)
+        base, top, width, height = "base", "rim", 2 * size, 2 * size
+        outline = [tuple(p) for p in points]
+    elif kind == "half-disk":
+        data["geometry"] = {"polygon": {"vertices": [[-size, size], [0, 0], [size, size]], "edges": [
+            {"name": "base", "arc": {"center": [0, size], "direction": "ccw"}},
+            {"name": "base", "arc": {"center": [0, size], "direction": "ccw"}}, "top"]}}
+        data["mesh"] = {"size": size / 10, "contact_size": size / rng.choice([50, 200, 1000]), "grading": 0.2}
+        base, top, width, height = "base", "top", 2 * size, size
+        outline = [(0.0, 0.0)]
+    else:
+        length = size
+        amplitude = length * _log_uniform(rng, 1e-5, 2e-2)
+        terms = " + ".join(
+            f"{amplitude / (j + 1):.6g}*sin({2 * math.pi * (j + 1) * rng.randint(1, 8) / length:.6g}*x"
+            f" + {rng.uniform(0, 6.28):.4g})" for j in range(rng.randint(1, 4)))
+        count = rng.choice([100, 400, 2000])
+        x = np.linspace(0, length, count)
+        heights = eval(terms, {"sin": np.sin, "x": x})  # the generator's own expression
+        depth = length * rng.uniform(0.1, 1.0)
+        data["geometry"] = {"profile": {"expression": terms, "x": [0, length], "points": count,
+                                        "depth": depth + float(heights.max())}}
+        data["mesh"] = {"size": depth / rng.choice([5, 10, 20])}
+        base, top, side, width, height = "base", "top", "left", length, depth
+        outline = list(zip(x.tolist(), heights.tolist()))
+
+    mode = rng.choice(MODES)
+    if mode in ("pressure", "platen", "platen_displacement", "weight") and side is None:
+        mode = "push"  # no straight side to hold it along the obstacle: contact alone cannot
+    pressure = strain * young
+    boundary: dict = {base: "contact"}
+    if mode == "push":
+        boundary[top] = {"displacement": [rng.choice([0, strain * height * rng.uniform(-1, 1)]), -strain * height]}
+    elif mode == "shear":
+        boundary[top] = {"displacement": [strain * height, -strain * height * rng.uniform(0, 1)]}
+    elif mode == "pressure":
+        boundary[top] = {"pressure": pressure}
+        if side:
+            boundary[side] = "symmetry"
+    elif mode == "platen":
+        boundary[top] = {"platen": {"force": pressure * width}}
+        if side:
+            boundary[side] = "symmetry"
+    elif mode == "platen_displacement":
+        boundary[top] = {"platen": {"displacement": strain * height}}
+        if side:
+            boundary[side] = "symmetry"
+    elif mode == "weight":
+        data["body_force"] = [0, -pressure / height]
+        boundary[side] = "symmetry"
+    elif mode == "lift":
+        if side:
+            boundary[side] = "clamped"
+            boundary[top] = {"traction": [0, f"{pressure}*cos(2*3.14159*x/{width})"]}
+        else:
+            boundary[top] = {"displacement": [0, strain * height]}
+    else:  # cantilever
+        if side:
+            boundary[side] = "clamped"
+            boundary[top] = {"traction": [0, f"{-pressure}*sin({rng.randint(1, 6)}*3.14159*x/{width})"]}
+        else:
+            boundary[top] = {"displacement": [0, -strain * height]}
+    data["boundary"] = boundary
+
+    offset = rng.choice([0.0, 0.0, -1e-3, 1e-3, -1e-2]) * height * strain * 100
+    far = max(outline, key=lambda p: p[0] * normal[0] + p[1] * normal[1])
+    point = [far[0] + offset * normal[0], far[1] + offset * normal[1]]
+    data["obstacle"] = {"point": point, "normal": [round(normal[0], 12), round(normal[1], 12)]}
+    if rng.random() < 0.2 and kind in ("rectangle", "profile"):
+        # A table along the obstacle's line; the walk keeps the obstacle on its right.
+        along = (-normal[1], normal[0])
+        spans = [(p[0] - point[0]) * along[0] + (p[1] - point[1]) * along[1] for p in outline]
+        low, high = min(spans), max(spans)
+        start = low + rng.uniform(-0.2, 0.5) * (high - low)
+        end = max(start, low) + rng.uniform(0.3, 1.2) * (high - low)
+        ends = [[point[0] + t * along[0], point[1] + t * along[1]] for t in (start, end)]
+        walk = (ends[1][0] - ends[0][0], ends[1][1] - ends[0][1])
+        right = (walk[1], -walk[0])
+        if right[0] * normal[0] + right[1] * normal[1] < 0:
+            ends.reverse()
+        data["obstacle"] = {"segment": ends}
+    if rng.random() < 0.15:
+        data["load_path"] = {"steps": rng.randint(2, 6)}
+    data["output"] = {"files": ["json"]}
+    return data
+
+
+def _contactfem(*args: object, timeout: float = 900) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "contactfem", *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def run_scene(seed: int, workdir: Path, more: bool = False) -> dict:
+    """Solve scene ``seed`` in ``workdir`` and classify the outcome."""
+    case = scene(seed)
+    directory = workdir / f"scene-{seed}"
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / "case.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False), encoding="utf-8")
+    started = time.perf_counter()
+    try:
+        done = _contactfem("solve", path, "--out", directory / "out", "--quiet", "--overwrite")
+        code, stderr = done.returncode, done.stderr
+    except subprocess.TimeoutExpired:
+        code, stderr = "timeout", ""
+    record: dict = {"seed": seed, "case": case, "exit_code": code, "seconds": time.perf_counter() - started}
+    lines = [line for line in stderr.strip().splitlines() if line.strip()]
+    if code == 0:
+        report = json.loads((directory / "out" / "report.json").read_text(encoding="utf-8"))
+        solver = report["solver"]
+        scales = solver["certificate"]["scales"]
+        resultant = math.hypot(*report["boundary_forces"]["total"]["force"])
+        bound = report["unknowns"]["displacement"] * max(scales["solver_tolerance"], scales["roundoff"]) * scales["force"]
+        record.update(newton_steps=solver["iterations"], active_nodes=report["contact_zone"]["active_nodes"],
+                      contact_nodes=report["contact_zone"]["contact_nodes"],
+                      balance=report["boundary_forces"]["total"]["relative_force_residual"],
+                      relative_precision=scales["relative_precision"])
+        if solver["status"] == "converged" and solver["certificate"]["passed"] and resultant <= bound:
+            record["outcome"] = "certified"
+        else:
+            record.update(outcome="failed", message=f"exit 0 with status {solver['status']}, resultant "
+                                                    f"{resultant:.2e} against its bound {bound:.2e}")
+    elif code == 2 and len(lines) == 1 and "Traceback" not in stderr:
+        record.update(outcome="refused", message=lines[0])
+    else:
+        record.update(outcome="failed", message=stderr.strip()[-1000:])
+    if more and record["outcome"] == "certified":
+        command = random.Random(seed + 7).choice(
+            [["compare"], ["converge", "--levels", "2"], ["adapt", "--max-unknowns", "20000", "--max-seconds", "60"]])
+        other = _contactfem(*command, path, "--out", directory / command[0], "--quiet", "--overwrite")
+        record["command"] = {"name": command[0], "exit_code": other.returncode}
+        if other.returncode != 0:
+            record.update(outcome="failed", message=f"{command[0]}: {other.stderr.strip()[-1000:]}")
+    return record
+
+
+def run(count: int, seed: int = 0, jobs: int = 2, more: bool = False, progress=None) -> dict:
+    with tempfile.TemporaryDirectory(prefix="contactfem-scenes-") as workdir, ThreadPoolExecutor(jobs) as pool:
+        records = []
+        for record in pool.map(lambda s: run_scene(s, Path(workdir), more), range(seed, seed + count)):
+            records.append(record)
+            if progress is not None:
+                progress(f"scene {record['seed']}: {record['outcome']} ({record['seconds']:.1f} s)"
+                         + (f" {record['message'][:160]}" if record["outcome"] != "certified" else ""))
+    counts = {outcome: sum(r["outcome"] == outcome for r in records) for outcome in ("certified", "refused", "failed")}
+    return {"benchmark": "scenes", "command": " ".join(sys.argv), "count": count, "first_seed": seed,
+            "more": more, "counts": counts, "scenes": records}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--count", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=0, help="the first scene's seed")
+    parser.add_argument("--jobs", type=int, default=2, help="scenes solved at once")
+    parser.add_argument("--more", action="store_true", help="also compare, converge or adapt each certified scene")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "scenes.json")
+    args = parser.parse_args()
+    results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=1, default=float) + "\n", encoding="utf-8")
+    counts = results["counts"]
+    print(f"{args.count} scenes: {counts['certified']} certified, {counts['refused']} refused, {counts['failed']} failed")
+    sys.exit(1 if counts["failed"] else 0)
+
+
+if __name__ == "__main__":
+    main()

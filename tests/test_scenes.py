@@ -1,0 +1,34 @@
+"""Scenes nobody chose (benchmarks/scenes.py), a few of them in the default run: each is
+solved through `python -m contactfem solve` and must be certified, the resultant of its
+forces within what its certificate implies, or refused in one line; the benchmark runs
+hundreds."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import scenes  # noqa: E402
+
+#: One of each kind: a half-disk on its rim and one along a load path, a rectangle on a
+#: finite table, a star along a load path, a profile under its weight, a profile clamped at
+#: one end under a wavy traction over a table, a profile under a platen force, a holed
+#: block under a platen force (these last two held along the normal by contact alone).
+SEEDS = (0, 12, 5, 6, 9, 14, 20, 30)
+
+
+def test_a_scene_is_drawn_from_its_seed_alone():
+    assert scenes.scene(9) == scenes.scene(9) and scenes.scene(9) != scenes.scene(10)
+    kinds = {next(iter(scenes.scene(seed)["geometry"])) for seed in SEEDS}
+    assert kinds == {"polygon", "rectangle", "profile"}
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_random_scenes_are_certified(seed, tmp_path):
+    record = scenes.run_scene(seed, tmp_path)
+    assert record["outcome"] == "certified", record.get("message")
+    assert record["relative_precision"] < 1e-6  # these are well conditioned
