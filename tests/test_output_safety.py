@@ -47,6 +47,20 @@ def leftovers(parent: Path) -> list[str]:
     return [p.name for p in parent.rglob(".tmp-*")]
 
 
+def started_command(args: list[str], ready: Path, **popen) -> subprocess.Popen:
+    """``contactfem args`` in a child process, returned once its imports are done (it touches
+    ``ready`` just before the command runs): a signal timed from then lands in the command,
+    not in importing SciPy, however loaded the machine (1.2 s from the start was not enough
+    beside another job)."""
+    driver = f"from contactfem.cli import main; open({str(ready)!r}, 'w').close(); main()"
+    process = subprocess.Popen([sys.executable, "-c", driver, *args], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, **popen)
+    deadline = time.monotonic() + 120
+    while not ready.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return process
+
+
 @pytest.fixture
 def solved(tmp_path) -> Path:
     out = tmp_path / "results"
@@ -129,15 +143,12 @@ def test_compare_and_converge_refuse_existing_results(tmp_path, command, marker)
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_sigint_during_the_solve_exits_130_and_keeps_earlier_results(solved, tmp_path):
-    """SIGINT about a second into a several-second solve (square refined 3 times, 131k triangles)."""
+    """SIGINT a second into a several-second solve (square refined 3 times, 131k triangles)."""
     before = snapshot(solved)
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    process = subprocess.Popen(
-        [sys.executable, "-c", "from contactfem.cli import main; main()", "solve", str(SQUARE),
-         "--refine", "3", "--out", str(solved), "--overwrite", "--quiet"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
-    )
-    time.sleep(1.2)
+    process = started_command(["solve", str(SQUARE), "--refine", "3", "--out", str(solved), "--overwrite",
+                               "--quiet"], tmp_path / "ready", env=env, cwd=tmp_path)
+    time.sleep(1.0)
     if process.poll() is not None:
         pytest.skip("the solve finished before the signal could be sent")
     process.send_signal(signal.SIGINT)
@@ -289,12 +300,9 @@ def test_a_signal_during_the_solve_of_every_writing_command_keeps_earlier_result
         (out / "compare.json").write_text("{}", encoding="utf-8")
         (out / "adapt.json").write_text("{}", encoding="utf-8")
         before = snapshot(out)
-        process = subprocess.Popen(
-            [sys.executable, "-c", "from contactfem.cli import main; main()", command[0], str(SQUARE),
-             *command[1:], "--out", str(out), "--overwrite", "--quiet"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
-        )
-        time.sleep(1.5)
+        process = started_command([command[0], str(SQUARE), *command[1:], "--out", str(out), "--overwrite",
+                                   "--quiet"], tmp_path / f"ready-{command[0]}", cwd=tmp_path)
+        time.sleep(1.0)
         if process.poll() is not None:
             pytest.skip(f"{command[0]} finished before the signal could be sent")
         process.send_signal(signal_number)
