@@ -354,17 +354,12 @@ class PredictedStarts(PathStarts):
         self.predict = predict
         self.prefer_coarse = True
         self.candidates: dict[str, np.ndarray] = {}
-        #: Steps started from each kind of set.
-        self.started = {"coarse": 0, "extrapolated": 0}
-        self.factor: float | None = None
-        self.repeated = False
+        #: Steps started from each kind of set (solved: a factor solved before, its own set).
+        self.started = {"coarse": 0, "extrapolated": 0, "solved": 0}
 
     def choose(self, factor: float, extrapolated: np.ndarray | None) -> np.ndarray | None:
-        # At a repeated factor the last set (what extrapolation gives there) is the answer,
-        # and the step judges neither prediction.
-        self.repeated, self.factor = factor == self.factor, factor
         self.candidates = {} if extrapolated is None else {"extrapolated": extrapolated}
-        if (self.prefer_coarse and not self.repeated) or extrapolated is None:
+        if self.prefer_coarse or extrapolated is None:
             predicted = self.predict(factor)
             if predicted is not None:
                 self.candidates["coarse"] = predicted
@@ -373,7 +368,13 @@ class PredictedStarts(PathStarts):
         self.started["extrapolated"] += extrapolated is not None
         return None
 
+    def revisited(self, factor: float) -> None:
+        # A factor solved before starts from its own set, the answer (the path solver's):
+        # no prediction was made, and the step judges neither.
+        self.candidates = {}
+        self.started["solved"] += 1
+
     def settled(self, active: np.ndarray) -> None:
         missed = {name: int(np.count_nonzero(guess != active)) for name, guess in self.candidates.items()}
-        if "extrapolated" in missed and not self.repeated:
+        if "extrapolated" in missed:
             self.prefer_coarse = missed["extrapolated"] > missed.get("coarse", 0)

@@ -261,7 +261,7 @@ def test_a_rough_profile_path_starts_each_step_from_the_coarser_level():
     data, source = rough_path(factors)
     case = parse_case(yaml.safe_dump(data), source=source)
     path = solve_load_path(case)
-    assert path.sequencing["started_from"] == {"coarse": 4, "extrapolated": 0}
+    assert path.sequencing["started_from"] == {"coarse": 4, "extrapolated": 0, "solved": 0}
     assert path.sequencing["coarse_steps"] == 4 and path.sequencing["levels"] >= 1
     push = data["boundary"]["top"]["displacement"][1]
     for factor, step in zip(factors, path.steps):
@@ -289,7 +289,7 @@ def test_a_path_whose_zone_stays_put_asks_the_coarser_level_twice():
     data = square_path(factors)
     data["mesh"]["divisions"] = 64  # 8 320 unknowns: a coarser level pays for itself
     path = solve_load_path(case_of(data))
-    assert path.sequencing["started_from"] == {"coarse": 2, "extrapolated": 6}
+    assert path.sequencing["started_from"] == {"coarse": 2, "extrapolated": 6, "solved": 0}
     assert path.sequencing["coarse_steps"] == 2
     assert [step.kernel.iterations for step in path.steps[2:]] == [1] * 6
     final = path.steps[-1].solution
@@ -360,11 +360,12 @@ def test_the_start_of_a_step_is_the_prediction_that_missed_fewer_nodes():
     starts.settled(coarse)
     assert starts.choose(1.25, coarse) is None
     starts.settled(right)  # extrapolation missed two nodes: the coarser level next
-    # A repeated factor starts from extrapolation (its last set) and judges nothing.
-    assert starts.choose(1.25, right) is None and asked == [0.25, 0.5, 1.0]
+    # A factor solved before starts from its own set (the path solver's): nothing is
+    # predicted, and the step judges nothing.
+    starts.revisited(1.25)
     starts.settled(right)
     assert np.array_equal(starts.choose(1.5, right), coarse) and asked == [0.25, 0.5, 1.0, 1.5]
-    assert starts.started == {"coarse": 4, "extrapolated": 3}
+    assert starts.started == {"coarse": 4, "extrapolated": 2, "solved": 1}
 
 
 def test_a_repeated_factor_starts_from_its_own_set_and_judges_nothing():
@@ -377,7 +378,7 @@ def test_a_repeated_factor_starts_from_its_own_set_and_judges_nothing():
     data, source = rough_path([0.5, 1.0])
     plain = solve_load_path(parse_case(yaml.safe_dump(data), source=source))
     assert repeated.steps[1].kernel.iterations == 1
-    assert repeated.sequencing["started_from"] == {"coarse": 2, "extrapolated": 1}
+    assert repeated.sequencing["started_from"] == {"coarse": 2, "extrapolated": 0, "solved": 1}
     assert repeated.steps[2].kernel.iterations == plain.steps[1].kernel.iterations
     for mine, theirs in ((repeated.steps[0], plain.steps[0]), (repeated.steps[1], plain.steps[0]),
                          (repeated.steps[2], plain.steps[1])):
@@ -398,3 +399,19 @@ def test_the_time_spent_writing_steps_is_not_the_solves():
     assert path.timings["write_steps"] >= 1.0
     assert path.timings["solve"] < 1.0 and path.seconds < 1.0
     assert "write_steps" not in solve_load_path(case_of(square_path([0.5, 1.0]))).timings
+
+
+def test_a_path_that_unloads_and_loads_again_revisits_each_factor_in_one_newton_step():
+    """Loading, unloading and loading again (1, 0.5, 0.25, 0.5, 1, 0.5): a factor solved
+    before starts from its own settled set, the answer, so it takes one Newton step, asks
+    no coarser level and no factorisation, and gives the same solution as the first time
+    (the problem is path-independent: elastic and frictionless)."""
+    data, source = rough_path([1.0, 0.5, 0.25, 0.5, 1.0, 0.5])
+    path = solve_load_path(parse_case(yaml.safe_dump(data), source=source))
+    assert path.sequencing["started_from"]["solved"] == 3
+    for again, first in ((3, 1), (4, 0), (5, 1)):
+        step, earlier = path.steps[again], path.steps[first]
+        assert step.kernel.iterations == 1 and step.kernel.factorizations == 0
+        assert np.array_equal(step.solution.contact.active, earlier.solution.contact.active)
+        force = abs(earlier.solution.contact.nodal_force.sum())
+        assert abs(step.solution.contact.nodal_force.sum() - earlier.solution.contact.nodal_force.sum()) <= 1e-10 * force
