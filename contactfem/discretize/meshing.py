@@ -6,7 +6,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError, MeshError
-from contactfem.estimate import largest_mesh_points, memory_limit
+from contactfem.estimate import MemoryLimit, largest_mesh_points, memory_limit
 from contactfem.mesh import (
     Mesh,
     check_mesh,
@@ -20,9 +20,10 @@ from contactfem.mesh.polygon import loop_signed_area
 
 def build_mesh(case: Case, refine: int | None = None) -> Mesh:
     """Mesh the case's geometry, refine it ``refine`` times (default: the case's), and check it."""
-    _refuse_oversized(case, refine)
+    limit = memory_limit()  # read once: the cgroup files and rlimits behind it cost 0.2 ms
+    _refuse_oversized(case, refine, limit)
     try:
-        mesh = _mesh_geometry(case)
+        mesh = _mesh_geometry(case, limit)
     except MeshError as error:
         key = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
         raise MeshError(f"{case.source.name}: geometry.{key[type(case.geometry)]}: {error}") from None
@@ -35,7 +36,7 @@ def build_mesh(case: Case, refine: int | None = None) -> Mesh:
     times = case.mesh.refine if refine is None else refine
     # Only now is the mesh's real size known (a mesh file, or a polygon with small features
     # meshed finer than its size asked): the same model checks it before refinements allocate.
-    _refuse_oversized(case, refine, base=mesh.n_triangles)
+    _refuse_oversized(case, refine, limit, base=mesh.n_triangles)
     if times:
         mesh = refine_uniform(mesh, times)
     try:
@@ -171,10 +172,10 @@ def _backend(case: Case) -> str:
         raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: {error}") from None
 
 
-def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -> None:
+def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: int | None = None) -> None:
     """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before
     refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
-    ``contactfem check`` prints) says the memory this process may use cannot hold
+    ``contactfem check`` prints) says the memory this process may use, ``limit``, cannot hold
     (:func:`~contactfem.estimate.memory_limit`: the machine's, a cgroup's, ``ulimit -v``)."""
     from contactfem.estimate import estimate_cost, unknowns_of_triangles
 
@@ -185,7 +186,6 @@ def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -
     backend = _backend(case)
     unknowns = unknowns_of_triangles(triangles)
     needed = estimate_cost(unknowns, backend)["bytes"]
-    limit = memory_limit()
     if needed > limit.bytes:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
@@ -194,7 +194,7 @@ def _refuse_oversized(case: Case, refine: int | None, base: int | None = None) -
         )
 
 
-def _mesh_geometry(case: Case) -> Mesh:
+def _mesh_geometry(case: Case, limit: MemoryLimit) -> Mesh:
     geometry = case.geometry
     settings = case.mesh
     if isinstance(geometry, RectangleGeometry):
@@ -206,7 +206,7 @@ def _mesh_geometry(case: Case) -> Mesh:
         mesh = triangulate_domain(
             geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
             size=_contact_grading(case) if settings.contact_size is not None else None,
-            max_points=largest_mesh_points(_backend(case), memory_limit().bytes),
+            max_points=largest_mesh_points(_backend(case), limit.bytes),
         )
     else:
         assert isinstance(geometry, MeshFileGeometry)
