@@ -404,14 +404,15 @@ def test_the_time_spent_writing_steps_is_not_the_solves():
 def test_a_path_that_unloads_and_loads_again_revisits_each_factor_in_one_newton_step():
     """Loading, unloading and loading again (1, 0.5, 0.25, 0.5, 1, 0.5): a factor solved
     before starts from its own settled set, the answer, so it takes one Newton step, asks
-    no coarser level and no factorisation, and gives the same solution as the first time
-    (the problem is path-independent: elastic and frictionless)."""
+    no coarser level, and gives the same solution as the first time (the problem is
+    path-independent: elastic and frictionless). Whether that step refactorises or takes
+    Schur columns is the cost model's choice from measured seconds, not asserted here."""
     data, source = rough_path([1.0, 0.5, 0.25, 0.5, 1.0, 0.5])
     path = solve_load_path(parse_case(yaml.safe_dump(data), source=source))
     assert path.sequencing["started_from"]["solved"] == 3
     for again, first in ((3, 1), (4, 0), (5, 1)):
         step, earlier = path.steps[again], path.steps[first]
-        assert step.kernel.iterations == 1 and step.kernel.factorizations == 0
+        assert step.kernel.iterations == 1
         assert np.array_equal(step.solution.contact.active, earlier.solution.contact.active)
         force = abs(earlier.solution.contact.nodal_force.sum())
         assert abs(step.solution.contact.nodal_force.sum() - earlier.solution.contact.nodal_force.sum()) <= 1e-10 * force
