@@ -13,7 +13,7 @@ import numpy as np
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
-from contactfem.mesh.quality import check_mesh
+from contactfem.mesh.quality import check_body, check_mesh
 from contactfem.mesh.refine import _undirected_keys, boundary_edges
 
 __all__ = ["read_gmsh", "write_gmsh", "UNNAMED_PART"]
@@ -193,6 +193,7 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     )
     try:
         check_mesh(mesh)
+        check_body(mesh)
     except MeshError as exc:
         raise MeshError(f"mesh {path}: {exc}") from None
     return mesh

@@ -20,7 +20,7 @@ from contactfem.mesh.refine import _undirected_keys, oriented_boundary
 from contactfem.mesh.topology import Topology
 
 __all__ = ["Arc", "Loop", "arc_sweep", "circle_loop", "first_crossing", "loop_outline", "loop_signed_area",
-           "polygon_problems", "triangulate_domain"]
+           "polygon_problems", "self_crossing", "triangulate_domain"]
 
 #: Relative tolerance on the radius of an arc's end vertex.
 RADIUS_TOLERANCE = 1e-9
@@ -674,10 +674,7 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     if np.all(line == 0):
         return "zero area"
 
-    folded = _folds(v)
-    if folded is not None:
-        return f"edges {folded[0]} and {folded[1]} intersect"
-    crossing = _sweep([v])
+    crossing = self_crossing(v)
     if crossing is not None:
         return f"edges {crossing[0]} and {crossing[1]} intersect"
 
@@ -688,6 +685,14 @@ def polygon_problems(vertices: np.ndarray) -> str | None:
     if area2 < 0.0:
         return CLOCKWISE
     return None
+
+
+def self_crossing(v: np.ndarray) -> tuple[int, int] | None:
+    """Two edges of the closed polygon ``v`` (k >= 3 distinct vertices) that meet other than
+    adjacent edges at their common vertex (touching counts), or None if it is simple: a fold
+    back onto the previous edge, else the first pair the sweep finds."""
+    folded = _folds(v)
+    return folded if folded is not None else _sweep([v])
 
 
 def _folds(v: np.ndarray) -> tuple[int, int] | None:

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
+from contactfem.mesh.polygon import first_crossing_among, self_crossing
 from contactfem.mesh.refine import (
     _decode,
     _single_codes,
@@ -13,7 +16,7 @@ from contactfem.mesh.refine import (
     _undirected_keys,
 )
 
-__all__ = ["check_mesh", "DEGENERATE_RATIO"]
+__all__ = ["boundary_loops", "check_body", "check_mesh", "DEGENERATE_RATIO"]
 
 #: A triangle whose area is at most this times its longest edge squared is degenerate
 #: (an equilateral triangle has ratio sqrt(3)/4 = 0.43).
@@ -169,3 +172,140 @@ def check_mesh(mesh: Mesh) -> None:
     _check_triangles(mesh)
     _check_edges(mesh)
     _check_curves(mesh)
+
+
+def _at(point: np.ndarray) -> str:
+    return f"({point[0]:.6g}, {point[1]:.6g})"
+
+
+def boundary_loops(mesh: Mesh) -> list[np.ndarray]:
+    """The closed loops of ``mesh``'s boundary, each as its node sequence with the body on
+    the left (the outer loop counter-clockwise, holes clockwise), loop by loop in the order
+    of their first edge.
+
+    Each boundary edge is followed by the one leaving its end node; the loops are the
+    cycles of that successor map, ranked by pointer jumping (O(m log m) for m boundary
+    edges, no walk in Python).
+
+    Raises
+    ------
+    MeshError
+        If a node starts two boundary edges: the boundary touches itself there.
+    """
+    edges = np.asarray(mesh.boundary_edges, dtype=np.int64)
+    m = len(edges)
+    if m == 0:
+        return []
+    start, end = edges[:, 0], edges[:, 1]
+    leaving = np.bincount(start, minlength=mesh.n_points)
+    pinched = np.flatnonzero(leaving > 1)
+    if pinched.size:
+        raise MeshError(f"the boundary touches itself at node {pinched[0]} {_at(mesh.points[pinched[0]])}: "
+                        "parts of the body meet at a single point")
+    edge_from = np.full(mesh.n_points, -1, dtype=np.int64)
+    edge_from[start] = np.arange(m)
+    successor = edge_from[end]  # a closed boundary: every end node starts an edge
+    count, label = connected_components(sp.csr_matrix((np.ones(m), (np.arange(m), successor)), shape=(m, m)),
+                                        connection="weak")
+    head = np.full(count, m, dtype=np.int64)
+    np.minimum.at(head, label, np.arange(m))
+    # Cut each cycle before its head, then rank every edge by its distance to the cut.
+    last = head[label][successor] == successor
+    following = np.where(last, np.arange(m), successor)
+    distance = np.where(last, 0, 1)
+    while True:
+        jumped = following[following]
+        distance = distance + distance[following]
+        if np.array_equal(jumped, following):
+            break
+        following = jumped
+    order = np.lexsort((-distance, head[label]))
+    sizes = np.bincount(label, minlength=count)[np.argsort(head)]
+    return np.split(start[order], np.cumsum(sizes)[:-1])
+
+
+def check_body(mesh: Mesh) -> None:
+    """Raise MeshError unless the triangulation ``mesh`` (already valid, :func:`check_mesh`)
+    covers each point of the plane at most once and is cut nowhere: its boundary is simple
+    closed loops that neither cross nor touch, and no piece (triangles joined through
+    edges) lies inside another's material. Separate pieces are allowed (two punches, each
+    held by its own supports, :mod:`contactfem.discretize.supports`).
+
+    A conforming mesh can still be one no one drew: surfaces meshed apart and not merged
+    (coincident nodes on either side of their interface, which then carries no force), a
+    slit of such nodes, pieces that overlap or meet at a point. Each solves, but not as the
+    body drawn. Sweeps over the boundary: O(m log m) for m boundary edges, and for pieces
+    whose bounding box lies in another's, a ray test of one point against its edges.
+    """
+    points = mesh.points
+    loops = boundary_loops(mesh)
+    nodes = np.concatenate(loops)
+    order = np.lexsort((points[nodes, 1], points[nodes, 0]))
+    same = np.flatnonzero(np.all(points[nodes[order[1:]]] == points[nodes[order[:-1]]], axis=1))
+    pieces, piece = connected_components(_edge_adjacency(mesh), directed=False)
+    if same.size:
+        a, b = sorted((int(nodes[order[same[0]]]), int(nodes[order[same[0] + 1]])))
+        where = f"nodes {a} and {b} coincide at {_at(points[a])} on the boundary"
+        if pieces > 1:
+            raise MeshError(f"{where}: the mesh is {pieces} pieces that share no edge, so surfaces meshed apart "
+                            "were not merged and no force crosses between them; merge them (Gmsh: Coherence Mesh)")
+        raise MeshError(f"{where}: the mesh is cut there (unmerged nodes, a slit) and no force crosses the cut; "
+                        "merge them (Gmsh: Coherence Mesh)")
+    outlines = [points[loop] for loop in loops]
+    for outline in outlines:
+        crossing = self_crossing(outline)
+        if crossing is not None:
+            raise MeshError(f"the boundary crosses itself near {_at(outline[crossing[1]])}: triangles overlap")
+    found = first_crossing_among(outlines)
+    if found is not None:
+        raise MeshError(f"two boundary loops meet near {_at(found[0])}: triangles overlap or touch")
+    if pieces > 1:
+        node_piece = np.empty(mesh.n_points, dtype=np.int64)
+        node_piece[mesh.triangles.ravel()] = np.repeat(piece, 3)
+        inside = _piece_inside_another(points, loops, node_piece[[loop[0] for loop in loops]], pieces)
+        if inside is not None:
+            raise MeshError(f"a piece of the mesh, at {_at(inside)}, lies inside another piece's triangles: "
+                            "they overlap")
+
+
+def _piece_inside_another(points: np.ndarray, loops: list[np.ndarray], loop_piece: np.ndarray,
+                          pieces: int) -> np.ndarray | None:
+    """A point of a piece inside another piece's material, or None. With no boundaries
+    crossing, a piece is inside another's material exactly when one of its points is: a
+    ray from it crosses that piece's boundary an odd number of times. Only pieces whose
+    bounding box lies in the other's are tested, all of them at once for each other piece."""
+    starts = np.concatenate(loops)
+    ends = np.concatenate([np.roll(loop, -1) for loop in loops])
+    edge_piece = np.repeat(loop_piece, [len(loop) for loop in loops])
+    low = np.full((pieces, 2), np.inf)
+    high = np.full((pieces, 2), -np.inf)
+    for k in range(2):
+        np.minimum.at(low[:, k], edge_piece, points[starts, k])
+        np.maximum.at(high[:, k], edge_piece, points[starts, k])
+    probe = np.empty(pieces, dtype=np.int64)
+    probe[loop_piece] = [loop[0] for loop in loops]  # any boundary node of the piece
+    for outer in range(pieces):
+        inner = np.flatnonzero(np.all((low >= low[outer]) & (high <= high[outer]), axis=1))
+        inner = inner[inner != outer]
+        if not inner.size:
+            continue
+        mine = edge_piece == outer
+        a, b = points[starts[mine]], points[ends[mine]]
+        # Blocks of probes by edges, a few million pairs at a time.
+        for block in np.array_split(inner, max(1, inner.size * len(a) // 4_000_000)):
+            x, y = points[probe[block], 0][:, None], points[probe[block], 1][:, None]
+            straddle = (a[:, 1] > y) != (b[:, 1] > y)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                crossing_x = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+            odd = np.flatnonzero(np.count_nonzero(straddle & (crossing_x > x), axis=1) % 2)
+            if odd.size:
+                return points[probe[block[odd[0]]]].copy()
+    return None
+
+
+def _edge_adjacency(mesh: Mesh) -> sp.csr_matrix:
+    """Triangles joined through an edge, as a symmetric sparse graph."""
+    sides = mesh.topology.edge_triangles
+    shared = sides[(sides[:, 0] >= 0) & (sides[:, 1] >= 0)]
+    n = mesh.n_triangles
+    return sp.csr_matrix((np.ones(len(shared)), (shared[:, 0], shared[:, 1])), shape=(n, n))
