@@ -1,6 +1,6 @@
 """Scenes nobody chose: random bodies, obstacles and loads through ``contactfem solve``.
 
-Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--out FILE.json]
+Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--backend NAME] [--out FILE.json]
 
 Each scene is drawn from its seed (the same seed, the same case):
 
@@ -28,7 +28,8 @@ counts as:
   one line) — the figure that must stay 0.
 
 ``--more`` also runs one of ``compare``, ``converge --levels 2`` or ``adapt`` on each
-certified scene, which must exit 0. Writes JSON (per scene: seed, case, outcome, seconds,
+certified scene, which must exit 0. ``--backend`` solves every scene with that sparse
+solver (``solver.backend``) instead of the fastest installed. Writes JSON (per scene: seed, case, outcome, seconds,
 Newton steps, active nodes) and prints the counts; exits 1 if any scene failed.
 """
 
@@ -200,9 +201,11 @@ def _contactfem(*args: object, timeout: float = 900) -> subprocess.CompletedProc
                           timeout=timeout)
 
 
-def run_scene(seed: int, workdir: Path, more: bool = False) -> dict:
-    """Solve scene ``seed`` in ``workdir`` and classify the outcome."""
+def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None = None) -> dict:
+    """Solve scene ``seed`` in ``workdir`` (with ``backend``, if given) and classify the outcome."""
     case = scene(seed)
+    if backend is not None:
+        case["solver"]["backend"] = backend
     directory = workdir / f"scene-{seed}"
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / "case.yaml"
@@ -244,17 +247,18 @@ def run_scene(seed: int, workdir: Path, more: bool = False) -> dict:
     return record
 
 
-def run(count: int, seed: int = 0, jobs: int = 2, more: bool = False, progress=None) -> dict:
+def run(count: int, seed: int = 0, jobs: int = 2, more: bool = False, progress=None,
+        backend: str | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="contactfem-scenes-") as workdir, ThreadPoolExecutor(jobs) as pool:
         records = []
-        for record in pool.map(lambda s: run_scene(s, Path(workdir), more), range(seed, seed + count)):
+        for record in pool.map(lambda s: run_scene(s, Path(workdir), more, backend), range(seed, seed + count)):
             records.append(record)
             if progress is not None:
                 progress(f"scene {record['seed']}: {record['outcome']} ({record['seconds']:.1f} s)"
                          + (f" {record['message'][:160]}" if record["outcome"] != "certified" else ""))
     counts = {outcome: sum(r["outcome"] == outcome for r in records) for outcome in ("certified", "refused", "failed")}
     return {"benchmark": "scenes", "command": " ".join(sys.argv), "count": count, "first_seed": seed,
-            "more": more, "counts": counts, "scenes": records}
+            "more": more, "backend": backend or "auto", "counts": counts, "scenes": records}
 
 
 def main() -> None:
@@ -263,9 +267,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="the first scene's seed")
     parser.add_argument("--jobs", type=int, default=2, help="scenes solved at once")
     parser.add_argument("--more", action="store_true", help="also compare, converge or adapt each certified scene")
+    parser.add_argument("--backend", help="the sparse solver of every scene (default: the case's, auto)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "scenes.json")
     args = parser.parse_args()
-    results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True))
+    results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True),
+                  backend=args.backend)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1, default=float) + "\n", encoding="utf-8")
     counts = results["counts"]
