@@ -82,9 +82,17 @@ def test_valid_bodies_pass_and_their_loops_close_with_the_body_on_the_left():
 
 
 def test_surfaces_meshed_apart_and_not_merged_are_refused_at_their_coincident_nodes():
-    with pytest.raises(MeshError, match=r"coincide at \(0, 0\.5\) on the boundary: the mesh is 2 pieces that share "
-                                        r"no edge.*Coherence"):
+    with pytest.raises(MeshError, match=r"coincide at \([01.0-9]+, 0\.5\) on the boundary: the mesh is 2 pieces that "
+                                        r"share no edge.*Coherence"):
         check_body(stacked(merged_where=lambda x: False))
+
+
+def test_nodes_merged_to_a_tolerance_they_missed_are_refused_too():
+    """A CAD interface 1e-9 apart (8e-9 of the edges there) is the same cut; a gap of 1e-3
+    (0.008 of them) is two separate blocks, a scene of its own."""
+    with pytest.raises(MeshError, match=r"are 1e-09 apart at \([01.0-9]+, 0\.5\), less than 1e-06 of the edges"):
+        check_body(stacked(merged_where=lambda x: False, lift=1e-9))
+    check_body(stacked(merged_where=lambda x: False, lift=1e-3))
 
 
 def test_a_slit_of_unmerged_nodes_cuts_the_body():
