@@ -1,6 +1,7 @@
 """Scenes nobody chose: random bodies, obstacles and loads through ``contactfem solve``.
 
-Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--backend NAME] [--out FILE.json]
+Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--backend NAME]
+                                  [--mesh-files | --all-mesh-files] [--out FILE.json]
 
 Each scene is drawn from its seed (the same seed, the same case):
 
@@ -27,6 +28,14 @@ counts as:
 - ``failed``: anything else (exit 1, a traceback, a crash, exit 0 not certified, more than
   one line) — the figure that must stay 0.
 
+A certified scene whose body is straight-edged is then solved again from its own mesh
+written by Gmsh (its Python API, from the test extra) the way meshers and converters
+leave them (``--mesh-files``, a fifth of the scenes; all with ``--all-mesh-files``): nodes
+renumbered at random, a few unused nodes, some or all triangles clockwise, boundary lines
+reversed, the 2.2 or 4.1 format in ASCII or binary. The twin must be certified too, with the contact force of the
+original within what the two certificates allow: twice their tolerance (or round-off
+bound, whichever is larger) times the condition estimate, of the force scale.
+
 ``--more`` also runs one of ``compare``, ``converge --levels 2`` or ``adapt`` on each
 certified scene, which must exit 0. ``--backend`` solves every scene with that sparse
 solver (``solver.backend``) instead of the fastest installed. Writes JSON (per scene: seed, case, outcome, seconds,
@@ -42,6 +51,7 @@ import random
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -201,7 +211,83 @@ def _contactfem(*args: object, timeout: float = 900) -> subprocess.CompletedProc
                           timeout=timeout)
 
 
-def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None = None) -> dict:
+_GMSH = threading.Lock()  # the gmsh API keeps one model per process
+
+
+def write_mesh_twin(case_path: Path, path: Path, rng: random.Random) -> dict:
+    """The mesh ``case_path`` is solved on, written to ``path`` by Gmsh itself (its API,
+    discrete entities) in a random encoding (see the module's docstring); what was chosen."""
+    import gmsh
+
+    from contactfem.case import load_case
+    from contactfem.discretize.meshing import build_mesh
+
+    mesh = build_mesh(load_case(case_path))
+    unused = rng.randint(0, 3)
+    tags = np.random.default_rng(rng.randrange(2**32)).permutation(mesh.n_points + unused) + 1
+    triangles = tags[mesh.triangles]
+    flipped = np.random.default_rng(rng.randrange(2**32)).random(len(triangles)) < rng.choice([0.0, 0.5, 1.0])
+    triangles[flipped] = triangles[flipped][:, ::-1]
+    version, binary = rng.choice(["2.2", "4.1"]), rng.random() < 0.5
+    coordinates = np.column_stack([mesh.points, np.zeros(mesh.n_points)])
+    with _GMSH:
+        gmsh.initialize(["-noenv"], readConfigFiles=False, interruptible=False)  # off the main thread
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.model.add("twin")
+            surface = gmsh.model.addDiscreteEntity(2)
+            gmsh.model.mesh.addNodes(2, surface, tags[:mesh.n_points].tolist(), coordinates.ravel().tolist())
+            gmsh.model.mesh.addElementsByType(surface, 2, [], triangles.ravel().tolist())
+            if unused:  # geometry points that no element uses
+                point = gmsh.model.addDiscreteEntity(0)
+                spare = np.tile(mesh.points.min(axis=0) - 1.0, (unused, 1))
+                gmsh.model.mesh.addNodes(0, point, tags[mesh.n_points:].tolist(),
+                                         np.column_stack([spare, np.zeros(unused)]).ravel().tolist())
+            for name in mesh.part_names:
+                lines = tags[mesh.edges_of(name)]
+                curve = gmsh.model.addDiscreteEntity(1)
+                gmsh.model.mesh.addElementsByType(curve, 1, [], (lines[:, ::-1] if rng.random() < 0.5 else lines)
+                                                  .ravel().tolist())
+                gmsh.model.addPhysicalGroup(1, [curve], name=name)
+            gmsh.model.addPhysicalGroup(2, [surface], name="body")
+            gmsh.option.setNumber("Mesh.MshFileVersion", float(version))
+            gmsh.option.setNumber("Mesh.Binary", int(binary))
+            gmsh.write(str(path))
+        finally:
+            gmsh.finalize()
+    return {"format": version, "binary": binary, "unused_nodes": unused, "clockwise_triangles": int(flipped.sum())}
+
+
+def _twin_of(record: dict, directory: Path, rng: random.Random) -> dict:
+    """Solve the scene again from its mesh as a file; the twin's record, compared."""
+    case = json.loads(json.dumps(record["case"]))
+    case.pop("mesh", None)
+    case["geometry"] = {"mesh_file": "mesh.msh"}
+    twin_dir = directory / "twin"
+    twin_dir.mkdir(exist_ok=True)
+    written = write_mesh_twin(directory / "case.yaml", twin_dir / "mesh.msh", rng)
+    path = twin_dir / "case.yaml"
+    path.write_text(yaml.safe_dump(case, sort_keys=False), encoding="utf-8")
+    done = _contactfem("solve", path, "--out", twin_dir / "out", "--quiet", "--overwrite")
+    twin = {"written": written, "exit_code": done.returncode}
+    if done.returncode != 0:
+        return twin | {"agrees": False, "message": done.stderr.strip()[-1000:]}
+    report = json.loads((twin_dir / "out" / "report.json").read_text(encoding="utf-8"))
+    original = json.loads((directory / "out" / "report.json").read_text(encoding="utf-8"))
+    certified = report["solver"]["status"] == "converged" and report["solver"]["certificate"]["passed"]
+    difference = math.dist(report["contact_force"]["vector"], original["contact_force"]["vector"])
+    scales = [r["solver"]["certificate"]["scales"] for r in (original, report)]
+    allowed = 2 * max(max(c["solver_tolerance"], c["roundoff"]) * c["condition_estimate"] * c["force"] for c in scales)
+    twin.update(agrees=certified and difference <= allowed, contact_force_difference=difference, allowed=allowed,
+                active_nodes=report["contact_zone"]["active_nodes"])
+    if not twin["agrees"]:
+        twin["message"] = (f"the mesh file's twin {'is' if certified else 'is not'} certified, its contact force "
+                           f"{difference:.3g} from the original's against {allowed:.3g} allowed")
+    return twin
+
+
+def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None = None,
+              mesh_files: float = 0.0) -> dict:
     """Solve scene ``seed`` in ``workdir`` (with ``backend``, if given) and classify the outcome."""
     case = scene(seed)
     if backend is not None:
@@ -237,6 +323,14 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
         record.update(outcome="refused", message=lines[0])
     else:
         record.update(outcome="failed", message=stderr.strip()[-1000:])
+    polygon = case["geometry"].get("polygon", {})
+    # A mesh file holds straight edges only: no circular hole, no arc.
+    straight = not polygon.get("holes") and not any(isinstance(e, dict) and "arc" in e for e in polygon.get("edges", []))
+    twin_rng = random.Random(seed + 11)
+    if record["outcome"] == "certified" and straight and twin_rng.random() < mesh_files:
+        record["mesh_file_twin"] = _twin_of(record, directory, twin_rng)
+        if not record["mesh_file_twin"]["agrees"]:
+            record.update(outcome="failed", message=record["mesh_file_twin"]["message"])
     if more and record["outcome"] == "certified":
         command = random.Random(seed + 7).choice(
             [["compare"], ["converge", "--levels", "2"], ["adapt", "--max-unknowns", "20000", "--max-seconds", "60"]])
@@ -248,17 +342,17 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
 
 
 def run(count: int, seed: int = 0, jobs: int = 2, more: bool = False, progress=None,
-        backend: str | None = None) -> dict:
+        backend: str | None = None, mesh_files: float = 0.0) -> dict:
     with tempfile.TemporaryDirectory(prefix="contactfem-scenes-") as workdir, ThreadPoolExecutor(jobs) as pool:
         records = []
-        for record in pool.map(lambda s: run_scene(s, Path(workdir), more, backend), range(seed, seed + count)):
+        for record in pool.map(lambda s: run_scene(s, Path(workdir), more, backend, mesh_files), range(seed, seed + count)):
             records.append(record)
             if progress is not None:
                 progress(f"scene {record['seed']}: {record['outcome']} ({record['seconds']:.1f} s)"
                          + (f" {record['message'][:160]}" if record["outcome"] != "certified" else ""))
     counts = {outcome: sum(r["outcome"] == outcome for r in records) for outcome in ("certified", "refused", "failed")}
     return {"benchmark": "scenes", "command": " ".join(sys.argv), "count": count, "first_seed": seed,
-            "more": more, "backend": backend or "auto", "counts": counts, "scenes": records}
+            "more": more, "backend": backend or "auto", "mesh_files": mesh_files, "counts": counts, "scenes": records}
 
 
 def main() -> None:
@@ -268,10 +362,14 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="scenes solved at once")
     parser.add_argument("--more", action="store_true", help="also compare, converge or adapt each certified scene")
     parser.add_argument("--backend", help="the sparse solver of every scene (default: the case's, auto)")
+    parser.add_argument("--mesh-files", action="store_const", const=0.2, default=0.0,
+                        help="solve a fifth of the certified scenes again from their mesh as a Gmsh file")
+    parser.add_argument("--all-mesh-files", dest="mesh_files", action="store_const", const=1.0,
+                        help="solve every certified straight-edged scene again from its mesh as a Gmsh file")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "scenes.json")
     args = parser.parse_args()
     results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True),
-                  backend=args.backend)
+                  backend=args.backend, mesh_files=args.mesh_files)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1, default=float) + "\n", encoding="utf-8")
     counts = results["counts"]

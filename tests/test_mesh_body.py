@@ -189,3 +189,19 @@ def test_a_mesh_file_of_two_unmerged_halves_is_refused_in_one_line(tmp_path):
     assert "halves.yaml: geometry.mesh_file" in lines[0] and "2 pieces that share no edge" in lines[0]
     assert "Coherence" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_a_file_whose_elements_name_an_entity_it_never_declares_says_so(tmp_path):
+    """Format 4.1 with boundary lines in entities missing from $Entities (meshio writes such
+    a file when every node is put in the surface's entity): the reader's KeyError became
+    "cannot read mesh ...: np.int32(1) (KeyError)"."""
+    square = structured_rectangle((0, 0), (1, 1), 2, 2)
+    lines = square.edges_of("bottom")
+    physical = [np.full(square.n_triangles, 5), np.full(len(lines), 1)]
+    meshio.write(tmp_path / "broken.msh", meshio.Mesh(
+        np.column_stack([square.points, np.zeros(square.n_points)]), [("triangle", square.triangles), ("line", lines)],
+        cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
+        field_data={"bottom": np.array([1, 1]), "body": np.array([5, 2])},
+        point_data={"gmsh:dim_tags": np.tile([2, 5], (square.n_points, 1))}), file_format="gmsh", binary=False)
+    with pytest.raises(MeshError, match=r"broken.msh: it refers to entity or tag 1, which it does not define \(KeyError\)"):
+        read_gmsh(tmp_path / "broken.msh")

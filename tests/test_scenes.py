@@ -32,3 +32,17 @@ def test_random_scenes_are_certified(seed, tmp_path):
     record = scenes.run_scene(seed, tmp_path)
     assert record["outcome"] == "certified", record.get("message")
     assert record["relative_precision"] < 1e-6  # these are well conditioned
+
+
+@pytest.mark.parametrize("seed", (8, 9))
+def test_a_scene_solved_again_from_its_mesh_written_by_gmsh_agrees(seed, tmp_path):
+    """The scene's own mesh, renumbered, partly clockwise, with unused nodes and reversed
+    boundary lines, written by Gmsh in format 4.1 (seed 8) and 2.2 binary (seed 9): the
+    same discrete problem, so the same contact force within what the two certificates
+    allow (twice their tolerance times the condition estimate, of the force scale)."""
+    record = scenes.run_scene(seed, tmp_path, mesh_files=1.0)
+    twin = record["mesh_file_twin"]
+    assert record["outcome"] == "certified" and twin["agrees"], record.get("message")
+    assert twin["written"]["format"] == {8: "4.1", 9: "2.2"}[seed]
+    assert twin["written"]["clockwise_triangles"] > 0
+    assert twin["contact_force_difference"] <= twin["allowed"]

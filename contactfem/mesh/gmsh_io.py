@@ -99,6 +99,11 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     except Exception as exc:  # noqa: BLE001 - meshio's parsers raise almost anything on bad input
         text = str(exc).strip()
         reason = text.splitlines()[0] if text else "not a Gmsh .msh file (no valid $MeshFormat header)"
+        if isinstance(exc, KeyError) and exc.args:
+            # A lookup of a tag the file never declared (an element's entity missing from
+            # $Entities): the bare key alone ("np.int32(1)") says nothing.
+            key = exc.args[0]
+            reason = f"it refers to entity or tag {key.item() if hasattr(key, 'item') else key!r}, which it does not define"
         raise MeshError(f"cannot read mesh {path}: {reason} ({type(exc).__name__})") from exc
 
     found: dict[str, int] = {}
