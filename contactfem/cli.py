@@ -17,6 +17,7 @@ from contactfem.errors import (
     CaseError,
     ContactFemError,
     ExistingResultError,
+    FactorCapacityError,
     Interrupted,
     MeshError,
 )
@@ -97,9 +98,12 @@ def _interruptible(command):
                 return result
         except (KeyboardInterrupt, Interrupted) as signalled:
             interrupted(signalled)
-        except MemoryError:
-            click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
-                       "a larger mesh.size or fewer refinements)", err=True)
+        except MemoryError as error:
+            if isinstance(error, FactorCapacityError):  # which limit, and what to do, in its words
+                click.echo(f"error: {error}; nothing was written", err=True)
+            else:
+                click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
+                           "a larger mesh.size or fewer refinements)", err=True)
             sys.exit(EXIT_FAILURE)
         except ImportError as error:
             # The writers and pictures load their libraries (h5py, matplotlib, Dask) only when

@@ -20,6 +20,13 @@ class SolverError(ContactFemError):
     """The discrete problem cannot be solved (singular system, no convergence)."""
 
 
+class FactorCapacityError(ContactFemError, MemoryError):
+    """A sparse factorisation ran out of room: memory, or a library's own size limit.
+
+    A MemoryError too, so that what handles running out of memory (no retry, nothing
+    written) handles it; its message says which limit and what to do."""
+
+
 class OutputError(ContactFemError):
     """An output file cannot be written."""
 

@@ -68,7 +68,7 @@ from contactfem.case import (
     read_text_file,
     shortened,
 )
-from contactfem.errors import CaseError, ContactFemError, MeshError, SolverError
+from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, MeshError, SolverError
 from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
 from contactfem.solve import solve_case
@@ -422,6 +422,8 @@ def solve_point(task: Mapping[str, Any]) -> dict:
                 record.update(_figures(case, result, report))
         except (CaseError, MeshError) as error:
             record.update(failure("invalid", str(error)))
+        except FactorCapacityError as error:
+            record.update(failure("error", f"{Path(task['source']).name}: {error}"))
         except ContactFemError as error:
             record.update(failure("failed", str(error)))
         except MemoryError:

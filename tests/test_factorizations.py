@@ -303,3 +303,32 @@ def test_an_analysis_made_ahead_in_another_thread_serves_the_first_factorisation
         assert ahead.ahead_seconds == 0.0
     solved = np.asarray(factor.solve(rhs)).ravel()
     assert np.abs(solved - expected).max() < 1e-12 * np.abs(expected).max()
+
+
+def test_superlu_running_out_of_room_names_its_32_bit_counts_through_the_command_line(tmp_path, monkeypatch):
+    """SciPy's SuperLU reports an overflow of its 32-bit entry counts as MemoryError ("Not
+    enough memory to perform factorization."): a holed strip at 5.2 million unknowns failed
+    so at 5.4 GB of a 23.5 GB machine, and the command said "out of memory ... use a
+    coarser mesh". It now says which limit, and that a 64-bit solver lifts it; exit 1, one
+    line, nothing written."""
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from contactfem.cli import main
+    from contactfem.errors import FactorCapacityError
+
+    def overflowing(*args, **kwargs):
+        raise MemoryError("Not enough memory to perform factorization.")
+
+    monkeypatch.setattr(linalg.spla, "splu", overflowing)
+    with pytest.raises(FactorCapacityError, match="32-bit") as caught:
+        linalg._SuperLU(sp.identity(3, format="csc"), "the test matrix")
+    assert isinstance(caught.value, MemoryError)
+    case = Path(__file__).resolve().parents[1] / "cases" / "square.yaml"
+    result = CliRunner().invoke(main, ["solve", str(case), "--backend", "superlu", "--out", str(tmp_path / "out")])
+    lines = result.stderr.strip().splitlines()
+    assert result.exit_code == 1 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert "SuperLU could not hold the factor" in lines[0] and "32-bit integers" in lines[0]
+    assert "solver.backend: cholmod" in lines[0]
+    assert not (tmp_path / "out").exists()
