@@ -37,6 +37,23 @@ def estimate_cost(unknowns: int, backend: str) -> dict[str, float]:
     return {"seconds": seconds, "bytes": peak}
 
 
+#: The fewest stiffness nonzeros per displacement unknown of a P1 mesh: two unknowns per node,
+#: each coupled to its node and at least four others (a strip one triangle across); 14 on
+#: most meshes (13.9 on a holed strip at 1.3 million unknowns).
+MIN_NONZEROS_PER_UNKNOWN = 10
+
+
+def backend_refusal(unknowns: int, backend: str) -> str | None:
+    """Why ``backend`` cannot factorise the stiffness matrix of ``unknowns`` unknowns whatever
+    the memory, or None: SciPy's SuperLU past its 32-bit first guess, with the fewest
+    nonzeros such a mesh can have (the factorisation checks the matrix's own count)."""
+    if backend != "superlu":
+        return None
+    from contactfem.linalg import superlu_refusal
+
+    return superlu_refusal(MIN_NONZEROS_PER_UNKNOWN * unknowns, unknowns, at_least=True)
+
+
 def largest_mesh_points(backend: str, memory: int) -> int:
     """The most mesh nodes whose solve the model fits in ``memory`` bytes with ``backend``."""
     scale = max(memory - 0.15e9, 0.0) / PEAK_BYTES[backend]

@@ -816,15 +816,49 @@ class _Pardiso:
         return self._solver.solve(self._matrix, rhs)
 
 
+#: SciPy's SuperLU sizes its first guess of the factor as this many times the matrix's
+#: nonzeros, in a C int (SRC/dmemory.c, scipy/scipy#15688): past (2**31 - 1) // 30 nonzeros
+#: the guess overflows and splu reports running out of memory at once, whatever the machine
+#: holds. Measured: a band matrix of 71.30 million nonzeros factorises (9.5 s), one of 71.99
+#: million fails in 0.3 s; a holed strip at 5.2 million unknowns (72.8 million) failed so.
+SUPERLU_FILL_GUESS = 30
+
+
+@functools.cache
+def superlu_max_nonzeros() -> int | None:
+    """The most matrix nonzeros SciPy's SuperLU factorises, or None when its integers are
+    64-bit (its permutations come back as int64 then; they are int32 in SciPy 1.17)."""
+    lu = spla.splu(sp.identity(2, format="csc"))
+    if np.asarray(lu.perm_c).dtype.itemsize >= 8:
+        return None
+    return (2**31 - 1) // SUPERLU_FILL_GUESS
+
+
+def superlu_refusal(nonzeros: int, unknowns: int, at_least: bool = False) -> str | None:
+    """Why SciPy's SuperLU cannot factorise a matrix of ``nonzeros`` (``at_least`` that many)
+    and ``unknowns`` rows, or None."""
+    limit = superlu_max_nonzeros()
+    if limit is None or nonzeros <= limit:
+        return None
+    return (f"SciPy's SuperLU cannot factorise a matrix of {'at least ' if at_least else ''}"
+            f"{nonzeros / 1e6:.4g} million nonzeros ({unknowns} unknowns): it sizes its first guess of the factor as {SUPERLU_FILL_GUESS} times them in a "
+            f"32-bit integer, which overflows past {limit / 1e6:.4g} million; use a solver with 64-bit counts "
+            "(solver.backend: cholmod, pip install 'contactfem[cholmod]', or pardiso) or fewer unknowns")
+
+
 class _SuperLU:
     # Reusing SuperLU's column ordering (permuting the matrix, then NATURAL) was measured
     # far slower than ordering afresh: scipy's NATURAL skips the postorder supernodes need.
     analysis = None
 
     def __init__(self, matrix: sp.spmatrix, name: str, analysis: object | None = None) -> None:
+        full = _symmetric_csc(matrix)
+        refusal = superlu_refusal(full.nnz, full.shape[0])
+        if refusal is not None:
+            raise FactorCapacityError(f"{name}: {refusal}")
         try:
             self._lu = spla.splu(
-                _symmetric_csc(matrix),
+                full,
                 permc_spec="MMD_AT_PLUS_A",
                 diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
@@ -832,15 +866,13 @@ class _SuperLU:
         except RuntimeError as error:  # "Factor is exactly singular"
             raise SolverError(f"{name} is singular (SuperLU: {error})") from error
         except MemoryError as error:
-            # SciPy's SuperLU counts the factor's entries in 32-bit integers and reports their
-            # overflow as this too: a strip with a hole at 5.2 million unknowns failed here at
-            # 5.4 GB of a 23.5 GB machine (the same at 1.3 million took 0.7 GB of factor).
-            n = matrix.shape[0]
+            # Its factor's later growth is counted in 32-bit integers too, and their overflow is
+            # reported the same way: say both causes, and what lifts either.
             raise FactorCapacityError(
-                f"SuperLU could not hold the factor of {name} ({n} unknowns): SciPy's SuperLU counts "
-                "its entries in 32-bit integers and reports their overflow as running out of memory, "
-                "which this size can reach with memory to spare; use a solver with 64-bit counts "
-                "(solver.backend: cholmod, pip install 'contactfem[cholmod]', or pardiso) or fewer unknowns"
+                f"SuperLU could not hold the factor of {name} ({full.shape[0]} unknowns): memory ran out "
+                "or its 32-bit entry counts overflowed, which SciPy's SuperLU reports alike; use a solver "
+                "with 64-bit counts (solver.backend: cholmod, pip install 'contactfem[cholmod]', or pardiso) "
+                "or fewer unknowns"
             ) from error
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:

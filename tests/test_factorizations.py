@@ -305,12 +305,52 @@ def test_an_analysis_made_ahead_in_another_thread_serves_the_first_factorisation
     assert np.abs(solved - expected).max() < 1e-12 * np.abs(expected).max()
 
 
-def test_superlu_running_out_of_room_names_its_32_bit_counts_through_the_command_line(tmp_path, monkeypatch):
+def test_superlus_32_bit_first_guess_sets_its_largest_matrix():
+    """SciPy 1.17's SuperLU (int32 permutations) sizes its first guess of the factor as 30
+    times the nonzeros in a C int: 71 582 788 nonzeros at most."""
+    if np.asarray(spla.splu(sp.identity(2, format="csc")).perm_c).dtype.itemsize >= 8:
+        pytest.skip("this SciPy's SuperLU counts in 64 bits")
+    assert linalg.superlu_max_nonzeros() == (2**31 - 1) // 30 == 71_582_788
+    assert linalg.superlu_refusal(71_582_788, 5_000_000) is None
+    assert "71.58 million" in linalg.superlu_refusal(71_582_789, 5_000_000)
+
+
+def test_a_matrix_past_superlus_first_guess_is_refused_before_it_is_tried(monkeypatch):
+    """The limit checked on the matrix itself, before SuperLU spends anything on it."""
+    from contactfem.errors import FactorCapacityError
+
+    monkeypatch.setattr(linalg, "superlu_max_nonzeros", lambda: 10)
+    monkeypatch.setattr(linalg.spla, "splu", lambda *args, **kwargs: pytest.fail("SuperLU was called"))
+    with pytest.raises(FactorCapacityError, match=r"the test matrix: SciPy's SuperLU cannot factorise a matrix of "
+                                                  r"1\.6e-05 million nonzeros \(4 unknowns\).*32-bit integer"):
+        linalg._SuperLU(sp.csc_matrix(np.ones((4, 4)) + 4 * np.eye(4)), "the test matrix")
+
+
+@pytest.mark.slow
+def test_superlu_fails_at_once_past_its_first_guess_whatever_the_fill():
+    """A band matrix of 23 diagonals (its factor as sparse as itself): 71.30 million nonzeros
+    factorise, 71.99 million fail at once with MemoryError, about 3 GB each."""
+    def band(n: int) -> sp.csc_matrix:
+        offsets = range(-11, 12)
+        return sp.diags([np.full(n - abs(k), 24.0 if k == 0 else -1.0) for k in offsets], list(offsets),
+                        shape=(n, n), format="csc")
+
+    above = band(3_130_000)
+    assert above.nnz > linalg.superlu_max_nonzeros()
+    with pytest.raises(MemoryError):
+        spla.splu(above, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    del above
+    below = band(3_100_000)
+    assert below.nnz <= linalg.superlu_max_nonzeros()
+    factor = spla.splu(below, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    assert factor.L.nnz < 2 * below.nnz
+
+
+def test_superlu_running_out_of_room_says_both_causes_through_the_command_line(tmp_path, monkeypatch):
     """SciPy's SuperLU reports an overflow of its 32-bit entry counts as MemoryError ("Not
-    enough memory to perform factorization."): a holed strip at 5.2 million unknowns failed
-    so at 5.4 GB of a 23.5 GB machine, and the command said "out of memory ... use a
-    coarser mesh". It now says which limit, and that a 64-bit solver lifts it; exit 1, one
-    line, nothing written."""
+    enough memory to perform factorization."), and the command said "out of memory ... use a
+    coarser mesh". It now names both causes and what lifts either; exit 1, one line,
+    nothing written."""
     from pathlib import Path
 
     from click.testing import CliRunner
@@ -329,6 +369,7 @@ def test_superlu_running_out_of_room_names_its_32_bit_counts_through_the_command
     result = CliRunner().invoke(main, ["solve", str(case), "--backend", "superlu", "--out", str(tmp_path / "out")])
     lines = result.stderr.strip().splitlines()
     assert result.exit_code == 1 and len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    assert "SuperLU could not hold the factor" in lines[0] and "32-bit integers" in lines[0]
+    assert "SuperLU could not hold the factor" in lines[0] and "32-bit entry counts" in lines[0]
     assert "solver.backend: cholmod" in lines[0]
     assert not (tmp_path / "out").exists()
+

@@ -720,3 +720,26 @@ def test_an_adapt_budget_beyond_memory_is_refused_before_anything_starts(tmp_pat
     backend = resolve_backend("auto")
     assert estimate_cost(fit, backend)["bytes"] <= 2 * 2**30 < estimate_cost(fit + 1000, backend)["bytes"]
     assert not out.exists()
+
+
+def test_a_mesh_past_superlus_32_bit_first_guess_is_refused_before_meshing(tmp_path, monkeypatch):
+    """On a machine with room for it, the square at 1 900 x 1 900 (7.2 million unknowns, at
+    least 72 million nonzeros) with SuperLU: SciPy's SuperLU cannot take that matrix whatever
+    the memory, so the case is refused in one line before meshing; CHOLMOD's is not."""
+    from contactfem.linalg import superlu_max_nonzeros
+
+    if superlu_max_nonzeros() is None:
+        pytest.skip("this SciPy's SuperLU counts in 64 bits")
+    a_machine_of(monkeypatch, 2**40)
+    path = tmp_path / CASE_NAME
+    text = SQUARE_TEXT.replace("divisions: 4", "divisions: 1900").replace("method: positive", "method: positive\n  backend: superlu")
+    assert "backend: superlu" in text
+    path.write_text(text, encoding="utf-8")
+    line = refuse_file(path, CASE_NAME, "mesh: about 7.22e+06 triangles", "SciPy's SuperLU cannot factorise",
+                       "32-bit integer", "solver.backend: cholmod")
+    assert "at least 72.2 million nonzeros" in line
+    from contactfem.estimate import backend_refusal
+
+    assert backend_refusal(7_220_000, "cholmod") is None and backend_refusal(7_000_000, "superlu") is None
+    refused = invoke("adapt", path, "--max-unknowns", "8000000", "--out", tmp_path / "a")
+    assert_one_line(refused, "--max-unknowns 8000000", "SciPy's SuperLU cannot factorise")

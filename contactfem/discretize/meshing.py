@@ -177,7 +177,7 @@ def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: 
     refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
     ``contactfem check`` prints) says the memory this process may use, ``limit``, cannot hold
     (:func:`~contactfem.estimate.memory_limit`: the machine's, a cgroup's, ``ulimit -v``)."""
-    from contactfem.estimate import estimate_cost, unknowns_of_triangles
+    from contactfem.estimate import backend_refusal, estimate_cost, unknowns_of_triangles
 
     if base is None:
         triangles = estimate_triangles(case, refine)
@@ -192,6 +192,10 @@ def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: 
             f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
             f"{limit.source}; use fewer divisions, a larger mesh.size or fewer refinements"
         )
+    refusal = backend_refusal(unknowns, backend)
+    if refusal is not None:
+        raise CaseError(f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the "
+                        f"refinements): {refusal}")
 
 
 def _mesh_geometry(case: Case, limit: MemoryLimit) -> Mesh:
