@@ -373,3 +373,35 @@ def test_superlu_running_out_of_room_says_both_causes_through_the_command_line(t
     assert "solver.backend: cholmod" in lines[0]
     assert not (tmp_path / "out").exists()
 
+
+def test_a_pardiso_factor_is_released_with_its_last_user():
+    """MKL keeps a Pardiso factor in its own memory until phase -1 releases it, which the
+    solver object does not do when collected: each factorisation stayed resident to the end
+    of the process (0.3 GB each at 490 000 unknowns, a convergence study at 13.7 GB against
+    8.2 for one solve of its finest mesh). Four more factorisations of a 250 000-unknown
+    Laplacian now leave the resident memory where the first left it."""
+    pytest.importorskip("pypardiso")
+    n = 500
+    line = sp.diags([-1.0, 4.0, -1.0], [-1, 0, 1], shape=(n, n))
+    matrix = (sp.kronsum(line, line) + sp.identity(n * n)).tocsr()
+
+    def resident() -> float:
+        with open("/proc/self/status", encoding="utf-8") as status:
+            return int(status.read().split("VmRSS:")[1].split()[0]) * 1024.0
+
+    def factorise_once() -> None:
+        factor = linalg._Pardiso(matrix, "the Laplacian")
+        assert np.abs(matrix @ factor.solve(np.ones(n * n)) - 1.0).max() < 1e-10
+        del factor
+        gc.collect()
+
+    factorise_once()
+    before = resident()
+    factor = linalg._Pardiso(matrix, "the Laplacian")
+    held = resident() - before  # one factor, resident
+    del factor
+    gc.collect()
+    for _ in range(4):
+        factorise_once()
+    assert held > 50e6  # the factor is large enough to see
+    assert resident() - before < 0.5 * held
