@@ -212,6 +212,9 @@ def _contactfem(*args: object, timeout: float = 900) -> subprocess.CompletedProc
 
 
 _GMSH = threading.Lock()  # the gmsh API keeps one model per process
+# One compare, converge or adapt at a time: each may use most of the machine's memory (its
+# size guard allows it all), and two of them beside each other were killed by the kernel.
+_ONE_STUDY = threading.Lock()
 
 
 def write_mesh_twin(case_path: Path, path: Path, rng: random.Random) -> dict:
@@ -334,7 +337,8 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
     if more and record["outcome"] == "certified":
         command = random.Random(seed + 7).choice(
             [["compare"], ["converge", "--levels", "2"], ["adapt", "--max-unknowns", "20000", "--max-seconds", "60"]])
-        other = _contactfem(*command, path, "--out", directory / command[0], "--quiet", "--overwrite")
+        with _ONE_STUDY:
+            other = _contactfem(*command, path, "--out", directory / command[0], "--quiet", "--overwrite")
         record["command"] = {"name": command[0], "exit_code": other.returncode}
         if other.returncode != 0:
             record.update(outcome="failed", message=f"{command[0]}: {other.stderr.strip()[-1000:]}")
