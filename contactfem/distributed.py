@@ -329,9 +329,7 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
-        say(f"  Newton {next(numbers)}: {record.active} active (+{record.added} -{record.removed}), "
-            f"residuals {record.equilibrium_residual:.1e} / {record.complementarity_residual:.1e}, "
-            f"{record.seconds:.2f} s")
+        say(f"  Newton {next(numbers)}: {record.summary()}")
 
     linear = _DistributedSolver(PETSc, MPI, comm, system, solver, tolerance=case.solver.tolerance)
     kernel, normal_displacement = _active_set_iteration(
@@ -425,6 +423,7 @@ class _DistributedSystem:
     supported_mesh: np.ndarray  # (2n,) bool, mesh numbering
     gap: np.ndarray
     multiplier_mass: object
+    contact_edges: np.ndarray  # (e, 2) ΓC edges as pairs of contact nodes (the kernel's order along ΓC)
     gamma: float
     layout: _Layout
     frame_nodes: np.ndarray
@@ -495,7 +494,8 @@ class _DistributedSystem:
             supported_local=layout.owned(supported_all), support_values_local=layout.owned(values_all),
             normal_dofs=layout.petsc(frames.normal_slot), normal_slots=np.asarray(frames.normal_slot, dtype=np.int64),
             supported_mesh=supported_all, gap=np.asarray(problem.contact.gap, dtype=float),
-            multiplier_mass=method.multiplier_mass(problem.contact.masses), gamma=roundoff_bound(longest_row + 2),
+            multiplier_mass=method.multiplier_mass(problem.contact.masses), contact_edges=problem.contact.node_edges(),
+            gamma=roundoff_bound(longest_row + 2),
             layout=layout, frame_nodes=frames.nodes, frames=blocks, owned_triangles=int(len(owned)), n_dof=n_dof,
             rigid_motions_local=np.stack([layout.owned(r) for r in rigid]),
         )
@@ -879,7 +879,7 @@ def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: fl
     ``linear.solution``. Also returns the normal displacement at the contact nodes (m,), on
     every rank."""
     system = ContactSystem(stiffness=None, load=None, normal_dofs=np.arange(len(linear.gap)), gap=linear.gap,
-                           multiplier_mass=linear.system.multiplier_mass)
+                           multiplier_mass=linear.system.multiplier_mass, contact_edges=linear.system.contact_edges)
     kernel = solve_contact(system, c=c, tolerance=tolerance, max_iterations=max_iterations,
                            initial_active=initial_active, on_iteration=on_iteration, linear=linear,
                            second_guess=second_guess)

@@ -221,11 +221,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         return active
 
     def on_iteration(record: Iteration) -> None:
-        say(
-            f"  Newton {next(numbers)}: {record.active} active (+{record.added} -{record.removed}), "
-            f"residuals {record.equilibrium_residual:.1e} / {record.complementarity_residual:.1e}, "
-            f"{record.seconds:.2f} s"
-        )
+        say(f"  Newton {next(numbers)}: {record.summary()}")
 
     kernel = solve_contact(
         reduced.system,
@@ -685,5 +681,6 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
 
 
 def _history_arrays(history: list[Iteration]) -> dict[str, np.ndarray]:
-    names = ("active", "added", "removed", "equilibrium_residual", "complementarity_residual", "seconds")
+    names = ("active", "added", "removed", "extrapolated", "equilibrium_residual", "complementarity_residual",
+             "seconds")
     return {name: np.array([getattr(r, name) for r in history]) for name in names}

@@ -97,6 +97,16 @@ class ContactBoundary:
     def tangent(self) -> np.ndarray:
         return self.obstacle.tangent
 
+    def node_edges(self) -> np.ndarray:
+        """The ΓC edges as pairs of positions in ``nodes`` (k', 2): those whose two ends
+        carry a constraint (an edge reaching beyond a finite obstacle is left out)."""
+        if len(self.nodes) == 0 or len(self.edges) == 0:
+            return np.zeros((0, 2), dtype=np.int64)
+        position = np.full(int(max(self.nodes.max(), self.edges.max())) + 1, -1, dtype=np.int64)
+        position[self.nodes] = np.arange(len(self.nodes))
+        pairs = position[np.asarray(self.edges, dtype=np.int64)]
+        return pairs[(pairs >= 0).all(axis=1)]
+
 
 def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundary:
     """ΓC of ``mesh``: refuses a contact part facing away from the obstacle, naming it."""

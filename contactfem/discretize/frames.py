@@ -84,6 +84,7 @@ class ReducedSystem:
             fixed_values=fixed_values[order],
             free_modes=free_modes,
             length_scale=float(np.ptp(problem.mesh.points, axis=0).max(initial=0.0)) or None,
+            contact_edges=contact.node_edges(),
         )
         return cls(system=system, rotation=rotation, problem=problem, frame_nodes=nodes, frames=blocks,
                    masters=frames.masters)
