@@ -380,15 +380,22 @@ def _creeping(history: Sequence["Iteration"]) -> str:
 
 
 #: Consecutive steps a zone edge must have moved the same way before its move is
-#: extrapolated (see :class:`ZoneFronts`): from the second step of a creep on. Taken on
-#: any step, not only on steps that are all creep, a cold start under the rough profiles
-#: took 3-5 steps more (7 → 10 at 1 000 segments: patches that grow for two steps and stop).
+#: extrapolated (see :class:`ZoneFronts`): from the second step of a creep on (from the
+#: third, the strips of the fragmented benchmark took 1-3 steps more, 11 % in all).
 CREEP_RUN = 2
 #: Overshoots (see :class:`ZoneFronts`) after which a solve goes on with Newton's update
 #: alone; each halves the extrapolations that overshot.
 MAX_OVERSHOOTS = 8
 #: The most nodes one extrapolation moves a zone edge by.
 MAX_EXTRAPOLATION = 4096
+#: An extrapolation takes at most this share of the nodes ahead of it in the state it
+#: leaves (two edges closing on a patch from both sides leave something of it). Without the
+#: bound, a wavy traction's hundreds of patches, each shrinking by a node per edge per step
+#: and kept at a core, were released whole: cold starts at k = 200, 400, 1 600 and 6 400
+#: took 14, 10, 8 and 9 steps (Newton alone: 23, 7, 7, 7); with a half, 14, 9, 8 and 8. On
+#: 16 strips 1 x 0.01 and 1 x 0.005 (400 x 2 and 800 x 4 cells, four pressures), a half or
+#: a third took 320 steps in all, the whole 389, Newton alone 857.
+SHARE_AHEAD = 2
 #: ΓC chains beyond which no order along them is built (a contact part of thousands of
 #: separate edges has no zone edge to creep): one graph search per chain.
 MAX_CHAINS = 256
@@ -407,8 +414,9 @@ class ZoneFronts:
     the same way. A block whose neighbour on one side changed the same way at the last
     step (and stays so) continues a run; on a step whose every block continues one, each
     block from the :data:`CREEP_RUN`-th step of its run on is carried on beyond its far
-    end by its own length times (run − 1)² nodes, through nodes in the state it leaves:
-    the edge crosses n nodes in about (3n)^⅓ steps. Doubling instead (a galloping search)
+    end by its own length times (run − 1)² nodes, through nodes in the state it leaves
+    (at most a :data:`SHARE_AHEAD`-th of those ahead of it): the edge crosses n nodes in
+    about (3n)^⅓ steps. Doubling instead (a galloping search)
     overshot more on strips lifting in several places. An extrapolation overshot when, at
     the next step, Newton changes a node of the stretch of nodes in one state that holds
     it (a strip released too far sags back onto the obstacle within its lifted span);
@@ -418,7 +426,10 @@ class ZoneFronts:
     :data:`MAX_OVERSHOOTS` of them the solve goes on with Newton's update alone, so that
     the iteration's termination (the cycle safeguard, the least-index rule) is kept.
     With it those strips took 14, 18 and 19 steps, and strips 1 x 0.005 and 1 x 0.02
-    lifting in four and two places 34 and 14 instead of 70 and 29.
+    lifting in four and two places 35 and 14 instead of 70 and 29. Slenderer strips
+    (1 x 0.002 and 1 x 0.001 at 400 x 2 cells) cycle, with or without it, and take hundreds
+    or thousands of steps: a coarser level's prediction settles them (see
+    :data:`STALL_ITERATIONS`).
     """
 
     def __init__(self, edges: np.ndarray, m: int):
@@ -471,12 +482,9 @@ class ZoneFronts:
         # An extrapolation overshot if Newton changes any node of the stretch of nodes in one
         # state that holds it: a node of the stretch itself, or one further on (a strip
         # released too far sags onto the obstacle in the middle of its lifted span).
+        stretch, stretch_start, stretch_end = self._stretches(active)
         if len(self.moved):
-            state = active[self.along]
-            same_stretch = np.ones(len(state), dtype=bool)
-            same_stretch[1:] = (state[1:] == state[:-1]) & (self.first[1:] == self.first[:-1])
-            stretch = np.cumsum(~same_stretch)
-            changing = np.bincount(stretch, weights=change[self.along] != 0, minlength=int(stretch[-1]) + 1) > 0
+            changing = np.bincount(stretch, weights=change[self.along] != 0, minlength=len(stretch_start)) > 0
             back = changing[stretch[self.where[self.moved]]]
             if back.any():
                 return self._bisect(active, proposed, back)
@@ -508,14 +516,23 @@ class ZoneFronts:
         self.run[nodes] = np.repeat(run, high - low + 1)
         self.moved = self.moved_owner = self.moved_offset = np.zeros(0, dtype=np.int64)
         fronts = np.flatnonzero(edge & (run >= CREEP_RUN))
-        if len(fronts) == 0 or not edge.all():  # only a step that is all creep
+        # Only a step that is all creep: taken on any step, a cold start under the rough
+        # profiles took 3-5 steps more (7 → 10 at 1 000 segments), from patches that grow
+        # for two steps and stop.
+        if len(fronts) == 0 or not edge.all():
             return proposed, 0
         # Beyond each such block, its own length times (run − 1)² places, as far as they run
-        # through nodes in the state the block leaves (at most MAX_EXTRAPOLATION).
+        # through nodes in the state the block leaves (at most MAX_EXTRAPOLATION, and a
+        # SHARE_AHEAD-th of that state's stretch ahead of the block).
         length = high[fronts] - low[fronts] + 1
-        reach = np.minimum(length * np.minimum(run[fronts] - 1, 64) ** 2, MAX_EXTRAPOLATION)
         direction = np.where(below[fronts], 1, -1)
         beyond = np.where(below[fronts], high[fronts], low[fronts])
+        ahead = np.where(below[fronts], stretch_end[stretch[beyond]] - beyond, beyond - stretch_start[stretch[beyond]])
+        reach = np.minimum(np.minimum(length * np.minimum(run[fronts] - 1, 64) ** 2, MAX_EXTRAPOLATION),
+                           ahead // SHARE_AHEAD)
+        fronts, direction, beyond, reach = fronts[reach > 0], direction[reach > 0], beyond[reach > 0], reach[reach > 0]
+        if len(fronts) == 0:
+            return proposed, 0
         owner = np.repeat(np.arange(len(fronts)), reach)
         offset = np.arange(len(owner)) - np.repeat(np.cumsum(reach) - reach, reach) + 1
         target_place = beyond[owner] + direction[owner] * offset
@@ -536,6 +553,15 @@ class ZoneFronts:
         self.last_change[target] = way[fronts][owner]
         self.run[target] = run[fronts][owner]
         return extended, len(target)
+
+    def _stretches(self, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The stretches of consecutive places in one state along each chain: each place's
+        stretch, and each stretch's first and last place."""
+        state = active[self.along]
+        starts = np.ones(len(state), dtype=bool)
+        starts[1:] = (state[1:] != state[:-1]) | (self.first[1:] != self.first[:-1])
+        first = np.flatnonzero(starts)
+        return np.cumsum(starts) - 1, first, np.r_[first[1:] - 1, len(state) - 1]
 
     def _bisect(self, active: np.ndarray, proposed: np.ndarray, back: np.ndarray) -> tuple[np.ndarray, int]:
         """The set after an overshoot: the far half of each stretch some of whose nodes

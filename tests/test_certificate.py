@@ -374,7 +374,7 @@ def test_the_least_index_safeguard_counts_only_its_own_sets_as_a_cycle():
 
     data = slender(1e-3, (200, 2), [0.0, "-1.0*(0.3 + sin(20*x))"])
     # Newton's update alone (no ΓC order to extrapolate the creep along: with it this
-    # strip settles in 33 steps, meeting a repeated set at step 19).
+    # strip settles in 33 steps, meeting a repeated set at step 22).
     system = replace(prepare(case_from(data)).contact_system(get_method("positive")).system, contact_edges=None)
     result = solve_contact(system)
     assert_certified(system, result)

@@ -518,14 +518,13 @@ def test_a_kernel_that_has_not_settled_asks_for_its_stalled_guess_once():
 
 def test_a_small_cold_start_that_stalls_is_predicted_from_a_coarser_mesh():
     """A strip 1 x 0.001 at 400 x 2 cells (2 400 unknowns, below the size that sequences):
-    cold, Newton's update alone creeps past the default cap of a step per contact node (and
-    settles after 2 598 steps); with its creep extrapolated along ΓC it settles within the
-    cap (112 steps). At STALL_ITERATIONS it is solved on 100 x 1 cells (a quarter) and
-    settles a few steps after, certified: the answer, the contact problem's solution being
-    unique."""
+    cold, it creeps past the default cap of a step per contact node, with its creep
+    extrapolated along ΓC or not (2 550 and 2 598 steps to settle). At STALL_ITERATIONS it
+    is solved on 100 x 1 cells (a quarter) and settles a few steps after, certified: the
+    answer, the contact problem's solution being unique."""
     from dataclasses import replace
 
-    from contactfem.kernel import STALL_ITERATIONS, Status, default_max_iterations, solve_contact
+    from contactfem.kernel import STALL_ITERATIONS, Status, solve_contact
     from contactfem.methods import get_method
     from contactfem.solve import prepare, solve_case
 
@@ -533,14 +532,11 @@ def test_a_small_cold_start_that_stalls_is_predicted_from_a_coarser_mesh():
     problem = prepare(case)
     assert problem.n_unknowns < 5_000
     system = problem.contact_system(get_method("positive")).system
-    plain = solve_contact(replace(system, contact_edges=None))
-    assert plain.status is Status.MAX_ITERATIONS and "raise solver.max_iterations" in plain.message
-    cold = solve_contact(system)
-    assert cold.status is Status.CONVERGED and cold.iterations < default_max_iterations(len(system.gap)) / 3
+    for cold in (solve_contact(system), solve_contact(replace(system, contact_edges=None))):
+        assert cold.status is Status.MAX_ITERATIONS and "raise solver.max_iterations" in cold.message
     outcome = solve_case(case, problem=problem)
     kernel = outcome.kernel
     assert kernel.status is Status.CONVERGED and kernel.certificate.passed
     stalled = outcome.sequencing["stalled"]
     assert stalled["at"] == STALL_ITERATIONS and stalled["coarse_unknowns"] < problem.n_unknowns / 2
     assert kernel.iterations <= STALL_ITERATIONS + 10
-    np.testing.assert_array_equal(kernel.active, cold.active)
