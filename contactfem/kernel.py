@@ -763,8 +763,9 @@ def solve_contact(
                     extended = holder.hold(extended, np.where(active, reaction_at_contact, c * slack))
                 if extrapolated and np.packbits(extended).tobytes() not in seen:
                     new_active = extended
-                else:
+                elif extrapolated:  # a set already solved: Newton's update, and the runs begin again
                     extrapolated = 0
+                    fronts.forget()
 
         with np.errstate(invalid="ignore", over="ignore"):
             complementarity = np.abs(
