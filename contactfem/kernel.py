@@ -478,14 +478,14 @@ class ZoneFronts:
     def extend(self, active: np.ndarray, proposed: np.ndarray) -> tuple[np.ndarray, int]:
         """Newton's proposed set with every creeping zone edge moved ahead, and how many
         nodes that changed beyond Newton's update; records this step's changes."""
-        change = proposed.astype(np.int8) - active.astype(np.int8)
         if not self.enabled:
             return proposed, 0
+        change = proposed.astype(np.int8) - active.astype(np.int8)
         # An extrapolation overshot if Newton changes any node of the stretch of nodes in one
         # state that holds it: a node of the stretch itself, or one further on (a strip
         # released too far sags onto the obstacle in the middle of its lifted span).
-        stretch, stretch_start, stretch_end = self._stretches(active)
         if len(self.moved):
+            stretch, stretch_start, _ = self._stretches(active)
             changing = np.bincount(stretch, weights=change[self.along] != 0, minlength=len(stretch_start)) > 0
             back = changing[stretch[self.where[self.moved]]]
             if back.any():
@@ -526,6 +526,7 @@ class ZoneFronts:
         # Beyond each such block, its own length times (run − 1)² places, as far as they run
         # through nodes in the state the block leaves (at most MAX_EXTRAPOLATION, and a
         # SHARE_AHEAD-th of that state's stretch ahead of the block).
+        stretch, stretch_start, stretch_end = self._stretches(active)
         length = high[fronts] - low[fronts] + 1
         direction = np.where(below[fronts], 1, -1)
         beyond = np.where(below[fronts], high[fronts], low[fronts])
@@ -577,8 +578,9 @@ class ZoneFronts:
         in_overshoot = np.isin(self.moved_owner, owners)
         reach = np.zeros(int(self.moved_owner.max()) + 1, dtype=np.int64)
         np.maximum.at(reach, self.moved_owner, self.moved_offset)
+        # Never empty: the farthest node of each such stretch is in its far half.
         far = in_overshoot & (self.moved_offset > reach[self.moved_owner] // 2)
-        if self.overshoots > MAX_OVERSHOOTS or not far.any():
+        if self.overshoots > MAX_OVERSHOOTS:
             self.enabled = False
             self.moved = np.zeros(0, dtype=np.int64)
             return proposed, 0
@@ -680,7 +682,6 @@ def solve_contact(
     holder = _ModeHolder(system) if system.free_modes is not None and m else None
     fronts: ZoneFronts | None = None  # built at the second step, which a settled solve never reaches
     newtons: np.ndarray | None = None  # Newton's own update, when the set to solve was extrapolated
-    contact_edges = getattr(system, "contact_edges", None)
     if holder is not None:
         active = holder.hold(active, holder.first_touch())
     linear = ActiveSetSolver(system, backend, tolerance=tolerance) if linear is None else linear
@@ -763,9 +764,9 @@ def solve_contact(
                     new_active = holder.hold(new_active, np.where(active, reaction_at_contact, c * slack))
 
         extrapolated = 0
-        if (fronts is None and contact_edges is not None and iteration >= 2 and finite
+        if (fronts is None and system.contact_edges is not None and iteration >= 2 and finite
                 and not np.array_equal(new_active, active)):
-            fronts = ZoneFronts(contact_edges, m)
+            fronts = ZoneFronts(system.contact_edges, m)
         if fronts is not None and fronts.enabled and finite:
             if guessed or cycle_detected_at is not None:
                 fronts.forget()

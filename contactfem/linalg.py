@@ -828,6 +828,9 @@ class _Pardiso:
 #: holds. Measured: a band matrix of 71.30 million nonzeros factorises (9.5 s), one of 71.99
 #: million fails in 0.3 s; a holed strip at 5.2 million unknowns (72.8 million) failed so.
 SUPERLU_FILL_GUESS = 30
+#: What lifts SuperLU's 32-bit limits, for the messages that meet them.
+SUPERLU_REMEDY = ("use a solver with 64-bit counts (solver.backend: cholmod, pip install 'contactfem[cholmod]', "
+                  "or pardiso) or fewer unknowns")
 
 
 @functools.cache
@@ -848,8 +851,7 @@ def superlu_refusal(nonzeros: int, unknowns: int, at_least: bool = False) -> str
         return None
     return (f"SciPy's SuperLU cannot factorise a matrix of {'at least ' if at_least else ''}"
             f"{nonzeros / 1e6:.4g} million nonzeros ({unknowns} unknowns): it sizes its first guess of the factor as {SUPERLU_FILL_GUESS} times them in a "
-            f"32-bit integer, which overflows past {limit / 1e6:.4g} million; use a solver with 64-bit counts "
-            "(solver.backend: cholmod, pip install 'contactfem[cholmod]', or pardiso) or fewer unknowns")
+            f"32-bit integer, which overflows past {limit / 1e6:.4g} million; {SUPERLU_REMEDY}")
 
 
 class _SuperLU:
@@ -876,9 +878,7 @@ class _SuperLU:
             # reported the same way: say both causes, and what lifts either.
             raise FactorCapacityError(
                 f"SuperLU could not hold the factor of {name} ({full.shape[0]} unknowns): memory ran out "
-                "or its 32-bit entry counts overflowed, which SciPy's SuperLU reports alike; use a solver "
-                "with 64-bit counts (solver.backend: cholmod, pip install 'contactfem[cholmod]', or pardiso) "
-                "or fewer unknowns"
+                f"or its 32-bit entry counts overflowed, which SciPy's SuperLU reports alike; {SUPERLU_REMEDY}"
             ) from error
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
