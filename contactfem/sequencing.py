@@ -49,6 +49,15 @@ COARSE_LEVEL_SOLVES = 3.0
 EXPECTED_SAVING_SOLVES = 2.0
 #: Sparse factorisation time grows like unknowns ** GROWTH on these 2D meshes.
 GROWTH = 1.1
+#: Cells a coarser level keeps across each side of a rectangle (all the fine mesh has, if
+#: fewer): P1 triangles resist bending by their cells across a thin body, so a strip
+#: coarsened to one cell across is far stiffer than its fine mesh and misplaces the edges of
+#: a zone that peels off. Strips 1 x 0.01 of 4 cells across, clamped at one end: coarsened
+#: to 1 cell across, 9 and 18 fine steps (0.24 and 2.5-3.3 s at 64 000 and 256 000
+#: unknowns); to 2, 7 and 9 (0.18 and 0.99 s); kept at 4 (a quarter of the unknowns
+#: instead of a sixteenth), 3 and 3 (0.15-0.16 and 0.44-0.51 s). The wavy strips' patches,
+#: a period each, were predicted as well either way (0-20% slower with 4 kept).
+MIN_CELLS_ACROSS = 4
 #: Candidate edge pairs the simplicity check of a decimated polygon may test; beyond it the
 #: polygon is kept as it is (an outline with many long, overlapping edges).
 MAX_EDGE_PAIRS = 5_000_000
@@ -94,20 +103,18 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
     """The same case on a mesh ``factor`` times coarser (or twice, if that is all the
     mesh allows), with its refinement count; None if it cannot be coarsened.
 
+    A rectangle's divisions shrink by ``factor`` (or 2) along each side that keeps
+    :data:`MIN_CELLS_ACROSS` of them, or all it has if fewer (see :func:`_coarser_rectangle`).
     A polygon's mesh sizes grow by ``factor``, and its runs of straight edges shorter than
     the coarse mesh's edge length are decimated by the same factor (see
     :func:`decimated_loop`); a loop whose decimation would not be simple keeps its vertices.
     """
     levels = factor.bit_length() - 1
-    if refinements >= 1:
-        return case, max(refinements - levels, 0)
     settings = case.mesh
     if isinstance(case.geometry, RectangleGeometry):
-        nx, ny = settings.divisions
-        for step in (factor, 2):
-            if nx % step == 0 and ny % step == 0:
-                return replace(case, mesh=replace(settings, divisions=(nx // step, ny // step))), 0
-        return None
+        return _coarser_rectangle(case, refinements, factor)
+    if refinements >= 1:
+        return case, max(refinements - levels, 0)
     if isinstance(case.geometry, PolygonGeometry):
         contact_size = None if settings.contact_size is None else factor * settings.contact_size
         mesh = replace(settings, size=factor * settings.size, contact_size=contact_size)
@@ -125,6 +132,30 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
         return replace(case, geometry=geometry, mesh=mesh), 0
     assert isinstance(case.geometry, MeshFileGeometry)
     return None
+
+
+def _coarser_rectangle(case: Case, refinements: int, factor: int) -> tuple[Case, int] | None:
+    """A rectangle's coarser level. Its cells across each side (the divisions refined
+    ``refinements`` times) are divided by ``factor``, or by 2, or kept: the largest step
+    that leaves :data:`MIN_CELLS_ACROSS` cells, or as many as the fine mesh has if fewer.
+    None unless the cells are at least halved. Where both sides take the same step, a
+    refined mesh's coarser level is its divisions refined fewer times, as for any geometry."""
+    nx, ny = case.mesh.divisions
+    across = (nx << refinements, ny << refinements)
+
+    def step(cells: int) -> int:
+        for divisor in (factor, 2):
+            if cells % divisor == 0 and cells // divisor >= min(cells, MIN_CELLS_ACROSS):
+                return divisor
+        return 1
+
+    steps = (step(across[0]), step(across[1]))
+    if steps[0] * steps[1] < 2:
+        return None
+    if steps[0] == steps[1] and refinements >= 1:
+        return case, max(refinements - (factor.bit_length() - 1), 0)
+    coarse = (across[0] // steps[0], across[1] // steps[1])
+    return replace(case, mesh=replace(case.mesh, divisions=coarse)), 0
 
 
 def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Loop | None:

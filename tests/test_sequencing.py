@@ -133,6 +133,40 @@ def test_a_square_is_still_coarsened_by_four():
     assert coarse.mesh.divisions == (16, 16)
 
 
+@pytest.mark.parametrize("divisions, refine, coarse", [
+    ((400, 4), 0, ((100, 4), 0)),    # a strip keeps its 4 cells across
+    ((400, 4), 1, ((200, 4), 0)),    # 800 x 8: halved across, to 4
+    ((400, 4), 3, ((400, 4), 1)),    # 3 200 x 32: both sides by four, one refinement fewer
+    ((8, 2), 0, ((4, 2), 0)),        # 2 across: kept; 8 along: halved, to 4
+    ((64, 64), 1, ((64, 64), 0)),    # a refined square: one refinement fewer, as before
+    ((4, 4), 0, None),               # nothing to halve without going below 4 across
+])
+def test_a_rectangle_keeps_its_cells_across_a_thin_side(divisions, refine, coarse):
+    case = case_from({**square_case_dict(), "mesh": {"divisions": list(divisions)}})
+    result = coarser(case, refine)
+    assert (None if result is None else (result[0].mesh.divisions, result[1])) == coarse
+
+
+def test_a_thin_strip_is_predicted_from_a_level_as_thick_in_cells():
+    """A strip 1 x 0.01 peeling off at 1 600 x 4 cells (16 000 unknowns): P1 triangles
+    bend by their cells across, so one cell across (the old 400 x 1 level) was far stiffer,
+    misplaced both zone edges by a few nodes and left 8 fine steps (the creep extrapolated).
+    Its 400 x 4 level bends like the fine mesh: the fine level settles within 4 steps, and
+    on the answer a cold start reaches (the contact problem's solution is unique)."""
+    from contactfem.kernel import solve_contact
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare, solve_case
+
+    case = case_from(_peeling_strip(1e-2, (1600, 4), 10, offset=0.5))
+    problem = prepare(case)
+    outcome = solve_case(case, problem=problem)
+    assert outcome.sequencing["coarse_unknowns"] == 2 * 401 * 5 - 2 * 5  # 400 x 4 cells, the clamp's nodes fixed
+    assert outcome.kernel.iterations <= 4 and outcome.kernel.certificate.passed
+    cold = solve_contact(problem.contact_system(get_method("positive")).system)
+    np.testing.assert_array_equal(outcome.kernel.active, cold.active)
+    assert cold.iterations > 2 * outcome.kernel.iterations
+
+
 def test_a_restricted_system_with_the_solutions_outer_values_has_the_solution():
     """K_kk u_k = F_k − K_ko u_o with u_o the converged solution's outer values is the same
     contact problem: its answer is the solution's, on every kept unknown (to round-off)."""
