@@ -68,7 +68,7 @@ from performance import (
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
 DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "light": [1000, 4000, 16000], "long": [4000, 16000, 64000],
-                 "wavy": [200], "strip": [400, 1600, 6400], "square": [256, 1024], "shipped": [3], "overlap": [2]}
+                 "wavy": [200], "strip": [400, 1600, 6400, 25600], "square": [256, 1024], "shipped": [3], "overlap": [2]}
 QUICK_SIZES = {"rough": [1000, 4000], "light": [1000], "long": [4000], "wavy": [200], "strip": [400], "square": [256],
                "shipped": [2], "overlap": [1]}
 #: The ``light`` scene's push: the rough block touches at its highest asperities only.
