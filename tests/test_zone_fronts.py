@@ -134,6 +134,26 @@ def test_after_its_overshoots_the_iteration_is_newtons_alone():
     assert differs == 0 and np.array_equal(out, newton) and not fronts.enabled
 
 
+def test_chains_numbered_along_themselves_are_read_as_the_graph_search_reads_them():
+    """ΓC's nodes as the contact boundary numbers them (every edge joins i and i + 1) are
+    read without a graph search; under other node numbers the search finds the same runs."""
+    edges = np.array([[1, 0], [1, 2], [3, 2], [3, 4], [7, 6], [7, 8], [9, 8]])  # 0-4, 5 alone, 6-9
+    fast = ZoneFronts(np.random.default_rng(1).permutation(edges), 10)
+    assert fast.enabled
+    np.testing.assert_array_equal(fast.along, np.arange(10))
+    np.testing.assert_array_equal(fast.first, [0] * 5 + [5] + [6] * 4)
+    np.testing.assert_array_equal(fast.last, [4] * 5 + [5] + [9] * 4)
+    relabel = np.random.default_rng(2).permutation(10)
+    assert not np.all(np.abs(relabel[edges[:, 0]] - relabel[edges[:, 1]]) == 1)
+    searched = ZoneFronts(relabel[edges], 10)
+
+    def runs(fronts: ZoneFronts, names: np.ndarray) -> list[tuple[int, ...]]:
+        return sorted(tuple(sorted(names[fronts.along[start:fronts.last[start] + 1]].tolist()))
+                      for start in set(fronts.first.tolist()))
+
+    assert runs(searched, np.argsort(relabel)) == runs(fast, np.arange(10)) == [(0, 1, 2, 3, 4), (5,), (6, 7, 8, 9)]
+
+
 def test_a_graph_that_is_no_chain_is_not_extrapolated_along():
     branching = ZoneFronts(np.array([[0, 1], [1, 2], [1, 3], [3, 4]]), 5)
     assert not branching.enabled
