@@ -1,6 +1,7 @@
 """Mesh sequencing, as pure steps: the same case on a coarser mesh, whether solving it first pays, and the active set it predicts.
 
-The coarse solution (h four times larger) is read along ΓC as functions of the abscissa
+The coarse solution (h four times larger, but never fewer than four cells across a
+rectangle's thin side: a body in bending must bend like its fine mesh) is read along ΓC as functions of the abscissa
 on the obstacle: its pressure λ and its normal displacement u_n. At each fine contact
 node the indicator of the active set iteration, λ ω + c (u_n − g), is evaluated with those
 interpolated values and the fine gap; the nodes where it is positive start active. Only
