@@ -138,6 +138,8 @@ def test_a_square_is_still_coarsened_by_four():
     ((400, 4), 1, ((200, 4), 0)),    # 800 x 8: halved across, to 4
     ((400, 4), 3, ((400, 4), 1)),    # 3 200 x 32: both sides by four, one refinement fewer
     ((8, 2), 0, ((4, 2), 0)),        # 2 across: kept; 8 along: halved, to 4
+    ((400, 3), 0, ((100, 3), 0)),    # an odd side is kept, the other coarsened
+    ((401, 3), 0, None),             # neither side can be halved
     ((64, 64), 1, ((64, 64), 0)),    # a refined square: one refinement fewer, as before
     ((4, 4), 0, None),               # nothing to halve without going below 4 across
 ])
