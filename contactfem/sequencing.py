@@ -140,7 +140,8 @@ def _coarser_rectangle(case: Case, refinements: int, factor: int) -> tuple[Case,
     ``refinements`` times) are divided by ``factor``, or by 2, or kept: the largest step
     that leaves :data:`MIN_CELLS_ACROSS` cells, or as many as the fine mesh has if fewer.
     None unless the cells are at least halved. Where both sides take the same step, a
-    refined mesh's coarser level is its divisions refined fewer times, as for any geometry."""
+    refined mesh's coarser level is its divisions refined fewer times (by the step, or all
+    its refinements if fewer), as for any geometry."""
     nx, ny = case.mesh.divisions
     across = (nx << refinements, ny << refinements)
 
@@ -154,7 +155,8 @@ def _coarser_rectangle(case: Case, refinements: int, factor: int) -> tuple[Case,
     if steps[0] * steps[1] < 2:
         return None
     if steps[0] == steps[1] and refinements >= 1:
-        return case, max(refinements - (factor.bit_length() - 1), 0)
+        # Each refinement undone halves the cells: as many as the step allows, or there are.
+        return case, refinements - min(steps[0].bit_length() - 1, refinements)
     coarse = (across[0] // steps[0], across[1] // steps[1])
     return replace(case, mesh=replace(case.mesh, divisions=coarse)), 0
 

@@ -141,6 +141,8 @@ def test_a_square_is_still_coarsened_by_four():
     ((400, 3), 0, ((100, 3), 0)),    # an odd side is kept, the other coarsened
     ((401, 3), 0, None),             # neither side can be halved
     ((64, 64), 1, ((64, 64), 0)),    # a refined square: one refinement fewer, as before
+    ((64, 64), 3, ((64, 64), 1)),    # two fewer
+    ((2, 2), 2, ((2, 2), 1)),        # 8 x 8: halved, to 4 across, not to 2
     ((4, 4), 0, None),               # nothing to halve without going below 4 across
 ])
 def test_a_rectangle_keeps_its_cells_across_a_thin_side(divisions, refine, coarse):
