@@ -456,29 +456,25 @@ class ZoneFronts:
             starts = np.flatnonzero(np.r_[True, ~linked[:-1]])
             if len(starts) > MAX_CHAINS:
                 return
-            lengths = np.diff(np.r_[starts, m])
-            self.along = self.where = np.arange(m)
-            self.first = np.repeat(starts, lengths)
-            self.last = np.repeat(starts + lengths - 1, lengths)
-            self.enabled = True
-            return
-        graph = sp.csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(m, m))
-        graph = ((graph + graph.T) > 0).astype(np.int8).tocsr()
-        count, labels = connected_components(graph, directed=False)
-        if count > MAX_CHAINS:
-            return
-        # Each chain is walked from an end (a node of one edge), or from any node of a loop.
-        start = np.zeros(count, dtype=np.int64)
-        start[labels[::-1]] = np.arange(m)[::-1]  # each chain's lowest node
-        ends = np.flatnonzero(np.diff(graph.indptr) == 1)
-        start[labels[ends[::-1]]] = ends[::-1]
-        orders = [depth_first_order(graph, node, directed=False, return_predecessors=False) for node in start]
+            along, lengths = np.arange(m), np.diff(np.r_[starts, m])
+        else:
+            graph = sp.csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(m, m))
+            graph = ((graph + graph.T) > 0).astype(np.int8).tocsr()
+            count, labels = connected_components(graph, directed=False)
+            if count > MAX_CHAINS:
+                return
+            # Each chain is walked from an end (a node of one edge), or from any node of a loop.
+            start = np.zeros(count, dtype=np.int64)
+            start[labels[::-1]] = np.arange(m)[::-1]  # each chain's lowest node
+            ends = np.flatnonzero(np.diff(graph.indptr) == 1)
+            start[labels[ends[::-1]]] = ends[::-1]
+            orders = [depth_first_order(graph, node, directed=False, return_predecessors=False) for node in start]
+            along, lengths = np.concatenate(orders), np.array([len(order) for order in orders])
         #: The contact nodes chain after chain, each chain in its order; ``where[i]`` is node
         #: i's place in it and ``first``/``last`` the places its chain spans.
-        self.along = np.concatenate(orders)
+        self.along = along
         self.where = np.empty(m, dtype=np.int64)
-        self.where[self.along] = np.arange(m)
-        lengths = np.array([len(order) for order in orders])
+        self.where[along] = np.arange(m)
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
         self.first = np.repeat(starts, lengths)
         self.last = np.repeat(starts + lengths - 1, lengths)

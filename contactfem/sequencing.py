@@ -110,12 +110,11 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
     the coarse mesh's edge length are decimated by the same factor (see
     :func:`decimated_loop`); a loop whose decimation would not be simple keeps its vertices.
     """
-    levels = factor.bit_length() - 1
-    settings = case.mesh
     if isinstance(case.geometry, RectangleGeometry):
         return _coarser_rectangle(case, refinements, factor)
     if refinements >= 1:
-        return case, max(refinements - levels, 0)
+        return case, max(refinements - (factor.bit_length() - 1), 0)
+    settings = case.mesh
     if isinstance(case.geometry, PolygonGeometry):
         contact_size = None if settings.contact_size is None else factor * settings.contact_size
         mesh = replace(settings, size=factor * settings.size, contact_size=contact_size)
