@@ -98,3 +98,37 @@ def test_facing_the_obstacle_is_decided_on_the_geometry():
     tilted = _hertz(obstacle={"point": [0, 0], "normal": [0.1736481776669303, -0.984807753012208]})
     message = _refusal(tilted)
     assert "faces away" in message and "between -0.174 and 1" in message
+
+
+@pytest.mark.parametrize("name", ["hertz.yaml", "flat_punch.yaml"])
+def test_the_graded_size_field_is_its_formula_with_exact_distances_near_and_far(name):
+    """h(x) = min(size, contact_size + grading · d(x)), d the distance to ΓC's samples (and,
+    facing a finite obstacle's ends, min with contact_size / 4 + grading · d_end): the
+    nearest-sample search, which stops where h can only be ``size``, gives the brute-force
+    values exactly, near ΓC and beyond that reach."""
+    import numpy as np
+
+    from contactfem.case import load_case
+    from contactfem.discretize.meshing import END_REFINEMENT, _contact_grading, _contact_samples
+
+    case = load_case(CASES / name)
+    settings = case.mesh
+    samples, ends = _contact_samples(case)
+    size = _contact_grading(case)
+    vertices = case.geometry.outer.vertices
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    rng = np.random.default_rng(7)
+    near = samples[np.linspace(0, len(samples) - 1, 200).astype(int)]
+    near = near + rng.normal(scale=2 * settings.contact_size, size=near.shape)
+    points = np.concatenate([rng.uniform(low, high, size=(400, 2)), near])
+
+    def distance(to: np.ndarray) -> np.ndarray:
+        return np.sqrt(((points[:, None, :] - to[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+
+    d = distance(samples)
+    expected = np.minimum(settings.size, settings.contact_size + settings.grading * d)
+    if len(ends):
+        expected = np.minimum(expected, settings.contact_size / END_REFINEMENT + settings.grading * distance(ends))
+    reach = (settings.size - settings.contact_size) / settings.grading
+    assert (d > reach).any() and (d < reach).any()  # both sides of where the search stops
+    assert np.array_equal(size(points), expected)

@@ -83,10 +83,45 @@ def _contact_grading(case: Case):
     """The size field h(x) = min(size, contact_size + grading · distance(x, ΓC)).
 
     The distance is to points sampled on the contact edges of the geometry at a quarter
-    of contact_size, so it is exact to that spacing.
+    of contact_size (:func:`_contact_samples`), so it is exact to that spacing.
     """
     from scipy.spatial import cKDTree
 
+    settings = case.mesh
+    samples, ends = _contact_samples(case)
+    # Sliding-midpoint splits: the samples lie along curves, and the queries, most of them
+    # near ΓC on a graded mesh, ran 1.4x faster than in the default median-split tree.
+    tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
+    end_tree = cKDTree(ends) if len(ends) else None
+    end_size = settings.contact_size / END_REFINEMENT
+
+    def reach(nearest: float) -> float:
+        """The distance beyond which h is ``size`` whatever the distance: the nearest-point
+        search stops there. Far from ΓC the nearest sample is otherwise sought among many
+        almost as near (the centre of a disk is as far from every point of its rim): the
+        queries took 65% of meshing the Hertz disk (0.13 s of 0.2 s at 32 000 unknowns;
+        0.065 s with the bound)."""
+        if settings.grading <= 0.0:
+            return np.inf
+        return max((settings.size - nearest) / settings.grading, 0.0)
+
+    def size(points: np.ndarray) -> np.ndarray:
+        distance, _ = tree.query(points, distance_upper_bound=reach(settings.contact_size))
+        h = np.minimum(settings.size, settings.contact_size + settings.grading * distance)
+        if end_tree is not None:
+            # The pressure is singular (like 1/√r) at the end of a finite obstacle pressed
+            # into the body: the mesh is finer there still.
+            to_end, _ = end_tree.query(points, distance_upper_bound=reach(end_size))
+            h = np.minimum(h, end_size + settings.grading * to_end)
+        return h
+
+    return size
+
+
+def _contact_samples(case: Case) -> tuple[np.ndarray, np.ndarray]:
+    """Points on ΓC's edges, a quarter of ``mesh.contact_size`` apart (only those in front
+    of a finite obstacle, which alone can touch it), and the points of ΓC facing the ends
+    of a finite obstacle (:func:`_segment_ends_on_body`)."""
     settings = case.mesh
     samples = []
     contact = set(case.contact_parts)
@@ -114,25 +149,11 @@ def _contact_grading(case: Case):
     samples = np.concatenate(samples)
     ends = _segment_ends_on_body(case, samples)
     if case.obstacle.ends is not None:
-        # Only the part of ΓC in front of a finite obstacle can touch it.
         from contactfem.discretize.contact import FlatObstacle
 
         facing = FlatObstacle.from_case(case).faces(samples)
         samples = samples[facing] if facing.any() else samples
-    tree = cKDTree(samples)
-    end_tree = cKDTree(ends) if len(ends) else None
-
-    def size(points: np.ndarray) -> np.ndarray:
-        distance, _ = tree.query(points)
-        h = np.minimum(settings.size, settings.contact_size + settings.grading * distance)
-        if end_tree is not None:
-            # The pressure is singular (like 1/√r) at the end of a finite obstacle pressed
-            # into the body: the mesh is finer there still.
-            to_end, _ = end_tree.query(points)
-            h = np.minimum(h, settings.contact_size / END_REFINEMENT + settings.grading * to_end)
-        return h
-
-    return size
+    return samples, ends
 
 
 #: How much finer than ``mesh.contact_size`` the mesh is at the ends of a finite obstacle
