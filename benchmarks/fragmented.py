@@ -30,6 +30,10 @@ refinements for shipped and overlap):
   0.5 + sin(10 x), which pulls it up on a fifth of its length (``--sizes``: cells along
   it, 4 across): a body in bending peeling off, whose zone creeps to its edges a node per
   edge per Newton step from a cold start (:func:`contactfem.kernel.default_max_iterations`).
+- ``teeth``: a 0.5-deep block standing on ``--sizes`` teeth 0.006 wide, 0.016 apart and
+  0.03 high (a tread), their tips up to 4e-4 off level, pushed down by 2e-4: a contact patch
+  per tooth on separate contact edges, graded onto them (:func:`teeth_case`). The teeth
+  cannot be decimated: a coarser level keeps 40% of the unknowns.
 - ``square``: cases/square.yaml at N x N (one contact zone, for comparison).
 - ``shipped``: every case of cases/ refined the given number of times.
 - ``overlap``: bodies that start inside the obstacle (:func:`overlap_cases`), refined the
@@ -68,9 +72,10 @@ from performance import (
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "fragmented.json"
 DEFAULT_SIZES = {"rough": [1000, 4000, 16000], "light": [1000, 4000, 16000], "long": [4000, 16000, 64000],
-                 "wavy": [200], "strip": [400, 1600, 6400, 25600], "square": [256, 1024], "shipped": [3], "overlap": [2]}
+                 "wavy": [200], "strip": [400, 1600, 6400, 25600], "square": [256, 1024], "shipped": [3], "overlap": [2],
+                 "teeth": [60, 300, 1000]}
 QUICK_SIZES = {"rough": [1000, 4000], "light": [1000], "long": [4000], "wavy": [200], "strip": [400], "square": [256],
-               "shipped": [2], "overlap": [1]}
+               "shipped": [2], "overlap": [1], "teeth": [60]}
 #: The ``light`` scene's push: the rough block touches at its highest asperities only.
 LIGHT_PUSH = 1e-4
 #: The ``long`` scene's push: 200-450 patches at 4 000-16 000 segments.
@@ -123,6 +128,41 @@ def long_case(segments: int, seed: int = SEED):
     :data:`LONG_PUSH`: the block's push of 9e-4 flattens a strip this thin over its whole
     length (one patch from 64 000 segments)."""
     return rough_case(segments, seed=seed, push=LONG_PUSH, length=segments / 1000)
+
+
+#: The ``teeth`` scene's tooth width, pitch and height, and the push on the block's top.
+TOOTH_WIDTH, TOOTH_PITCH, TOOTH_HEIGHT, TEETH_PUSH = 0.006, 0.016, 0.03, 2e-4
+
+
+def teeth_case(teeth: int, seed: int = SEED):
+    """A block 0.5 deep standing on ``teeth`` teeth (a tread, a comb), each tip its own
+    contact part's edge, the tips up to 4e-4 off level (seeded), pushed down by
+    :data:`TEETH_PUSH`; graded onto the tips (size 0.05, contact_size 0.002). The teeth
+    are not decimated, so a coarser level keeps every vertex and 40% of the unknowns."""
+    from contactfem.case import PolygonGeometry, parse_case
+    from contactfem.mesh.polygon import Loop
+
+    rng = np.random.default_rng(seed)
+    length = teeth * TOOTH_PITCH
+    vertices, names = [], []
+    for i in range(teeth):
+        left = i * TOOTH_PITCH + (TOOTH_PITCH - TOOTH_WIDTH) / 2
+        tip = -TOOTH_HEIGHT + rng.uniform(0.0, 4e-4)
+        vertices += [(left, 0.0), (left, tip), (left + TOOTH_WIDTH, tip), (left + TOOTH_WIDTH, 0.0)]
+        names += ["flank", "tip", "flank", "root"]
+    vertices += [(length, 0.0), (length, 0.5), (0.0, 0.5), (0.0, 0.0)]
+    names += ["side", "top", "side", "root"]
+    data = {
+        "title": f"a block on {teeth} teeth, pushed {TEETH_PUSH:g}",
+        "geometry": {"polygon": {"vertices": [[0, 0], [length, 0], [length, 0.5], [0, 0.5]],
+                                 "edges": ["tip", "side", "top", "side"]}},
+        "mesh": {"size": 0.05, "contact_size": 0.002},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"top": {"displacement": [0, -TEETH_PUSH]}, "tip": "contact"},
+        "obstacle": {"point": [0, -TOOTH_HEIGHT], "normal": [0, -1]},
+    }
+    case = parse_case(yaml.safe_dump(data), source=ROOT / "benchmarks" / f"teeth-{teeth}.yaml")
+    return replace(case, geometry=PolygonGeometry(Loop(np.array(vertices), tuple(names)), ()))
 
 
 def wavy_case(wavenumber: int):
@@ -199,6 +239,8 @@ def scenes(name: str, size: int) -> list[tuple[str, object, int | None]]:
         return [(f"long-{size}", long_case(size), None)]
     if name == "wavy":
         return [(f"wavy-{size}", wavy_case(size), None)]
+    if name == "teeth":
+        return [(f"teeth-{size}", teeth_case(size), None)]
     if name == "strip":
         return [(f"strip-{size}", strip_case(size), None)]
     if name == "square":
@@ -334,7 +376,7 @@ def table(records: list[dict]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", choices=list(DEFAULT_SIZES),
-                        default=["rough", "light", "long", "wavy", "strip", "square", "shipped"])
+                        default=["rough", "light", "long", "wavy", "strip", "square", "shipped", "teeth"])
     parser.add_argument("--sizes", nargs="+", type=int, help="sizes for every scene chosen (default: per scene)")
     parser.add_argument("--quick", action="store_true", help="the small sizes only")
     parser.add_argument("--methods", nargs="+", choices=["positive", "standard"], default=["positive", "standard"])

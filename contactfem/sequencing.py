@@ -45,6 +45,11 @@ COARSENING = 4
 #: What a coarse level's contact solve costs, in linear solves of its own size, once
 #: predicted from the level below: 1.3–3 measured on the square and the rough profiles.
 COARSE_LEVEL_SOLVES = 3.0
+#: What meshing and assembling a coarse level costs, in linear solves of its own size:
+#: 1.8–3.2 on the shipped polygons' coarse levels and 2.2–4.0 on the rough profiles' (the
+#: Hertz disk's graded mesh of 7 000 unknowns 2.8; its 3 500 of the platen 5.2; the teeth
+#: of a tread, graded onto their tips, 4.6–8.0).
+MESHING_SOLVES = 3.0
 #: What a prediction saves on the fine level, in its linear solves: a cold start took 3–8
 #: factorisations (square, punch, rough profiles), a predicted one 1–2.
 EXPECTED_SAVING_SOLVES = 2.0
@@ -83,21 +88,30 @@ def worth_sequencing(n_unknowns: int) -> bool:
     return n_unknowns >= SEQUENCING_THRESHOLD
 
 
-def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int) -> bool:
+def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int, meshed: bool = True) -> bool:
     """Whether solving ``coarse_unknowns`` first is expected to cost less than it saves.
 
     Cost model, in linear solves of the fine problem: a linear solve of the coarse level
-    costs q = (coarse / fine) ** :data:`GROWTH` of a fine one; the coarse level costs
-    :data:`COARSE_LEVEL_SOLVES` of its own and the levels below it as much again in
-    proportion (q + q² + … = q / (1 − q) in all, the same ratio assumed down the chain);
-    the prediction saves :data:`EXPECTED_SAVING_SOLVES`. A square coarsened by four in h
-    (a sixteenth of the unknowns) or a decimated rough base (a seventh) pays; a polygon
-    whose boundary cannot be coarsened (about half the unknowns per level) does not.
+    costs q = (coarse / fine) ** :data:`GROWTH` of a fine one; the coarse level's contact
+    solve costs :data:`COARSE_LEVEL_SOLVES` of its own, and meshing and assembling it
+    :data:`MESHING_SOLVES` more; the levels below it cost as much again in proportion (q² +
+    q³ + …, the same ratio assumed down the chain); the prediction saves
+    :data:`EXPECTED_SAVING_SOLVES`. ``meshed``: the level is meshed already (its meshing is
+    spent, and its unknowns counted); otherwise ``coarse_unknowns`` is an estimate made before
+    meshing it, and its meshing counts.
+
+    A square coarsened by four in h (a sixteenth of the unknowns), h twice as large (a
+    quarter) or a decimated rough base (a fifth) pays; a polygon whose boundary cannot be
+    coarsened (the teeth of a tread keep 38% of the unknowns, and a coarse level made their
+    solve twice as slow as a cold start) does not.
     """
     if coarse_unknowns <= 0 or coarse_unknowns >= fine_unknowns:
         return False
     q = (coarse_unknowns / fine_unknowns) ** GROWTH
-    return COARSE_LEVEL_SOLVES * q / (1.0 - q) < EXPECTED_SAVING_SOLVES
+    level = COARSE_LEVEL_SOLVES + MESHING_SOLVES
+    below = level * q * q / (1.0 - q)
+    cost = (COARSE_LEVEL_SOLVES if meshed else level) * q + below
+    return cost < EXPECTED_SAVING_SOLVES
 
 
 def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Case, int] | None:

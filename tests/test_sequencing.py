@@ -18,6 +18,7 @@ from contactfem.sequencing import (
     coarser,
     decimated_loop,
     overlapped,
+    patch_count,
     simple_polygon,
 )
 
@@ -94,11 +95,65 @@ def test_edges_already_as_long_as_the_coarse_mesh_are_kept():
 
 
 def test_the_cost_model_pays_for_a_quarter_but_not_for_half_the_unknowns():
-    assert coarse_level_pays(60_000, 8_000)       # a decimated rough base: 7x fewer unknowns
-    assert coarse_level_pays(2_100_000, 525_000)  # the square, h twice as large
-    assert not coarse_level_pays(60_000, 28_000)  # a polygon whose boundary cannot be coarsened
-    assert not coarse_level_pays(10_000, 10_000)
-    assert not coarse_level_pays(10_000, 0)
+    for meshed in (True, False):
+        assert coarse_level_pays(60_000, 8_000, meshed)       # a decimated rough base: 7x fewer unknowns
+        assert coarse_level_pays(2_100_000, 525_000, meshed)  # the square, h twice as large
+        assert not coarse_level_pays(60_000, 28_000, meshed)  # a polygon whose boundary cannot be coarsened
+        assert not coarse_level_pays(10_000, 10_000, meshed)
+        assert not coarse_level_pays(10_000, 0, meshed)
+    # A tread's teeth keep 38% of the unknowns: a level already meshed is barely not worth
+    # solving, and one still to mesh is not worth meshing (estimated at 32%).
+    assert not coarse_level_pays(26_060, 9_810)
+    assert not coarse_level_pays(26_060, int(0.32 * 26_060), meshed=False)
+    # Meshing is what a level not meshed yet still costs: between the two thresholds the
+    # level is worth solving once meshed, not worth meshing.
+    assert coarse_level_pays(100_000, 30_000) and not coarse_level_pays(100_000, 30_000, meshed=False)
+
+
+def teeth_case(teeth: int):
+    """A 0.5-deep block standing on ``teeth`` teeth 0.006 wide and 0.016 apart, their tips
+    (the contact part) up to 4e-4 off level, pushed down by 2e-4, graded onto the tips."""
+    rng = np.random.default_rng(5)
+    vertices, names = [], []
+    for i in range(teeth):
+        left = i * 0.016 + 0.005
+        tip = -0.03 + rng.uniform(0.0, 4e-4)
+        vertices += [(left, 0.0), (left, tip), (left + 0.006, tip), (left + 0.006, 0.0)]
+        names += ["flank", "tip", "flank", "root"]
+    length = teeth * 0.016
+    vertices += [(length, 0.0), (length, 0.5), (0.0, 0.5), (0.0, 0.0)]
+    names += ["side", "top", "side", "root"]
+    data = {
+        "geometry": {"polygon": {"vertices": [[0, 0], [length, 0], [length, 0.5], [0, 0.5]],
+                                 "edges": ["tip", "side", "top", "side"]}},
+        "mesh": {"size": 0.05, "contact_size": 0.002},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"top": {"displacement": [0, -2e-4]}, "tip": "contact"},
+        "obstacle": {"point": [0, -0.03], "normal": [0, -1]},
+    }
+    return replace(case_from(data), geometry=PolygonGeometry(Loop(np.array(vertices), tuple(names)), ()))
+
+
+def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatch):
+    """The teeth cannot be decimated: a coarser level keeps 38% of the unknowns, and meshing
+    it (graded onto every tip) cost 4-8 of its linear solves, so that sequencing made the
+    solve twice as slow as a cold start. The level is refused from its estimated unknowns,
+    before it is meshed; the cold start is certified."""
+    import contactfem.solve as solve_module
+    from contactfem.kernel import Status
+
+    case = teeth_case(80)
+    problem = solve_module.prepare(case)
+    assert problem.n_unknowns > SEQUENCING_THRESHOLD
+    coarse_case, refine = coarser(case, problem.refinements)
+    estimated = solve_module._estimated_unknowns(problem, case, coarse_case, refine)
+    assert 0.25 < estimated / problem.n_unknowns < 0.45
+    meshed = []
+    original = solve_module.prepare
+    monkeypatch.setattr(solve_module, "prepare", lambda *args, **kwargs: meshed.append(args) or original(*args, **kwargs))
+    result = solve_module.solve_case(case, problem=problem)
+    assert meshed == [] and result.sequencing == {}
+    assert result.kernel.status is Status.CONVERGED and patch_count(result.kernel.active) >= 10
 
 
 @pytest.mark.parametrize("beside_from", [0, 10**9])
