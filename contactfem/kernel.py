@@ -151,6 +151,12 @@ class ContactSystem:
         The ΓC edges as pairs of contact nodes (indices into ``normal_dofs``): the order
         along ΓC in which a creeping zone edge is recognised (:class:`ZoneFronts`). None:
         Newton's update alone.
+    translation : (n,), optional
+        A rigid translation of the body in these unknowns that the prescribed values are
+        components of, given when nothing loads the body (a block pushed by its top): it is
+        then the supports' own solution, which a cold start with no node inside the
+        obstacle would factorise and solve for first (:func:`solve_contact` checks it and
+        starts from its update instead). None: not known.
     """
 
     stiffness: sp.spmatrix
@@ -163,12 +169,14 @@ class ContactSystem:
     free_modes: np.ndarray | None = None
     length_scale: float | None = None
     contact_edges: np.ndarray | None = None
+    translation: np.ndarray | None = None
 
     def scaled(self, factor: float) -> "ContactSystem":
         """The system with its load and prescribed values multiplied by ``factor`` (a step
         of a load path; the obstacle stays)."""
         return dataclasses.replace(self, load=factor * np.asarray(self.load, dtype=float),
-                                   fixed_values=factor * np.asarray(self.fixed_values, dtype=float))
+                                   fixed_values=factor * np.asarray(self.fixed_values, dtype=float),
+                                   translation=None if self.translation is None else factor * self.translation)
 
     def coupled_outside(self, keep: np.ndarray) -> np.ndarray:
         """The unknowns outside ``keep`` (bool, n) that a kept equation couples to: the only
@@ -617,6 +625,26 @@ def default_c(system: ContactSystem) -> float:
     return float(np.mean(system.stiffness.diagonal()[system.normal_dofs]))
 
 
+def _translation_update(system: ContactSystem, linear, tolerance: float, active: np.ndarray) -> np.ndarray:
+    """Newton's update from the supports' own solution when that is ``system.translation``,
+    checked to be one: no load, the prescribed values its components to round-off, and K
+    times it zero to the round-off bound of the equations (:meth:`ActiveSetSolver.measure`).
+    ``active`` unchanged otherwise."""
+    translation = system.translation
+    if translation is None or np.any(system.load) or not isinstance(linear, ActiveSetSolver):
+        return active  # a distributed solver holds each rank's part of the vectors
+    translation = np.asarray(translation, dtype=float)
+    values = np.asarray(system.fixed_values, dtype=float)
+    prescribed = translation[np.asarray(system.fixed_dofs, dtype=np.int64)]
+    if np.abs(prescribed - values).max(initial=0.0) > 8 * np.finfo(float).eps * np.abs(values).max(initial=0.0):
+        return active
+    scales = linear.measure(translation, np.zeros(len(active)))
+    if not scales.equilibrium <= scales.roundoff:
+        return active
+    slack = linear.normals(translation) - np.asarray(system.gap, dtype=float)
+    return slack > max(tolerance, roundoff_bound(2)) * scales.displacement
+
+
 def solve_contact(
     system: ContactSystem,
     *,
@@ -697,6 +725,16 @@ def solve_contact(
         active = holder.hold(active, holder.first_touch())
     linear = ActiveSetSolver(system, backend, tolerance=tolerance) if linear is None else linear
     factorizations_before, column_solves_before = linear.factorizations, linear.column_solves
+    if initial_active is None and holder is None and m and not active.any():
+        # A cold start with no node inside the obstacle solves the supports alone first. When
+        # that solution is a translation known in advance (a body pushed by a prescribed
+        # displacement, nothing loading it), Newton's update from it is known too: the nodes
+        # the translation presses into the obstacle, where the iteration starts instead.
+        translated = _translation_update(system, linear, tolerance, active)
+        skipped = int(translated is not active)  # the update counts as the first step's
+        active = translated
+    else:
+        skipped = 0
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     least_index, least_index_from = False, 0
@@ -775,7 +813,7 @@ def solve_contact(
                     new_active = holder.hold(new_active, np.where(active, reaction_at_contact, c * slack))
 
         extrapolated = 0
-        if (fronts is None and system.contact_edges is not None and iteration >= 2 and finite
+        if (fronts is None and system.contact_edges is not None and iteration + skipped >= 2 and finite
                 and not np.array_equal(new_active, active)):
             fronts = ZoneFronts(system.contact_edges, m)
         if fronts is not None and fronts.enabled and finite:

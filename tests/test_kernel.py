@@ -735,3 +735,68 @@ def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
     linear = prepared()
     linear.refactorization_seconds = 2 * (base + blocks * n)
     assert linear._refactorize_first(target) is False and linear.path_share is None
+
+
+def test_a_body_pushed_by_a_translation_starts_from_the_nodes_it_presses_in():
+    """The rough block pushed down by its top, nothing loading it: the supports' own solution
+    is that translation, so the cold start's first solve is known and its update (every node
+    the push presses in) is where the iteration starts. The answer is the same to round-off,
+    one step and one factorisation fewer; the first set solved is the old second one. A
+    translation that is not the supports' solution (twice the push, or a load on the body)
+    is checked and not used."""
+    from dataclasses import replace
+
+    from test_sequencing import rough_polygon_case
+
+    from contactfem.kernel import ActiveSetSolver
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    problem = prepare(rough_polygon_case(400))
+    for method in ("positive", "standard"):
+        system_ = problem.contact_system(get_method(method)).system
+        assert system_.translation is not None
+        # Every changed set factorised (the kernel's choice between columns and a
+        # refactorisation follows measured timings): factorisations count the sets solved.
+        known = solve_contact(system_, linear=ActiveSetSolver(system_, "auto", max_changes=0))
+        plain = replace(system_, translation=None)
+        unknown = solve_contact(plain, linear=ActiveSetSolver(plain, "auto", max_changes=0))
+        for result in (known, unknown):
+            assert result.status is Status.CONVERGED, result.message
+        np.testing.assert_array_equal(known.active, unknown.active)
+        scale = np.abs(unknown.displacement).max()
+        np.testing.assert_allclose(known.displacement, unknown.displacement, rtol=0, atol=1e-12 * scale)
+        assert known.iterations == unknown.iterations - 1
+        assert known.factorizations == unknown.factorizations - 1
+        assert unknown.history[0].active == 0 and known.history[0].active == unknown.history[1].active > 0
+        for wrong in (replace(system_, translation=2 * system_.translation),
+                      replace(system_, load=np.where(np.arange(len(system_.load)) == 0, 1e-3, 0.0))):
+            other = solve_contact(wrong)
+            assert other.history[0].active == 0  # solved from the supports, as without a translation
+
+
+def test_no_translation_is_claimed_where_the_data_are_not_one():
+    """A translation is given to the kernel only when nothing loads the body and every
+    prescribed value is a component of it: not under a traction (the square) or a platen's
+    force (the Hertz disk held by contact alone); the pushed Hertz disk and a square whose
+    top and left side each prescribe one component of a translation get one."""
+    from conftest import case_from, shipped_case, square_case_dict
+
+    from contactfem.methods import get_method
+    from contactfem.solve import prepare
+
+    method = get_method("positive")
+    assert prepare(case_from(square_case_dict(8))).contact_system(method).system.translation is None
+    assert prepare(shipped_case("hertz_platen")).contact_system(method).system.translation is None
+    pushed = prepare(shipped_case("hertz")).contact_system(method).system  # its top pushed down by 4e-3
+    assert pushed.translation is not None
+    assert np.abs(pushed.translation[pushed.normal_dofs]).max() == pytest.approx(4e-3, rel=1e-12)
+    # Two parts, each prescribing one component: together one translation, checked by the kernel.
+    data = square_case_dict(8)
+    data["boundary"] = {"top": {"displacement": [None, -1e-3]}, "left": {"displacement": [2e-4, None]},
+                        "bottom": "contact"}
+    system_ = prepare(case_from(data)).contact_system(method).system
+    assert system_.translation is not None
+    result = solve_contact(system_)
+    assert result.status is Status.CONVERGED and result.history[0].active > 0  # started pressed in
+    np.testing.assert_allclose(result.displacement[system_.fixed_dofs], system_.fixed_values, rtol=0, atol=1e-15)

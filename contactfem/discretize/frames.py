@@ -74,6 +74,9 @@ class ReducedSystem:
         free_modes = None
         if problem.free_modes is not None:
             free_modes = _reduce(problem.free_modes, nodes, blocks, frames.masters)
+        translation = None
+        if free_modes is None and not np.any(load):
+            translation = _prescribed_translation(problem, nodes, blocks, frames.masters)
         system = ContactSystem(
             stiffness=rotated,
             load=load,
@@ -85,6 +88,7 @@ class ReducedSystem:
             free_modes=free_modes,
             length_scale=float(np.ptp(problem.mesh.points, axis=0).max(initial=0.0)) or None,
             contact_edges=contact.node_edges(),
+            translation=translation,
         )
         return cls(system=system, rotation=rotation, problem=problem, frame_nodes=nodes, frames=blocks,
                    masters=frames.masters)
@@ -150,6 +154,27 @@ def _rotated_in_blocks(stiffness: sp.csr_matrix, nodes: np.ndarray, frames: np.n
     rotated = sp.csr_matrix((data, indices, indptr), shape=stiffness.shape, copy=False)
     rotated.has_canonical_format = stiffness.has_canonical_format
     return rotated
+
+
+def _prescribed_translation(problem: DiscreteProblem, nodes: np.ndarray, frames: np.ndarray,
+                            masters: np.ndarray) -> np.ndarray | None:
+    """The translation whose components every prescribed x and every prescribed y value is
+    (a body pushed by its top, the rest free or on rollers along the push), in the kernel's
+    unknowns; None when the prescribed values differ. The kernel checks it against its own
+    fixed values before using it (:attr:`contactfem.kernel.ContactSystem.translation`)."""
+    dofs, values = problem.dirichlet_dofs, problem.dirichlet_values
+    if len(dofs) == 0:
+        return None
+    step = np.zeros(2)
+    for component in (0, 1):
+        given = values[dofs % 2 == component]
+        if len(given):
+            if np.ptp(given) > 0.0:
+                return None
+            step[component] = given[0]
+    if not step.any():
+        return None  # held still: the cold start's first solve is u = 0, no cost to skip
+    return _reduce(np.tile(step, problem.mesh.n_points), nodes, frames, masters)
 
 
 def _reduce(displacement: np.ndarray, nodes: np.ndarray, frames: np.ndarray, masters: np.ndarray) -> np.ndarray:
