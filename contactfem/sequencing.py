@@ -320,10 +320,16 @@ def starting_set(gap: np.ndarray, tolerance: float,
         record.update(cost)
         return active
 
-    inside = overlapped(gap, tolerance)
-    if len(inside) and inside.all():
-        return inside, predicted, record
+    if not prediction_first(gap, tolerance):
+        return overlapped(gap, tolerance), predicted, record
     return predicted(), None, record
+
+
+def prediction_first(gap: np.ndarray, tolerance: float) -> bool:
+    """Whether :func:`starting_set` starts from the coarse prediction: not every contact
+    node starts inside the obstacle."""
+    inside = overlapped(gap, tolerance)
+    return not (len(inside) and inside.all())
 
 
 def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:

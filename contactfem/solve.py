@@ -48,6 +48,7 @@ from contactfem.sequencing import (
     PredictedStarts,
     patch_count,
     predict_active_set,
+    prediction_first,
     starting_set,
     worth_sequencing,
 )
@@ -182,8 +183,14 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
     what the prediction cost: what a fine solve and a coarse level share."""
     tolerance = case.solver.tolerance
-    # Without a coarse level there is nothing to overlap with.
-    with ThreadPoolExecutor(max_workers=1) if worth_sequencing(problem.n_unknowns) else _InPlace() as pool:
+    kept = {} if coarse_levels is None else coarse_levels
+    # Without a coarse level to mesh and solve first there is nothing to overlap with: a
+    # small problem, one whose coarser level is not worth meshing (a tread's teeth), one
+    # pressed in everywhere (the coarse level is then a second guess, after the first
+    # step), or a coarse level kept from an earlier solve.
+    overlapped = (worth_sequencing(problem.n_unknowns) and prediction_first(problem.contact.gap, tolerance)
+                  and "solve" not in kept and _worth_meshing(case, problem, kept))
+    with ThreadPoolExecutor(max_workers=1) if overlapped else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
         # solver and that solver's ordering and symbolic analysis are made while the
         # coarser levels mesh and solve: on a rough profile's graded mesh they cost about
@@ -206,7 +213,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             solver_soon = pool.submit(_analysed, solver())
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
-            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, coarse_levels))
+            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, kept))
         reduced, c = fine_soon.result()
         linear = solver_soon.result()
     numbers = itertools.count(1)
@@ -216,7 +223,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         # bending peeling off creeps a node per edge per step, which a coarser level does
         # at a quarter of the size (kernel.STALL_ITERATIONS).
         say(f"  not settled after {STALL_ITERATIONS} steps: predicting from a coarser mesh")
-        active, cost = _predict_from_coarser(case, problem, lambda: (reduced, c), say, coarse_levels, forced=True)
+        active, cost = _predict_from_coarser(case, problem, lambda: (reduced, c), say, kept, forced=True)
         if active is not None:
             sequencing["stalled"] = {"at": STALL_ITERATIONS, **cost}
         return active
@@ -237,6 +244,19 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         linear=linear,
     )
     return reduced, kernel, sequencing
+
+
+def _worth_meshing(case: Case, problem: DiscreteProblem, kept: dict) -> bool:
+    """Whether ``problem``'s coarser level is expected to pay for its meshing
+    (:func:`contactfem.sequencing.coarse_level_pays` on its estimated unknowns); the level's
+    case is kept in ``kept`` for :func:`coarser_level`."""
+    if "coarser" not in kept:
+        kept["coarser"] = coarser(case, problem.refinements)
+    if kept["coarser"] is None:
+        return False
+    coarse_case, refine = kept["coarser"]
+    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, case, coarse_case, refine),
+                             meshed=False)
 
 
 class _InPlace:
@@ -507,7 +527,8 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
         return correct_in_layer(reduced, coarse, active, c, case.solver.tolerance, case.solver.max_iterations,
                                 _serial_backend(case))
 
-    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced)
+    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced,
+                                kept.get("coarser"))
 
 
 def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
@@ -571,17 +592,18 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
 
 
 def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable[[Case, int], DiscreteProblem],
-                  forced: bool = False) -> tuple[Case, DiscreteProblem] | None:
+                  forced: bool = False, coarse: tuple[Case, int] | None = None) -> tuple[Case, DiscreteProblem] | None:
     """The coarser level that predicts ``problem``'s active set (its case, and its problem
     from ``prepare_coarse``), or None when the problem is small, no coarser mesh exists,
     the mesher or the contact checks refuse the decimated boundary, or the level is not
     expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
     before it is meshed from an estimate of its unknowns, and again from them once it is).
     ``forced``: whatever the size and the cost model
-    (a cold start that stalled), as long as the coarser mesh is smaller."""
+    (a cold start that stalled), as long as the coarser mesh is smaller. ``coarse``: the
+    coarser case and its refinements, when already made."""
     if not forced and not worth_sequencing(problem.n_unknowns):
         return None
-    coarse = coarser(case, problem.refinements)
+    coarse = coarser(case, problem.refinements) if coarse is None else coarse
     if coarse is None:
         return None
     coarse_case, coarse_refine = coarse
@@ -614,7 +636,8 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
                          prepare_coarse: Callable[[Case, int], DiscreteProblem],
                          solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
                          correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
-                         forced: bool = False) -> tuple[np.ndarray | None, dict]:
+                         forced: bool = False, coarse: tuple[Case, int] | None = None,
+                         ) -> tuple[np.ndarray | None, dict]:
     """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
     process, or across MPI ranks), and optionally to ``correct`` its prediction on the
     fine mesh: the predicted active set and what it cost. ``c`` gives the fine kernel's c,
@@ -622,9 +645,10 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
 
     (None, {}) when there is no :func:`coarser_level` (``forced``: see there) or solving it
     fails: a prediction is only a starting point, and without one the kernel starts cold.
+    ``coarse``: the coarser case and its refinements, when already made (:func:`coarser`).
     """
     started = time.perf_counter()
-    level = coarser_level(case, problem, prepare_coarse, forced)
+    level = coarser_level(case, problem, prepare_coarse, forced, coarse)
     if level is None:
         return None, {}
     coarse_case, coarse_problem = level

@@ -138,7 +138,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     """The teeth cannot be decimated: a coarser level keeps 38% of the unknowns, and meshing
     it (graded onto every tip) cost 4-8 of its linear solves, so that sequencing made the
     solve twice as slow as a cold start. The level is refused from its estimated unknowns,
-    before it is meshed; the cold start is certified."""
+    before it is meshed, and no worker thread is started; the cold start is certified."""
     import contactfem.solve as solve_module
     from contactfem.kernel import Status
 
@@ -148,11 +148,13 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     coarse_case, refine = coarser(case, problem.refinements)
     estimated = solve_module._estimated_unknowns(problem, case, coarse_case, refine)
     assert 0.25 < estimated / problem.n_unknowns < 0.45
-    meshed = []
+    meshed, workers = [], []
     original = solve_module.prepare
     monkeypatch.setattr(solve_module, "prepare", lambda *args, **kwargs: meshed.append(args) or original(*args, **kwargs))
+    # With no coarse level to mesh first, nothing runs beside the fine level's analysis.
+    monkeypatch.setattr(solve_module, "ThreadPoolExecutor", lambda *args, **kwargs: workers.append(args))
     result = solve_module.solve_case(case, problem=problem)
-    assert meshed == [] and result.sequencing == {}
+    assert meshed == [] and workers == [] and result.sequencing == {}
     assert result.kernel.status is Status.CONVERGED and patch_count(result.kernel.active) >= 10
 
 
