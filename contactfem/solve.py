@@ -188,9 +188,9 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     # small problem, one whose coarser level is not worth meshing (a tread's teeth), one
     # pressed in everywhere (the coarse level is then a second guess, after the first
     # step), or a coarse level kept from an earlier solve.
-    overlapped = (worth_sequencing(problem.n_unknowns) and prediction_first(problem.contact.gap, tolerance)
-                  and "solve" not in kept and _worth_meshing(case, problem, kept))
-    with ThreadPoolExecutor(max_workers=1) if overlapped else _InPlace() as pool:
+    coarse_first = (worth_sequencing(problem.n_unknowns) and prediction_first(problem.contact.gap, tolerance)
+                    and "solve" not in kept and _worth_meshing(case, problem, kept))
+    with ThreadPoolExecutor(max_workers=1) if coarse_first else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
         # solver and that solver's ordering and symbolic analysis are made while the
         # coarser levels mesh and solve: on a rough profile's graded mesh they cost about
