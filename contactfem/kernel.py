@@ -625,22 +625,22 @@ def default_c(system: ContactSystem) -> float:
     return float(np.mean(system.stiffness.diagonal()[system.normal_dofs]))
 
 
-def _translation_update(system: ContactSystem, linear, tolerance: float, active: np.ndarray) -> np.ndarray:
+def _translation_update(system: ContactSystem, linear, tolerance: float) -> np.ndarray | None:
     """Newton's update from the supports' own solution when that is ``system.translation``,
     checked to be one: no load, the prescribed values its components to round-off, and K
     times it zero to the round-off bound of the equations (:meth:`ActiveSetSolver.measure`).
-    ``active`` unchanged otherwise."""
+    None otherwise."""
     translation = system.translation
     if translation is None or np.any(system.load) or not isinstance(linear, ActiveSetSolver):
-        return active  # a distributed solver holds each rank's part of the vectors
+        return None  # a distributed solver holds each rank's part of the vectors
     translation = np.asarray(translation, dtype=float)
     values = np.asarray(system.fixed_values, dtype=float)
     prescribed = translation[np.asarray(system.fixed_dofs, dtype=np.int64)]
     if np.abs(prescribed - values).max(initial=0.0) > 8 * np.finfo(float).eps * np.abs(values).max(initial=0.0):
-        return active
-    scales = linear.measure(translation, np.zeros(len(active)))
+        return None
+    scales = linear.measure(translation, np.zeros(len(system.gap)))
     if not scales.equilibrium <= scales.roundoff:
-        return active
+        return None
     slack = linear.normals(translation) - np.asarray(system.gap, dtype=float)
     return slack > max(tolerance, roundoff_bound(2)) * scales.displacement
 
@@ -725,16 +725,15 @@ def solve_contact(
         active = holder.hold(active, holder.first_touch())
     linear = ActiveSetSolver(system, backend, tolerance=tolerance) if linear is None else linear
     factorizations_before, column_solves_before = linear.factorizations, linear.column_solves
-    if initial_active is None and holder is None and m and not active.any():
-        # A cold start with no node inside the obstacle solves the supports alone first. When
-        # that solution is a translation known in advance (a body pushed by a prescribed
-        # displacement, nothing loading it), Newton's update from it is known too: the nodes
-        # the translation presses into the obstacle, where the iteration starts instead.
-        translated = _translation_update(system, linear, tolerance, active)
-        skipped = int(translated is not active)  # the update counts as the first step's
+    # A cold start with no node inside the obstacle solves the supports alone first. When
+    # that solution is a translation known in advance (a body pushed by a prescribed
+    # displacement, nothing loading it), Newton's update from it is known too: the nodes
+    # the translation presses into the obstacle, where the iteration starts instead.
+    translated = (_translation_update(system, linear, tolerance)
+                  if initial_active is None and holder is None and m and not active.any() else None)
+    skipped = int(translated is not None)  # that update counts as the first step's
+    if translated is not None:
         active = translated
-    else:
-        skipped = 0
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     least_index, least_index_from = False, 0

@@ -252,11 +252,7 @@ def _worth_meshing(case: Case, problem: DiscreteProblem, kept: dict) -> bool:
     case is kept in ``kept`` for :func:`coarser_level`."""
     if "coarser" not in kept:
         kept["coarser"] = coarser(case, problem.refinements)
-    if kept["coarser"] is None:
-        return False
-    coarse_case, refine = kept["coarser"]
-    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, case, coarse_case, refine),
-                             meshed=False)
+    return kept["coarser"] is not None and _meshing_pays(problem, case, *kept["coarser"])
 
 
 class _InPlace:
@@ -607,8 +603,7 @@ def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable
     if coarse is None:
         return None
     coarse_case, coarse_refine = coarse
-    if not forced and not coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, case, coarse_case,
-                                                                                    coarse_refine), meshed=False):
+    if not forced and not _meshing_pays(problem, case, coarse_case, coarse_refine):
         return None  # not worth meshing: a tread's teeth keep 38% of the unknowns at every level
     try:
         coarse_problem = prepare_coarse(coarse_case, coarse_refine)
@@ -618,6 +613,13 @@ def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable
             or forced and coarse_problem.n_unknowns < problem.n_unknowns):
         return None
     return coarse_case, coarse_problem
+
+
+def _meshing_pays(problem: DiscreteProblem, case: Case, coarse_case: Case, coarse_refine: int) -> bool:
+    """Whether the coarser level ``coarse_case`` is worth meshing: the cost model, meshing
+    included, on its :func:`_estimated_unknowns`."""
+    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, case, coarse_case, coarse_refine),
+                             meshed=False)
 
 
 def _estimated_unknowns(problem: DiscreteProblem, case: Case, coarse_case: Case, coarse_refine: int) -> int:

@@ -110,37 +110,19 @@ def test_the_cost_model_pays_for_a_quarter_but_not_for_half_the_unknowns():
     assert coarse_level_pays(100_000, 30_000) and not coarse_level_pays(100_000, 30_000, meshed=False)
 
 
-def teeth_case(teeth: int):
-    """A 0.5-deep block standing on ``teeth`` teeth 0.006 wide and 0.016 apart, their tips
-    (the contact part) up to 4e-4 off level, pushed down by 2e-4, graded onto the tips."""
-    rng = np.random.default_rng(5)
-    vertices, names = [], []
-    for i in range(teeth):
-        left = i * 0.016 + 0.005
-        tip = -0.03 + rng.uniform(0.0, 4e-4)
-        vertices += [(left, 0.0), (left, tip), (left + 0.006, tip), (left + 0.006, 0.0)]
-        names += ["flank", "tip", "flank", "root"]
-    length = teeth * 0.016
-    vertices += [(length, 0.0), (length, 0.5), (0.0, 0.5), (0.0, 0.0)]
-    names += ["side", "top", "side", "root"]
-    data = {
-        "geometry": {"polygon": {"vertices": [[0, 0], [length, 0], [length, 0.5], [0, 0.5]],
-                                 "edges": ["tip", "side", "top", "side"]}},
-        "mesh": {"size": 0.05, "contact_size": 0.002},
-        "material": {"E": 1.0e6, "nu": 0.3},
-        "boundary": {"top": {"displacement": [0, -2e-4]}, "tip": "contact"},
-        "obstacle": {"point": [0, -0.03], "normal": [0, -1]},
-    }
-    return replace(case_from(data), geometry=PolygonGeometry(Loop(np.array(vertices), tuple(names)), ()))
-
-
 def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatch):
     """The teeth cannot be decimated: a coarser level keeps 38% of the unknowns, and meshing
     it (graded onto every tip) cost 4-8 of its linear solves, so that sequencing made the
     solve twice as slow as a cold start. The level is refused from its estimated unknowns,
     before it is meshed, and no worker thread is started; the cold start is certified."""
+    import sys
+    from pathlib import Path
+
     import contactfem.solve as solve_module
     from contactfem.kernel import Status
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from fragmented import teeth_case
 
     case = teeth_case(80)
     problem = solve_module.prepare(case)
