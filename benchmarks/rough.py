@@ -114,19 +114,26 @@ def write_surface(path: Path, points: int, seed: int = SEED) -> None:
     x, h = self_affine_profile(points, seed=seed)
     header = (f"# self-affine profile: Hurst exponent {HURST}, {points} points on [0, 1], height {HEIGHT:g} "
               f"(lowest to highest), seed {seed}\n"
-              f"# written by: python benchmarks/rough.py --write-surface\n"
-              "x,h\n")
-    body = "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(x, h))
-    path.write_text(header + body + "\n", encoding="utf-8")
+              f"# written by: python benchmarks/rough.py --write-surface\n")
+    path.write_text(header + profile_text(x, h), encoding="utf-8")
 
 
-def rim_outline(points: int, seed: int = SEED) -> tuple[np.ndarray, list[str]]:
+def profile_text(x: np.ndarray | None, h: np.ndarray) -> str:
+    """A profile file's CSV lines: a header and x, h per line, or h alone (``x`` None: the
+    one-column form, whose case gives the spacing)."""
+    if x is None:
+        return "h\n" + "\n".join(f"{b:.17g}" for b in h) + "\n"
+    return "x,h\n" + "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(x, h)) + "\n"
+
+
+def rim_outline(points: int, seed: int = SEED, *, hurst: float = RIM_HURST,
+                height: float = RIM_HEIGHT) -> tuple[np.ndarray, list[str]]:
     """The rough half-disk's outline, counter-clockwise from (-1, 1): ``points`` vertices on
     the rim r(θ) = 1 + h(t) sin²(πt), θ = π (1 + t), h a :func:`self_affine_profile` of
-    :data:`RIM_HEIGHT` and Hurst exponent :data:`RIM_HURST`, then the straight top back;
-    the rim's lower third is part ``rim``, the rest ``left`` and ``right``, the top ``top``
-    (the part of each vertex's edge)."""
-    t, h = self_affine_profile(points, hurst=RIM_HURST, height=RIM_HEIGHT, seed=seed)
+    ``height`` and Hurst exponent ``hurst`` (:data:`RIM_HEIGHT`, :data:`RIM_HURST` for the
+    shipped case), then the straight top back; the rim's lower third is part ``rim``, the
+    rest ``left`` and ``right``, the top ``top`` (the part of each vertex's edge)."""
+    t, h = self_affine_profile(points, hurst=hurst, height=height, seed=seed)
     radius = 1.0 + h * np.sin(np.pi * t) ** 2
     theta = np.pi * (1.0 + t)
     vertices = np.stack([radius * np.cos(theta), 1.0 + radius * np.sin(theta)], axis=1)
@@ -141,12 +148,15 @@ def write_outline(path: Path, points: int, seed: int = SEED) -> None:
     header = (f"# a rough half-disk's outline: {points} vertices, self-affine radial roughness (Hurst {RIM_HURST}, "
               f"{RIM_HEIGHT:g} high), seed {seed}\n"
               "# written by: python benchmarks/rough.py --write-outline\n"
-              "# the part of the edge from each vertex to the next; empty: the part above\n"
-              "x,y,part\n")
-    # A part only where it changes: the file says where each part starts.
+              "# the part of the edge from each vertex to the next; empty: the part above\n")
+    path.write_text(header + outline_text(vertices, parts), encoding="utf-8")
+
+
+def outline_text(vertices: np.ndarray, parts: list[str]) -> str:
+    """An outline file's CSV lines: a header and x, y, part per vertex, the part written only
+    where it changes (the file says where each part starts)."""
     starts = [part if i == 0 or parts[i - 1] != part else "" for i, part in enumerate(parts)]
-    body = "\n".join(f"{x:.17g},{y:.17g},{part}" for (x, y), part in zip(vertices.tolist(), starts))
-    path.write_text(header + body + "\n", encoding="utf-8")
+    return "x,y,part\n" + "\n".join(f"{x:.17g},{y:.17g},{part}" for (x, y), part in zip(vertices.tolist(), starts)) + "\n"
 
 
 # --------------------------------------------------------------------------- one run

@@ -1,7 +1,7 @@
 """Scenes nobody chose: random bodies, obstacles and loads through ``contactfem solve``.
 
 Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--backend NAME]
-                                  [--mesh-files | --all-mesh-files] [--out FILE.json]
+                                  [--mesh-files | --all-mesh-files] [--family mixed|rough] [--out FILE.json]
 
 Each scene is drawn from its seed (the same seed, the same case):
 
@@ -16,6 +16,15 @@ Each scene is drawn from its seed (the same seed, the same case):
   symmetry side (a body that contact alone holds along the normal), a platen driven by
   displacement, its weight, a cantilever under a wavy traction, a traction that lifts;
 - either method; 15% as load paths of 2 to 6 steps.
+
+``--family rough`` draws rough surfaces read from files instead, as users bring measured
+ones (``benchmarks/rough.py``'s spectral synthesis, Hurst exponent 0.3 to 0.9, seeded per
+scene): two thirds are blocks on a profile of 500 to 20 000 points, 1e-5 to 1e-2 of their
+length high, in a CSV of x, h or of heights alone with the spacing in the case; a third
+are half-disks whose rim is a closed outline of 500 to 8 000 vertices in a file (x, y,
+part), roughened radially by 1e-4 to 1e-2 of the radius. The load presses the surface in
+by 5% to twice its relief; material, method, supports, loads, tables and load paths are
+drawn as above. It writes benchmarks/results/scenes_rough.json.
 
 A scene's contact parts are the edges that face the obstacle (a star's base), as a user
 would mark them. Each solve runs in its own process (``python -m contactfem solve``) and
@@ -60,6 +69,8 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The scene generators: ``mixed`` bodies (the default) and ``rough`` surfaces.
+FAMILIES = ("mixed", "rough")
 MODES = ("push", "push", "pressure", "platen", "weight", "cantilever", "shear", "lift", "platen_displacement")
 
 
@@ -67,17 +78,28 @@ def _log_uniform(rng: random.Random, low: float, high: float) -> float:
     return 10 ** rng.uniform(math.log10(low), math.log10(high))
 
 
-def scene(seed: int) -> dict:
-    """The case (as a YAML mapping) of scene ``seed``."""
-    rng = random.Random(seed)
+def _material_and_method(rng: random.Random, title: str) -> tuple[float, float, dict]:
+    """A scene's Young's modulus, strain scale and case mapping so far (material, method)."""
     young = _log_uniform(rng, 1e-2, 1e11)
     strain = _log_uniform(rng, 1e-7, 3e-2)
     data: dict = {
-        "title": f"scene {seed}",
+        "title": title,
         "material": {"E": young, "nu": rng.choice([0.0, 0.3, rng.uniform(0, 0.49), 0.4999]),
                      "plane": rng.choice(["strain", "stress"])},
         "solver": {"method": rng.choice(["positive", "standard"])},
     }
+    return young, strain, data
+
+
+def scene(seed: int, family: str = "mixed") -> dict:
+    """The case (as a YAML mapping) of scene ``seed`` of ``family`` (see :data:`FAMILIES`).
+
+    A case that reads data files carries their text under ``_files`` (name: text), which
+    :func:`run_scene` writes beside the case and leaves out of the record."""
+    if family == "rough":
+        return rough_scene(seed)
+    rng = random.Random(seed)
+    young, strain, data = _material_and_method(rng, f"scene {seed}")
     size = _log_uniform(rng, 1e-3, 1e3)
     tilt = rng.choice([0.0, 0.0, rng.gauss(0, 3), rng.gauss(0, 10)])
     kind = rng.choice(["rectangle", "rectangle", "star", "profile", "half-disk"])
@@ -144,11 +166,70 @@ def scene(seed: int) -> dict:
         data["mesh"] = {"size": depth / rng.choice([5, 10, 20])}
         base, top, side, width, height = "base", "top", "left", length, depth
         outline = list(zip(x.tolist(), heights.tolist()))
+    _supports_loads_and_obstacle(rng, data, young * strain, strain, kind, base, top, side, width, height, outline,
+                                 normal)
+    return data
 
+
+def rough_scene(seed: int) -> dict:
+    """Scene ``seed`` of the rough family: a self-affine surface (Hurst exponent 0.3 to 0.9)
+    read from a file, as users bring measured ones (see the module's docstring)."""
+    from rough import outline_text, profile_text, rim_outline, self_affine_profile
+
+    rng = random.Random(seed)
+    young, strain, data = _material_and_method(rng, f"rough scene {seed}")
+    size = _log_uniform(rng, 1e-3, 1e3)
+    hurst = rng.uniform(0.3, 0.9)
+    phases = rng.randrange(2**32)
+    if rng.random() < 2 / 3:  # a block on a profile
+        points = int(_log_uniform(rng, 500, 20_000))
+        relief = size * _log_uniform(rng, 1e-5, 1e-2)
+        x, h = self_affine_profile(points, hurst=hurst, height=relief, length=size, seed=phases)
+        tilt = rng.choice([0.0, 0.0, rng.gauss(0, 3)])
+        depth = size * rng.uniform(0.1, 1.0)
+        profile: dict = {"file": "surface.csv", "depth": relief + depth}
+        if rng.random() < 0.5:  # one column of heights, the spacing given
+            profile["spacing"] = size / (points - 1)
+            text = profile_text(None, h)
+        else:
+            text = profile_text(x, h)
+        data["geometry"] = {"profile": profile}
+        data["mesh"] = {"size": depth / rng.choice([5, 10, 20])}
+        kind, base, top, side, width, height = "profile", "base", "top", "left", size, depth
+        outline = list(zip(x.tolist(), h.tolist()))
+    else:  # a half-disk whose rim is a closed outline from a file (no graph h(x))
+        points = int(_log_uniform(rng, 500, 8_000))
+        relief = _log_uniform(rng, 1e-4, 1e-2)  # of the radius
+        vertices, parts = rim_outline(points, phases, hurst=hurst, height=relief)
+        vertices = vertices * size
+        tilt = 0.0
+        data["geometry"] = {"polygon": {"file": "outline.csv"}}
+        data["mesh"] = {"size": size / rng.choice([5, 10, 20])}
+        text = outline_text(vertices, parts)
+        kind, base, top, side, width, height = "outline", "rim", "top", None, 2 * size, size
+        outline = [tuple(p) for p in vertices.tolist()]
+    # The load presses the surface in by a fraction of its relief to twice it: from its
+    # highest asperities alone to most of it (the material's own strain scale is not used).
+    absolute_relief = relief if kind == "profile" else relief * size
+    strain = min(3e-2, absolute_relief / height * _log_uniform(rng, 0.05, 2.0))
+    angle = math.radians(tilt)
+    normal = (math.sin(angle), -math.cos(angle))
+    _supports_loads_and_obstacle(rng, data, young * strain, strain, kind, base, top, side, width, height, outline,
+                                 normal)
+    data["_files"] = {next(iter(data["geometry"].values()))["file"]: text}
+    data["_surface"] = {"kind": kind, "points": points, "hurst": hurst, "relief": relief, "phases": phases}
+    return data
+
+
+def _supports_loads_and_obstacle(rng: random.Random, data: dict, pressure: float, strain: float, kind: str,
+                                 base: str, top: str, side: str | None, width: float, height: float,
+                                 outline: list[tuple[float, float]], normal: tuple[float, float]) -> None:
+    """Draw the scene's supports and load (:data:`MODES`), its obstacle (through the point of
+    ``outline`` farthest along ``normal``, or a table along it) and its load path, into
+    ``data``; ``side``: a straight side that a symmetry condition may hold (None: none)."""
     mode = rng.choice(MODES)
     if mode in ("pressure", "platen", "platen_displacement", "weight") and side is None:
         mode = "push"  # no straight side to hold it along the obstacle: contact alone cannot
-    pressure = strain * young
     boundary: dict = {base: "contact"}
     if mode == "push":
         boundary[top] = {"displacement": [rng.choice([0, strain * height * rng.uniform(-1, 1)]), -strain * height]}
@@ -203,7 +284,6 @@ def scene(seed: int) -> dict:
     if rng.random() < 0.15:
         data["load_path"] = {"steps": rng.randint(2, 6)}
     data["output"] = {"files": ["json"]}
-    return data
 
 
 def _contactfem(*args: object, timeout: float = 900) -> subprocess.CompletedProcess:
@@ -290,13 +370,17 @@ def _twin_of(record: dict, directory: Path, rng: random.Random) -> dict:
 
 
 def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None = None,
-              mesh_files: float = 0.0) -> dict:
-    """Solve scene ``seed`` in ``workdir`` (with ``backend``, if given) and classify the outcome."""
-    case = scene(seed)
+              mesh_files: float = 0.0, family: str = "mixed") -> dict:
+    """Solve scene ``seed`` of ``family`` in ``workdir`` (with ``backend``, if given) and
+    classify the outcome."""
+    case = scene(seed, family)
+    files, surface = case.pop("_files", {}), case.pop("_surface", None)
     if backend is not None:
         case["solver"]["backend"] = backend
-    directory = workdir / f"scene-{seed}"
+    directory = workdir / f"{family}-scene-{seed}"
     directory.mkdir(parents=True, exist_ok=True)
+    for name, text in files.items():
+        (directory / name).write_text(text, encoding="utf-8")
     path = directory / "case.yaml"
     path.write_text(yaml.safe_dump(case, sort_keys=False), encoding="utf-8")
     started = time.perf_counter()
@@ -306,6 +390,8 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
     except subprocess.TimeoutExpired:
         code, stderr = "timeout", ""
     record: dict = {"seed": seed, "case": case, "exit_code": code, "seconds": time.perf_counter() - started}
+    if surface is not None:
+        record["surface"] = surface
     lines = [line for line in stderr.strip().splitlines() if line.strip()]
     if code == 0:
         report = json.loads((directory / "out" / "report.json").read_text(encoding="utf-8"))
@@ -314,6 +400,7 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
         resultant = math.hypot(*report["boundary_forces"]["total"]["force"])
         bound = report["unknowns"]["displacement"] * max(scales["solver_tolerance"], scales["roundoff"]) * scales["force"]
         record.update(newton_steps=solver["iterations"], active_nodes=report["contact_zone"]["active_nodes"],
+                      contact_patches=len(report["contact_zone"]["intervals"]),
                       contact_nodes=report["contact_zone"]["contact_nodes"],
                       balance=report["boundary_forces"]["total"]["relative_force_residual"],
                       relative_precision=scales["relative_precision"])
@@ -346,16 +433,17 @@ def run_scene(seed: int, workdir: Path, more: bool = False, backend: str | None 
 
 
 def run(count: int, seed: int = 0, jobs: int = 2, more: bool = False, progress=None,
-        backend: str | None = None, mesh_files: float = 0.0) -> dict:
+        backend: str | None = None, mesh_files: float = 0.0, family: str = "mixed") -> dict:
     with tempfile.TemporaryDirectory(prefix="contactfem-scenes-") as workdir, ThreadPoolExecutor(jobs) as pool:
         records = []
-        for record in pool.map(lambda s: run_scene(s, Path(workdir), more, backend, mesh_files), range(seed, seed + count)):
+        for record in pool.map(lambda s: run_scene(s, Path(workdir), more, backend, mesh_files, family),
+                               range(seed, seed + count)):
             records.append(record)
             if progress is not None:
                 progress(f"scene {record['seed']}: {record['outcome']} ({record['seconds']:.1f} s)"
                          + (f" {record['message'][:160]}" if record["outcome"] != "certified" else ""))
     counts = {outcome: sum(r["outcome"] == outcome for r in records) for outcome in ("certified", "refused", "failed")}
-    return {"benchmark": "scenes", "command": " ".join(sys.argv), "count": count, "first_seed": seed,
+    return {"benchmark": "scenes", "family": family, "command": " ".join(sys.argv), "count": count, "first_seed": seed,
             "more": more, "backend": backend or "auto", "mesh_files": mesh_files, "counts": counts, "scenes": records}
 
 
@@ -370,10 +458,14 @@ def main() -> None:
                         help="solve a fifth of the certified scenes again from their mesh as a Gmsh file")
     parser.add_argument("--all-mesh-files", dest="mesh_files", action="store_const", const=1.0,
                         help="solve every certified straight-edged scene again from its mesh as a Gmsh file")
-    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "scenes.json")
+    parser.add_argument("--family", choices=FAMILIES, default="mixed",
+                        help="the mixed bodies (default) or rough surfaces read from files")
+    parser.add_argument("--out", type=Path, help="default: benchmarks/results/scenes.json, or scenes_rough.json")
     args = parser.parse_args()
+    if args.out is None:
+        args.out = ROOT / "benchmarks" / "results" / ("scenes.json" if args.family == "mixed" else "scenes_rough.json")
     results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True),
-                  backend=args.backend, mesh_files=args.mesh_files)
+                  backend=args.backend, mesh_files=args.mesh_files, family=args.family)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1, default=float) + "\n", encoding="utf-8")
     counts = results["counts"]

@@ -8,7 +8,6 @@ contact zone is shaded over exactly those intervals.
 
 from __future__ import annotations
 
-import itertools
 import json
 from pathlib import Path
 
@@ -51,36 +50,23 @@ def _with_unit(label: str, unit: str | None) -> str:
 
 def zone_intervals(abscissa: np.ndarray, active: np.ndarray, edges: np.ndarray | None = None,
                    nodes: np.ndarray | None = None) -> list[tuple[float, float]]:
-    """The contact zone's intervals [from, to] along the obstacle, as report.json's contact_zone.
+    """The contact zone's intervals [from, to] along the obstacle, as report.json's contact_zone
+    (:func:`contactfem.discretize.contact.contact_patches`).
 
     Active nodes joined by ΓC edges whose both ends are active form one interval (its
     smallest and largest abscissa). Without ``edges``/``nodes`` (mesh indices of ΓC's
     edges and of the contact nodes), consecutive active nodes in abscissa order are joined.
     """
+    from contactfem.discretize.contact import contact_patches, node_pairs
+
     s = np.asarray(abscissa, dtype=float)
-    active = np.asarray(active, dtype=bool)
-    m = len(s)
-    parent = np.arange(m)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
     if edges is not None and nodes is not None:
-        index = {int(n): i for i, n in enumerate(np.asarray(nodes, dtype=np.int64))}
-        pairs = [(index.get(int(a), -1), index.get(int(b), -1)) for a, b in np.asarray(edges).reshape(-1, 2)]
+        pairs = node_pairs(nodes, edges)
     else:
         order = np.argsort(s, kind="stable")
-        pairs = list(itertools.pairwise(order))
-    for a, b in pairs:
-        if a >= 0 and b >= 0 and active[a] and active[b]:
-            parent[root(a)] = root(b)
-    groups: dict[int, list[int]] = {}
-    for i in np.flatnonzero(active):
-        groups.setdefault(root(int(i)), []).append(int(i))
-    return sorted((float(s[g].min()), float(s[g].max())) for g in groups.values())
+        pairs = np.column_stack([order[:-1], order[1:]])
+    first, last, _counts = contact_patches(s, active, pairs)
+    return sorted(zip(s[first].tolist(), s[last].tolist()))
 
 
 def _shade(axis, intervals, label: str | None = None) -> None:

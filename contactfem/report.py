@@ -10,12 +10,11 @@ import time
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from contactfem import __version__
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem
+from contactfem.discretize.contact import contact_patches
 from contactfem.methods import get_method
 from contactfem.result import Solution
 
@@ -199,30 +198,16 @@ def obstacle_figures(problem: DiscreteProblem) -> dict:
 
 
 def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:
-    """Active nodes and the intervals of ΓC they form (connected along ΓC edges)."""
+    """Active nodes and the intervals of ΓC they form (connected along ΓC edges:
+    :func:`contactfem.discretize.contact.contact_patches`)."""
     contact = problem.contact
-    m = len(contact.nodes)
-    index = np.full(problem.mesh.n_points, -1)
-    index[contact.nodes] = np.arange(m)
-    a, b = index[contact.edges[:, 0]], index[contact.edges[:, 1]]
-    linked = (a >= 0) & (b >= 0)
-    a, b = a[linked], b[linked]
-    both = active[a] & active[b]
-    graph = sp.coo_matrix((np.ones(both.sum()), (a[both], b[both])), shape=(m, m))
-    _, labels = connected_components(graph, directed=False)
-    intervals = []
-    for label in np.unique(labels[active]):
-        members = np.flatnonzero((labels == label) & active)
-        s = contact.abscissa[members]
-        first, last = members[np.argmin(s)], members[np.argmax(s)]
-        intervals.append({
-            "from": problem.mesh.points[contact.nodes[first]].tolist(),
-            "to": problem.mesh.points[contact.nodes[last]].tolist(),
-            "abscissa": [float(s.min()), float(s.max())],
-            "nodes": int(len(members)),
-        })
-    intervals.sort(key=lambda item: item["abscissa"][0])
-    return {"active_nodes": int(active.sum()), "contact_nodes": int(m), "intervals": intervals}
+    first, last, counts = contact_patches(contact.abscissa, active, contact.node_edges())
+    ends = problem.mesh.points[contact.nodes]
+    intervals = [{"from": ends[a].tolist(), "to": ends[b].tolist(),
+                  "abscissa": [float(contact.abscissa[a]), float(contact.abscissa[b])], "nodes": int(count)}
+                 for a, b, count in zip(first, last, counts)]
+    return {"active_nodes": int(np.count_nonzero(active)), "contact_nodes": len(contact.nodes),
+            "intervals": intervals}
 
 
 def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,

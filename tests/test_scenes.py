@@ -46,3 +46,24 @@ def test_a_scene_solved_again_from_its_mesh_written_by_gmsh_agrees(seed, tmp_pat
     assert twin["written"]["format"] == {8: "4.1", 9: "2.2"}[seed]
     assert twin["written"]["clockwise_triangles"] > 0
     assert twin["contact_force_difference"] <= twin["allowed"]
+
+
+#: The rough family: a block on a 1 531-point profile (one column of heights) under a
+#: pressure, on a finite table, and a half-disk whose 3 049-vertex rough outline is a file,
+#: pushed by its top, with the standard method.
+ROUGH_SEEDS = (11, 29)
+
+
+def test_a_rough_scene_is_drawn_from_its_seed_alone():
+    first, again = scenes.scene(11, "rough"), scenes.scene(11, "rough")
+    assert first == again and first != scenes.scene(12, "rough")
+    assert first["_surface"]["kind"] == "profile" and scenes.scene(29, "rough")["_surface"]["kind"] == "outline"
+    assert "surface.csv" in first["_files"] and first["geometry"]["profile"]["file"] == "surface.csv"
+
+
+@pytest.mark.parametrize("seed", ROUGH_SEEDS)
+def test_rough_scenes_read_from_files_are_certified_in_many_patches(seed, tmp_path):
+    record = scenes.run_scene(seed, tmp_path, family="rough")
+    assert record["outcome"] == "certified", record.get("message")
+    assert record["active_nodes"] >= 100 and record["contact_patches"] >= 10
+    assert (tmp_path / f"rough-scene-{seed}" / record["case"]["geometry"].popitem()[1]["file"]).is_file()

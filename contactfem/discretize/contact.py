@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sp
 
 from contactfem.assembly import boundary_mass, edge_geometry
 from contactfem.case import Case, PolygonGeometry, RectangleGeometry
@@ -100,12 +101,53 @@ class ContactBoundary:
     def node_edges(self) -> np.ndarray:
         """The ΓC edges as pairs of positions in ``nodes`` (k', 2): those whose two ends
         carry a constraint (an edge reaching beyond a finite obstacle is left out)."""
-        if len(self.nodes) == 0 or len(self.edges) == 0:
-            return np.zeros((0, 2), dtype=np.int64)
-        position = np.full(int(max(self.nodes.max(), self.edges.max())) + 1, -1, dtype=np.int64)
-        position[self.nodes] = np.arange(len(self.nodes))
-        pairs = position[np.asarray(self.edges, dtype=np.int64)]
-        return pairs[(pairs >= 0).all(axis=1)]
+        return node_pairs(self.nodes, self.edges)
+
+
+def node_pairs(nodes: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``edges`` (k, 2 mesh node indices) as pairs of positions in ``nodes`` (k', 2): those
+    whose two ends are among ``nodes``."""
+    nodes, edges = np.asarray(nodes, dtype=np.int64), np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if len(nodes) == 0 or len(edges) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    position = np.full(int(max(nodes.max(), edges.max())) + 1, -1, dtype=np.int64)
+    position[nodes] = np.arange(len(nodes))
+    pairs = position[edges]
+    return pairs[(pairs >= 0).all(axis=1)]
+
+
+def contact_patches(abscissa: np.ndarray, active: np.ndarray,
+                    pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The contact zone's intervals: active contact nodes joined by ``pairs`` (ΓC's edges as
+    positions in the contact nodes, :func:`node_pairs`) whose two ends are active form one.
+
+    For each interval, in order of its lowest ``abscissa``: the position of its node of
+    lowest abscissa, of its node of highest abscissa (ties: the lower position) and its
+    number of nodes. Found by sorting, not by a pass over ΓC per interval: a rough
+    profile's zone has thousands of them.
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    active = np.asarray(active, dtype=bool)
+    s = np.asarray(abscissa, dtype=float)
+    m = len(active)
+    members = np.flatnonzero(active)
+    if len(members) == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    joined = pairs[active[pairs[:, 0]] & active[pairs[:, 1]]]
+    graph = sp.coo_matrix((np.ones(len(joined)), (joined[:, 0], joined[:, 1])), shape=(m, m))
+    _, labels = connected_components(graph, directed=False)
+    label, along = labels[members], s[members]
+    low = members[np.lexsort((members, along, label))]
+    high = members[np.lexsort((-members, along, label))]
+    sorted_labels = np.sort(label)
+    starts = np.flatnonzero(np.r_[True, sorted_labels[1:] != sorted_labels[:-1]])
+    stops = np.r_[starts[1:], len(members)]
+    first, last, counts = low[starts], high[stops - 1], stops - starts
+    order = np.lexsort((sorted_labels[starts], s[first]))
+    return first[order], last[order], counts[order]
 
 
 def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundary:
