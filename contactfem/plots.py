@@ -70,11 +70,21 @@ def zone_intervals(abscissa: np.ndarray, active: np.ndarray, edges: np.ndarray |
 
 
 def _shade(axis, intervals, label: str | None = None) -> None:
-    for k, (low, high) in enumerate(intervals):
-        if high > low:
-            axis.axvspan(low, high, color="tab:red", alpha=0.12, lw=0, label=label if k == 0 else None)
-        else:
-            axis.axvline(low, color="tab:red", alpha=0.4, lw=1.5, label=label if k == 0 else None)
+    """Shade the contact ``intervals`` over the axis' height (a one-node interval as a line),
+    as two collections: an artist per interval took 2 s for a rough profile's 1 150."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    spans = [(low, high) for low, high in intervals if high > low]
+    points = [low for low, high in intervals if not high > low]
+    across = axis.get_xaxis_transform()  # x along ΓC, y from the axis' bottom (0) to its top (1)
+    if spans:
+        axis.add_collection(PolyCollection([[(a, 0), (b, 0), (b, 1), (a, 1)] for a, b in spans], transform=across,
+                                           facecolors="tab:red", alpha=0.12, linewidths=0, label=label),
+                            autolim=False)
+    if points:
+        axis.add_collection(LineCollection([[(x, 0), (x, 1)] for x in points], transform=across, colors="tab:red",
+                                           alpha=0.4, linewidths=1.5, label=None if spans else label),
+                            autolim=False)
 
 
 #: Contact intervals listed one by one up to this many; a zone of more patches (a rough
