@@ -28,10 +28,14 @@ from dataclasses import replace
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
+from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
+from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
+from contactfem.linalg import factorize
 from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
@@ -81,6 +85,13 @@ LAYER_SAMPLES = 4_000
 LAYER_THRESHOLD = 50_000
 #: Schur columns costing about one refactorisation (CHOLMOD; see :mod:`contactfem.kernel`).
 COLUMNS_PER_FACTORIZATION = 20
+#: Steps of the half-plane correction of a prediction (:func:`correct_at_asperities`): it
+#: settled in 3-4 on the rough profiles and the Hertz disk.
+ASPERITY_ITERATIONS = 8
+#: Fine contact nodes on either side within the half-plane correction's reach at most (the
+#: coarse level's spacing, four fine ones on the rough profiles): its compliance matrix
+#: has at most 2 x this + 1 entries a row.
+ASPERITY_NEIGHBOURS = 16
 
 
 def worth_sequencing(n_unknowns: int) -> bool:
@@ -332,11 +343,103 @@ def prediction_first(gap: np.ndarray, tolerance: float) -> bool:
     return not (len(inside) and inside.all())
 
 
-def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float) -> np.ndarray:
-    """Initial active set (m,) of the fine contact nodes from a coarse solution's contact fields."""
+def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float,
+                       law: Elasticity | None = None) -> np.ndarray:
+    """Initial active set (m,) of the fine contact nodes from a coarse solution's contact
+    fields; with the body's ``law``, corrected at the scale of the coarse level's contact
+    nodes (:func:`correct_at_asperities`)."""
     pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)
     normal = np.interp(fine.abscissa, coarse.abscissa, coarse.normal_displacement)
-    return pressure * fine.masses.lumped + c * (normal - fine.gap) > 0
+    active = pressure * fine.masses.lumped + c * (normal - fine.gap) > 0
+    if law is None or len(coarse.abscissa) < 2:
+        return active
+    return correct_at_asperities(fine, normal, pressure * fine.masses.lumped, law, active,
+                                 float(np.median(np.diff(np.sort(coarse.abscissa)))))
+
+
+def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.ndarray, law: Elasticity,
+                          active: np.ndarray, spacing: float) -> np.ndarray:
+    """The predicted ``active`` set corrected where the fine boundary differs from the
+    coarse one within ``spacing`` (the coarse contact nodes'), with the elastic half-plane's
+    compliance.
+
+    The coarse level gives, interpolated at the fine nodes, a normal displacement ``normal``
+    and nodal forces ``force``, right at its own scale. Below it, the fine profile's
+    asperities and the ends of its patches move the force about: near ΓC the body answers
+    like a half-plane, whose normal displacement under a line load P is
+    (2 / π E*) P ln(R / r) plus a constant (Flamant; E* the plane-strain modulus). So the
+    fine nodal forces Λ are taken as those of the contact problem
+
+        u_n = normal − C (Λ − force),   Λ ≥ 0,  u_n ≤ g,  Λ (g − u_n) = 0,
+
+    with C the half-plane's compliance between nodes less than R = ``spacing`` apart (each
+    node's force spread over its share of ΓC), solved by the primal–dual active set
+    iteration from ``active``, at most :data:`ASPERITY_ITERATIONS` steps. Its set is the
+    prediction; any failure (a block that is not positive definite) keeps ``active``.
+
+    Measured (mispredicted nodes, then the fine level's Newton steps): rough block of 1 000,
+    4 000, 16 000 and 64 000 segments, 47 → 22, 122 → 62, 387 → 167, 1 165 → 582, and one
+    step fewer (at 64 000, one factorisation fewer); the Hertz disk 2 → 0, 3 steps → 1.
+    The correction cost 1–3% of the fine level's solve.
+    """
+    s = fine.abscissa
+    m = len(s)
+    fine_spacing = float(np.median(np.diff(s))) if m > 1 else 0.0
+    if m < 2 or not active.any() or not fine_spacing > 0:
+        return active
+    # At most ASPERITY_NEIGHBOURS nodes within reach on either side: C stays O(m).
+    reach = min(spacing, ASPERITY_NEIGHBOURS * fine_spacing)
+    compliance = half_plane_compliance(s, fine.masses.lumped, reach, plane_strain_modulus(law))
+    slack = normal - fine.gap + compliance @ force  # u_n − g with Λ = 0
+    for _ in range(ASPERITY_ITERATIONS):
+        held = np.flatnonzero(active)
+        forces = np.zeros(m)
+        if len(held):
+            try:
+                block = compliance[held][:, held]
+                forces[held] = factorize(block, check=False, name="the half-plane compliance").solve(slack[held])
+            except (SolverError, MemoryError):
+                return active
+        updated = np.where(active, forces > 0, slack - compliance @ forces > 0)
+        if np.array_equal(updated, active):
+            break
+        active = updated
+    return active
+
+
+def plane_strain_modulus(law: Elasticity) -> float:
+    """E* of the 2D law: E / (1 − ν²) in plane strain, E in plane stress (4μ(λ+μ)/(λ+2μ)
+    with the λ the 2D law holds)."""
+    return 4.0 * law.mu * (law.lam + law.mu) / (law.lam + 2.0 * law.mu)
+
+
+def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float) -> sp.csr_matrix:
+    """C (m, m): the normal displacement at node i of the elastic half-plane of plane-strain
+    ``modulus`` under a unit force at node j spread evenly over its ``share`` of ΓC,
+    (2 / π E*) times the mean of ln(reach / |s_i − t|)₊ over that segment, symmetrised;
+    zero for nodes farther apart than ``reach`` (whose differences the coarse level holds).
+    ``abscissa`` sorted. ln(R / r)₊ is positive definite in the plane (the Green's function
+    of a disk), so C is positive semi-definite on a line up to the segments' spreading."""
+    s = np.asarray(abscissa, dtype=float)
+    m = len(s)
+    low = np.searchsorted(s, s - reach, side="left")
+    high = np.searchsorted(s, s + reach, side="right")
+    counts = high - low
+    rows = np.repeat(np.arange(m), counts)
+    cols = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(low, counts)
+    offset = s[rows] - s[cols]
+    half = 0.5 * np.asarray(share, dtype=float)[cols]
+
+    def integral(t: np.ndarray) -> np.ndarray:  # ∫_0^t ln(reach / |τ|)₊ dτ, odd in t
+        a = np.minimum(np.abs(t), reach)
+        safe = np.where(a > 0, a, reach)
+        return np.sign(t) * np.where(a > 0, a * (np.log(reach / safe) + 1.0), 0.0)
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        values = (integral(offset + half) - integral(offset - half)) / np.where(half > 0, 2.0 * half, np.inf)
+    values *= 2.0 / (np.pi * modulus)
+    compliance = sp.csr_matrix((values, (rows, cols)), shape=(m, m))
+    return ((compliance + compliance.T) * 0.5).tocsr()
 
 
 def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.ndarray:

@@ -413,7 +413,7 @@ class CoarsePath:
             self.iterations += kernel.iterations
             self.factorizations += kernel.factorizations
             fields = _contact_fields(self.problem, self.reduced.displacement(kernel.displacement), kernel)
-            active = predict_active_set(self.fine.contact, fields, self.c)
+            active = predict_active_set(self.fine.contact, fields, self.c, self.fine.law)
         self.seconds += time.perf_counter() - started
         return active
 
@@ -667,7 +667,7 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
     if not settled and not (forced and np.isfinite(coarse_kernel.displacement).all()
                             and np.isfinite(coarse_kernel.multiplier).all()):
         return None, {}
-    active = predict_active_set(problem.contact, coarse_result.contact, c())
+    active = predict_active_set(problem.contact, coarse_result.contact, c(), problem.law)
     say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
     corrected: dict = {}
     if correct is not None:
