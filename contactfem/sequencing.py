@@ -29,6 +29,7 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
@@ -88,6 +89,8 @@ COLUMNS_PER_FACTORIZATION = 20
 #: Steps of the half-plane correction of a prediction (:func:`correct_at_asperities`): it
 #: settled in 3-4 on the rough profiles and the Hertz disk.
 ASPERITY_ITERATIONS = 8
+#: Unknowns of the half-plane correction up to which its blocks are factorised dense.
+ASPERITY_DENSE_UP_TO = 300
 #: Fine contact nodes on either side within the half-plane correction's reach at most (the
 #: coarse level's spacing, four fine ones on the rough profiles): its compliance matrix
 #: has at most 2 x this + 1 entries a row.
@@ -373,38 +376,56 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
         u_n = normal − C (Λ − force),   Λ ≥ 0,  u_n ≤ g,  Λ (g − u_n) = 0,
 
     with C the half-plane's compliance between nodes less than R = ``spacing`` apart (each
-    node's force spread over its share of ΓC), solved by the primal–dual active set
-    iteration from ``active``, at most :data:`ASPERITY_ITERATIONS` steps. Its set is the
-    prediction; any failure (a block that is not positive definite) keeps ``active``.
+    node's force spread over its share of ΓC). Only nodes within R of an end of a predicted
+    patch are unknowns; the others keep the coarse force (those predicted active) or none.
+    It is solved by the primal–dual active set iteration from ``active``, at most
+    :data:`ASPERITY_ITERATIONS` steps; its set is the prediction. Any failure (a block
+    that is not positive definite) keeps ``active``.
 
     Measured (mispredicted nodes, then the fine level's Newton steps): rough block of 1 000,
-    4 000, 16 000 and 64 000 segments, 47 → 22, 122 → 62, 387 → 167, 1 165 → 582, and one
-    step fewer (at 64 000, one factorisation fewer); the Hertz disk 2 → 0, 3 steps → 1.
-    The correction cost 1–3% of the fine level's solve.
+    4 000, 16 000 and 64 000 segments, 47 → 23, 122 → 63, 387 → 183, 1 165 → 636, and a
+    step fewer up to 16 000 (at 64 000, a factorisation fewer); the Hertz disk 2 → 0, 3
+    steps → 1. It cost 0.3 ms on a single zone, 0.9 ms at 1 000 segments, 12 ms at 64 000
+    (the whole band then: every node is near a patch end).
     """
     s = fine.abscissa
     m = len(s)
     fine_spacing = float(np.median(np.diff(s))) if m > 1 else 0.0
-    if m < 2 or not active.any() or not fine_spacing > 0:
-        return active
+    ends = np.flatnonzero(active[1:] != active[:-1])
+    if len(ends) == 0 or not fine_spacing > 0:
+        return active  # nothing predicted, or everything: no patch end to move
     # At most ASPERITY_NEIGHBOURS nodes within reach on either side: C stays O(m).
     reach = min(spacing, ASPERITY_NEIGHBOURS * fine_spacing)
-    compliance = half_plane_compliance(s, fine.masses.lumped, reach, plane_strain_modulus(law))
-    slack = normal - fine.gap + compliance @ force  # u_n − g with Λ = 0
+    between = 0.5 * (s[ends] + s[ends + 1])
+    after = np.searchsorted(between, s)
+    distance = np.minimum(np.abs(s - between[np.maximum(after - 1, 0)]),
+                          np.abs(between[np.minimum(after, len(between) - 1)] - s))
+    band = np.flatnonzero(distance <= reach)
+    compliance = half_plane_compliance(s, fine.masses.lumped, reach, plane_strain_modulus(law), rows=band)
+    held = np.where(active, force, 0.0)
+    held[band] = 0.0
+    slack = normal[band] - fine.gap[band] + compliance @ (force - held)  # u_n − g with the band's Λ = 0
+    local = compliance[:, band]
+    dense = local.toarray() if len(band) <= ASPERITY_DENSE_UP_TO else None
+    settled = active[band]
     for _ in range(ASPERITY_ITERATIONS):
-        held = np.flatnonzero(active)
-        forces = np.zeros(m)
-        if len(held):
-            try:
-                block = compliance[held][:, held]
-                forces[held] = factorize(block, check=False, name="the half-plane compliance").solve(slack[held])
-            except (SolverError, MemoryError):
-                return active
-        updated = np.where(active, forces > 0, slack - compliance @ forces > 0)
-        if np.array_equal(updated, active):
+        on = np.flatnonzero(settled)
+        forces = np.zeros(len(band))
+        try:
+            if dense is not None and len(on):
+                forces[on] = cho_solve(cho_factor(dense[np.ix_(on, on)]), slack[on])
+            elif len(on):
+                block = local[on][:, on]
+                forces[on] = factorize(block, check=False, name="the half-plane compliance").solve(slack[on])
+        except (SolverError, MemoryError, LinAlgError):
+            return active
+        updated = np.where(settled, forces > 0, slack - local @ forces > 0)
+        if np.array_equal(updated, settled):
             break
-        active = updated
-    return active
+        settled = updated
+    corrected = active.copy()
+    corrected[band] = settled
+    return corrected
 
 
 def plane_strain_modulus(law: Elasticity) -> float:
@@ -413,33 +434,37 @@ def plane_strain_modulus(law: Elasticity) -> float:
     return 4.0 * law.mu * (law.lam + law.mu) / (law.lam + 2.0 * law.mu)
 
 
-def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float) -> sp.csr_matrix:
-    """C (m, m): the normal displacement at node i of the elastic half-plane of plane-strain
-    ``modulus`` under a unit force at node j spread evenly over its ``share`` of ΓC,
-    (2 / π E*) times the mean of ln(reach / |s_i − t|)₊ over that segment, symmetrised;
-    zero for nodes farther apart than ``reach`` (whose differences the coarse level holds).
-    ``abscissa`` sorted. ln(R / r)₊ is positive definite in the plane (the Green's function
-    of a disk), so C is positive semi-definite on a line up to the segments' spreading."""
+def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float,
+                          rows: np.ndarray | None = None) -> sp.csr_matrix:
+    """C (m, m), or its ``rows``: the normal displacement at node i of the elastic
+    half-plane of plane-strain ``modulus`` under a unit force at node j spread evenly over
+    its ``share`` of ΓC, (2 / π E*) times the mean of ln(reach / |s_i − t|)₊ over that
+    segment, symmetrised (the mean of C_ij and C_ji); zero for nodes farther apart than
+    ``reach`` (whose differences the coarse level holds). ``abscissa`` sorted.
+    ln(R / r)₊ is positive definite in the plane (the Green's function of a disk), so C is
+    positive semi-definite on a line up to the segments' spreading."""
     s = np.asarray(abscissa, dtype=float)
-    m = len(s)
-    low = np.searchsorted(s, s - reach, side="left")
-    high = np.searchsorted(s, s + reach, side="right")
+    share = np.asarray(share, dtype=float)
+    rows = np.arange(len(s)) if rows is None else np.asarray(rows, dtype=np.int64)
+    low = np.searchsorted(s, s[rows] - reach, side="left")
+    high = np.searchsorted(s, s[rows] + reach, side="right")
     counts = high - low
-    rows = np.repeat(np.arange(m), counts)
+    row = np.repeat(np.arange(len(rows)), counts)
     cols = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(low, counts)
-    offset = s[rows] - s[cols]
-    half = 0.5 * np.asarray(share, dtype=float)[cols]
+    offset = s[rows][row] - s[cols]
 
     def integral(t: np.ndarray) -> np.ndarray:  # ∫_0^t ln(reach / |τ|)₊ dτ, odd in t
         a = np.minimum(np.abs(t), reach)
         safe = np.where(a > 0, a, reach)
         return np.sign(t) * np.where(a > 0, a * (np.log(reach / safe) + 1.0), 0.0)
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        values = (integral(offset + half) - integral(offset - half)) / np.where(half > 0, 2.0 * half, np.inf)
-    values *= 2.0 / (np.pi * modulus)
-    compliance = sp.csr_matrix((values, (rows, cols)), shape=(m, m))
-    return ((compliance + compliance.T) * 0.5).tocsr()
+    def mean_over(half: np.ndarray) -> np.ndarray:  # over (s_j − half, s_j + half), seen from s_i
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (integral(offset + half) - integral(offset - half)) / np.where(half > 0, 2.0 * half, np.inf)
+
+    values = (mean_over(0.5 * share[cols]) + mean_over(0.5 * share[rows][row])) * (1.0 / (np.pi * modulus))
+    return sp.csr_matrix((values, (row, cols)), shape=(len(rows), len(s)))
+
 
 
 def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.ndarray:
