@@ -751,3 +751,24 @@ def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monke
 
     monkeypatch.setattr(sequencing, "factorize", refuse)
     assert np.array_equal(sequencing.predict_active_set(problem.contact, coarse, c, problem.law), plain)
+
+
+def test_the_half_plane_correction_moves_only_nodes_near_a_predicted_patch_end():
+    """Nodes farther than the reach (the coarse contact spacing) from every end of a
+    predicted patch keep their prediction: only the band near the ends is solved for."""
+    from contactfem.sequencing import correct_at_asperities
+
+    problem, _reduced, c, coarse = _predictions(rough_polygon_case(2000))
+    fine = problem.contact
+    pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)
+    normal = np.interp(fine.abscissa, coarse.abscissa, coarse.normal_displacement)
+    force = pressure * fine.masses.lumped
+    # A prediction with one long patch over the middle third: its two ends are the only ones.
+    s = fine.abscissa
+    active = (s > s[0] + (s[-1] - s[0]) / 3) & (s < s[0] + 2 * (s[-1] - s[0]) / 3)
+    spacing = float(np.median(np.diff(np.sort(coarse.abscissa))))
+    corrected = correct_at_asperities(fine, normal, force, problem.law, active, spacing)
+    ends = s[np.flatnonzero(active[1:] != active[:-1])]
+    moved = np.flatnonzero(corrected != active)
+    assert len(moved) > 0
+    assert np.all(np.min(np.abs(s[moved][:, None] - ends[None, :]), axis=1) <= spacing + np.diff(s).max())
