@@ -353,11 +353,11 @@ def predict_active_set(fine: ContactBoundary, coarse: ContactFields, c: float,
     nodes (:func:`correct_at_asperities`)."""
     pressure = np.interp(fine.abscissa, coarse.abscissa, coarse.multiplier)
     normal = np.interp(fine.abscissa, coarse.abscissa, coarse.normal_displacement)
-    active = pressure * fine.masses.lumped + c * (normal - fine.gap) > 0
+    force = pressure * fine.masses.lumped
+    active = force + c * (normal - fine.gap) > 0
     if law is None or len(coarse.abscissa) < 2:
         return active
-    return correct_at_asperities(fine, normal, pressure * fine.masses.lumped, law, active,
-                                 float(np.median(np.diff(np.sort(coarse.abscissa)))))
+    return correct_at_asperities(fine, normal, force, law, active, float(np.median(np.diff(np.sort(coarse.abscissa)))))
 
 
 def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.ndarray, law: Elasticity,
