@@ -89,8 +89,8 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         },
         "newton": [
             {"iteration": i + 1, **{k: getattr(r, k) for k in
-                                    ("active", "added", "removed", "extrapolated", "equilibrium_residual",
-                                     "complementarity_residual", "seconds")}}
+                                    ("active", "added", "removed", "extrapolated", "modelled",
+                                     "equilibrium_residual", "complementarity_residual", "seconds")}}
             for i, r in enumerate(kernel.history)
         ],
         "sign_conditions": sign_conditions(

@@ -33,6 +33,7 @@ from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.compliance import plane_strain_modulus
 from contactfem.discretize import ContactBoundary
 from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
@@ -426,12 +427,6 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     corrected = active.copy()
     corrected[band] = settled
     return corrected
-
-
-def plane_strain_modulus(law: Elasticity) -> float:
-    """E* of the 2D law: E / (1 − ν²) in plane strain, E in plane stress (4μ(λ+μ)/(λ+2μ)
-    with the λ the 2D law holds)."""
-    return 4.0 * law.mu * (law.lam + law.mu) / (law.lam + 2.0 * law.mu)
 
 
 def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float,

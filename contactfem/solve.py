@@ -18,6 +18,7 @@ import numpy as np
 
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
+from contactfem.compliance import MODEL_NODES, half_plane_model
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.meshing import estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
@@ -188,7 +189,16 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     # small problem, one whose coarser level is not worth meshing (a tread's teeth), one
     # pressed in everywhere (the coarse level is then a second guess, after the first
     # step), or a coarse level kept from an earlier solve.
-    coarse_first = (worth_sequencing(problem.n_unknowns) and prediction_first(problem.contact.gap, tolerance)
+    # A small contact boundary on a deep body starts cold, its steps proposed by the
+    # half-plane model of its compliance (contactfem.compliance), cheaper there than a
+    # coarser level's prediction.
+    # (A body that contact alone holds has its free motions held by the kernel, which asks
+    # no model: it keeps the coarser level.)
+    model = (half_plane_model(problem.contact, problem.law, problem.mesh.points)
+             if problem.free_modes is None else None)
+    modelled = model is not None and len(problem.contact.nodes) <= MODEL_NODES
+    coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled
+                    and prediction_first(problem.contact.gap, tolerance)
                     and "solve" not in kept and _worth_meshing(case, problem, kept))
     with ThreadPoolExecutor(max_workers=1) if coarse_first else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
@@ -211,9 +221,13 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         else:
             fine_soon = _InPlace.submit(fine)
             solver_soon = pool.submit(_analysed, solver())
+        # A start the model takes (no node inside the obstacle) asks no coarser level first;
+        # one pressed in everywhere keeps it as the second guess.
+        first_by_model = modelled and prediction_first(problem.contact.gap, tolerance)
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
-            lambda: _predict_from_coarser(case, problem, fine_soon.result, say, kept))
+            lambda: ((None, {}) if first_by_model else
+                     _predict_from_coarser(case, problem, fine_soon.result, say, kept)))
         reduced, c = fine_soon.result()
         linear = solver_soon.result()
     numbers = itertools.count(1)
@@ -242,6 +256,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         second_guess=second_guess,
         stalled_guess=stalled_guess if initial_active is None else None,
         linear=linear,
+        compliance=model if initial_active is None else None,
     )
     return reduced, kernel, sequencing
 
@@ -724,6 +739,6 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
 
 
 def _history_arrays(history: list[Iteration]) -> dict[str, np.ndarray]:
-    names = ("active", "added", "removed", "extrapolated", "equilibrium_residual", "complementarity_residual",
-             "seconds")
+    names = ("active", "added", "removed", "extrapolated", "modelled", "equilibrium_residual",
+             "complementarity_residual", "seconds")
     return {name: np.array([getattr(r, name) for r in history]) for name in names}

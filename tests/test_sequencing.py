@@ -339,6 +339,17 @@ def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
 
 
 
+@pytest.fixture
+def coarse_levels_only(monkeypatch):
+    """Sequencing's machinery on meshes whose contact boundary is small enough for a cold
+    start with the half-plane model (contactfem.compliance.MODEL_NODES), which the solve
+    would otherwise take instead of a coarser level."""
+    import contactfem.solve as solve_module
+
+    monkeypatch.setattr(solve_module, "MODEL_NODES", 0)
+
+
+@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("name", ["hertz", "hertz_platen", "hertz_quarter", "hole", "punch", "square"])
 def test_a_layer_forced_on_every_shipped_geometry_leaves_the_answer_unchanged(name, monkeypatch):
     """Curved boundaries (rim points outside the coarse mesh), holes, symmetry lines,
@@ -434,6 +445,7 @@ def test_a_face_pressed_in_that_partly_releases_is_predicted_after_its_first_ste
     assert result.kernel.iterations < cold.iterations
 
 
+@pytest.mark.usefixtures("coarse_levels_only")
 def test_a_partial_overlap_starts_from_the_coarse_prediction():
     """A tilted face pressed in over part of its width only (4e-3 at x = 1, out of reach at
     x = −1): the overlap mispredicts, so the coarse level comes first and the first step
@@ -459,6 +471,7 @@ def test_overlap_counts_a_gap_below_round_off_as_touching():
     np.testing.assert_array_equal(overlapped(np.array([-1e-3, -2e-3, 1e-3]), 1e-10), [True, True, False])
 
 
+@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("beside_from", [0, 10**9])
 def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch, beside_from):
     """The fine level's kernel system, solver and analysis are made in a worker thread while
@@ -493,6 +506,7 @@ def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces
         assert coarse_systems == []
 
 
+@pytest.mark.usefixtures("coarse_levels_only")
 def test_below_the_worker_threshold_only_the_analysis_runs_beside_the_coarse_level(monkeypatch):
     """On a mesh with a coarse level but under BESIDE_COARSER_FROM unknowns, the fine
     solver's ordering and symbolic analysis (outside the interpreter's lock) run in another
@@ -524,6 +538,7 @@ def test_below_the_worker_threshold_only_the_analysis_runs_beside_the_coarse_lev
     np.testing.assert_array_equal(sequenced.kernel.active, cold.active)
 
 
+@pytest.mark.usefixtures("coarse_levels_only")
 def test_compare_meshes_and_solves_the_coarse_levels_once_for_both_methods(monkeypatch):
     """Both methods' active sets are predicted from the same coarse levels (solved with the
     positive method whatever the fine one): compare meshes and solves them once, and the

@@ -1,0 +1,166 @@
+"""The half-plane model of ΓC's compliance (contactfem.compliance) and the kernel's use of it.
+
+- its columns are Flamant's ln(R / r)₊ / π E*, and its diagonal the mean of that over a
+  node's share, against quadrature;
+- its contact problem, settled, satisfies the model's own sign and complementarity
+  conditions, and (a P-matrix problem has one solution) does not depend on the stages the
+  free body is pushed in by;
+- the kernel with the model reaches the set, displacement and certificate it reaches
+  without it, in fewer steps on rough bases and curved bodies; a model that proposes
+  nonsense costs steps, never the answer;
+- it refuses what it cannot afford or factorise, and is not offered to a body that bends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import shipped_case
+from scipy.integrate import quad
+from test_sequencing import rough_polygon_case
+
+import contactfem.compliance as compliance_module
+from contactfem.compliance import HalfPlaneModel, half_plane_model, plane_strain_modulus
+from contactfem.kernel import Status, solve_contact
+from contactfem.methods import get_method
+from contactfem.solve import prepare, solve_case
+
+
+def _model(m: int = 200, reach: float = 0.5) -> tuple[HalfPlaneModel, np.ndarray, np.ndarray]:
+    """A model on m nodes over [0, 1] graded as a mesh is (spacings growing by 2% a node,
+    fifty-fold across), with each node's share of ΓC."""
+    steps = 1.02 ** np.arange(m - 1)
+    s = np.concatenate([[0.0], np.cumsum(steps) / steps.sum()])
+    share = np.diff(np.concatenate([[s[0]], 0.5 * (s[1:] + s[:-1]), [s[-1]]]))
+    return HalfPlaneModel(s, share, np.zeros(m), 2.0e6, reach), s, share
+
+
+def test_columns_are_flamants_log_and_the_diagonal_its_mean_over_a_share():
+    model, s, share = _model()
+    nodes = np.arange(len(s))
+    model._hold(nodes)
+    matrix = model.columns[:, model.slot[nodes]]
+    scale = 1.0 / (np.pi * 2.0e6)
+    distance = np.abs(s[:, None] - s[None, :])
+    off = ~np.eye(len(s), dtype=bool)
+    expected = scale * np.maximum(np.log(0.5 / np.where(off, distance, 1.0)), 0.0)
+    assert np.abs(matrix[off] - expected[off]).max() <= 1e-12 * scale
+    for j in (0, 57, 198):
+        w = share[j]
+        mean, _ = quad(lambda t: np.log(0.5 / abs(t)), -w / 2, w / 2, points=[0.0], epsabs=1e-14)
+        assert abs(matrix[j, j] / scale - mean / w) <= 1e-10 * abs(mean / w)
+    assert np.array_equal(matrix, matrix.T)
+    assert np.linalg.eigvalsh(matrix).min() > 0
+
+
+def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_stages(monkeypatch):
+    """From the free body pushed 2e-5 onto nodes whose gaps are random: the set proposed,
+    with the forces it implies, satisfies Λ ≥ 0 on it, slack ≤ 0 off it (to round-off of
+    the push); in one stage or eight, the same set (the solution is unique)."""
+    monkeypatch.setattr(compliance_module, "MODEL_ITERATIONS", 200)
+    rng = np.random.default_rng(5)
+    m = 300
+    s = np.linspace(0.0, 1.0, m)
+    share = np.full(m, 1.0 / (m - 1))
+    share[[0, -1]] *= 0.5
+    gap = rng.uniform(0.0, 4e-5, m)
+    push = np.full(m, 2e-5)
+    sets = []
+    for stages in (1, 2, 8):
+        monkeypatch.setattr(compliance_module, "FREE_BODY_STAGES", stages)
+        model = HalfPlaneModel(s, share, gap, 1.0e6, 0.5)
+        proposed = model(np.zeros(m, dtype=bool), push - gap, np.zeros(m))
+        on = np.flatnonzero(proposed)
+        block = model.columns[np.ix_(on, model.slot[on])]
+        forces = np.linalg.solve(block, (push - gap)[on])
+        slack = push - gap - model._times(on, forces)
+        assert 10 < len(on) < m - 10
+        assert forces.min() >= 0
+        assert np.abs(slack[on]).max() <= 1e-12 * 2e-5
+        assert slack[~proposed].max() <= 1e-12 * 2e-5
+        sets.append(proposed)
+    assert all(np.array_equal(sets[0], other) for other in sets[1:])
+
+
+def _kernel_pair(problem, method: str = "positive", model=None):
+    reduced = problem.contact_system(get_method(method))
+    model = half_plane_model(problem.contact, problem.law, problem.mesh.points) if model is None else model
+    plain = solve_contact(reduced.system, tolerance=1e-10)
+    modelled = solve_contact(reduced.system, tolerance=1e-10, compliance=model)
+    return plain, modelled
+
+
+@pytest.mark.parametrize("name", ["rough", "hertz_quarter", "rough_rim", "hole"])
+def test_the_model_changes_the_steps_never_the_answer(name):
+    """Cold starts with and without the model reach the same certified set and
+    displacement (to 1e-10 of the largest), the modelled one in fewer steps on the rough
+    base, the quarter disk and the rough rim (a hole's few nodes: no more steps)."""
+    case = rough_polygon_case(1000) if name == "rough" else shipped_case(name)
+    problem = prepare(case)
+    assert half_plane_model(problem.contact, problem.law, problem.mesh.points) is not None
+    for method in ("positive", "standard"):
+        plain, modelled = _kernel_pair(problem, method)
+        assert plain.status is Status.CONVERGED and modelled.status is Status.CONVERGED
+        assert np.array_equal(plain.active, modelled.active)
+        scale = np.abs(plain.displacement).max()
+        assert np.abs(plain.displacement - modelled.displacement).max() <= 1e-10 * scale
+        if name == "hole":
+            assert modelled.iterations <= plain.iterations
+        else:
+            assert modelled.iterations < plain.iterations, (method, plain.iterations, modelled.iterations)
+
+
+def test_a_model_proposing_nonsense_costs_steps_never_the_answer():
+    """A 'model' that proposes a random unseen set at every step: the kernel stops asking
+    after MAX_PROPOSALS and Newton's update settles on the same certified answer."""
+    from contactfem.kernel import MAX_PROPOSALS
+
+    problem = prepare(rough_polygon_case(400))
+    rng = np.random.default_rng(0)
+    asked = []
+
+    def nonsense(active, slack, force):
+        asked.append(1)
+        return rng.uniform(size=len(active)) < 0.5
+
+    plain, confused = _kernel_pair(problem, model=nonsense)
+    assert confused.status is Status.CONVERGED
+    assert np.array_equal(plain.active, confused.active)
+    assert len(asked) == MAX_PROPOSALS
+    scale = np.abs(plain.displacement).max()
+    assert np.abs(plain.displacement - confused.displacement).max() <= 1e-10 * scale
+
+
+def test_it_refuses_what_it_cannot_afford_or_factorise(monkeypatch):
+    model, s, share = _model(m=100)
+    push = np.full(100, 1e-3)
+    monkeypatch.setattr(compliance_module, "MODEL_BLOCK", 10)
+    assert model(np.zeros(100, dtype=bool), push, np.zeros(100)) is None
+    monkeypatch.setattr(compliance_module, "MODEL_BLOCK", 600)
+    monkeypatch.setattr(compliance_module, "MODEL_COLUMN_ENTRIES", 100 * 5)
+    assert _model(m=100)[0](np.zeros(100, dtype=bool), push, np.zeros(100)) is None
+    monkeypatch.setattr(compliance_module, "MODEL_COLUMN_ENTRIES", 8_000_000)
+    # Shares far wider than the reach: the diagonal (ln(2R / w) + 1) below its
+    # neighbours, not positive definite.
+    broken = HalfPlaneModel(s, share * 1e4, np.zeros(100), 1.0, 0.5)
+    assert broken(np.zeros(100, dtype=bool), push, np.zeros(100)) is None
+
+
+def test_a_strip_that_bends_is_offered_no_model_and_a_platen_keeps_its_coarse_level():
+    strip = prepare(shipped_case("strip"))
+    assert half_plane_model(strip.contact, strip.law, strip.mesh.points) is None
+    platen = shipped_case("hertz_platen")
+    solved = solve_case(replace(platen, load_path=None), method="positive")
+    assert solved.kernel.status is Status.CONVERGED
+    assert solved.sequencing.get("levels", 0) >= 1  # held by contact alone: the kernel asks no model
+
+
+def test_plane_strain_modulus_is_e_over_one_minus_nu_squared():
+    from contactfem.assembly import Elasticity
+
+    E, nu = 2.0e5, 0.3
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    assert abs(plane_strain_modulus(Elasticity.from_lame(lam, mu, "strain")) - E / (1 - nu**2)) <= 1e-10 * E
+    assert abs(plane_strain_modulus(Elasticity.from_lame(lam, mu, "stress")) - E) <= 1e-10 * E
