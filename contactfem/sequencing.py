@@ -28,12 +28,11 @@ from dataclasses import replace
 from typing import Callable
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
-from contactfem.compliance import plane_strain_modulus
+from contactfem.compliance import half_plane_compliance, plane_strain_modulus
 from contactfem.discretize import ContactBoundary
 from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
@@ -427,39 +426,6 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     corrected = active.copy()
     corrected[band] = settled
     return corrected
-
-
-def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float,
-                          rows: np.ndarray | None = None) -> sp.csr_matrix:
-    """C (m, m), or its ``rows``: the normal displacement at node i of the elastic
-    half-plane of plane-strain ``modulus`` under a unit force at node j spread evenly over
-    its ``share`` of ΓC, (2 / π E*) times the mean of ln(reach / |s_i − t|)₊ over that
-    segment, symmetrised (the mean of C_ij and C_ji); zero for nodes farther apart than
-    ``reach`` (whose differences the coarse level holds). ``abscissa`` sorted.
-    ln(R / r)₊ is positive definite in the plane (the Green's function of a disk), so C is
-    positive semi-definite on a line up to the segments' spreading."""
-    s = np.asarray(abscissa, dtype=float)
-    share = np.asarray(share, dtype=float)
-    rows = np.arange(len(s)) if rows is None else np.asarray(rows, dtype=np.int64)
-    low = np.searchsorted(s, s[rows] - reach, side="left")
-    high = np.searchsorted(s, s[rows] + reach, side="right")
-    counts = high - low
-    row = np.repeat(np.arange(len(rows)), counts)
-    cols = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(low, counts)
-    offset = s[rows][row] - s[cols]
-
-    def integral(t: np.ndarray) -> np.ndarray:  # ∫_0^t ln(reach / |τ|)₊ dτ, odd in t
-        a = np.minimum(np.abs(t), reach)
-        safe = np.where(a > 0, a, reach)
-        return np.sign(t) * np.where(a > 0, a * (np.log(reach / safe) + 1.0), 0.0)
-
-    def mean_over(half: np.ndarray) -> np.ndarray:  # over (s_j − half, s_j + half), seen from s_i
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return (integral(offset + half) - integral(offset - half)) / np.where(half > 0, 2.0 * half, np.inf)
-
-    values = (mean_over(0.5 * share[cols]) + mean_over(0.5 * share[rows][row])) * (1.0 / (np.pi * modulus))
-    return sp.csr_matrix((values, (row, cols)), shape=(len(rows), len(s)))
-
 
 
 def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.ndarray:
