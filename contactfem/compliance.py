@@ -20,8 +20,9 @@ coarse prediction uses on its sparse band: dense, the means cost ten times as mu
 next solve measures the true answer for that set, so the
 model's error is corrected at every step and only decides how many steps there are; the
 kernel's own sign test still decides when the set has settled. On the rough block of
-1 000 segments the model's first proposal missed 25 of 1 000 nodes (Newton's update 653)
-and the solve took three steps; on 4 000 segments 60 (Newton's 2 765), three steps.
+1 000 segments the model's first proposal missed 16 of 1 000 nodes (Newton's update 653)
+and the solve took three steps. On 4 000 segments (526 active) its sets outgrow
+:data:`MODEL_BLOCK` and it proposes nothing: a coarser level predicts there.
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ class HalfPlaneModel:
 
     Called with a solved set, its slack d − G and its nodal forces, it returns the set of
     the model's contact problem anchored there (see the module), or None where it has
-    none: its block is not positive definite, its iteration did not settle, or it would
+    none: its block is not positive definite, larger than :data:`MODEL_BLOCK`, or it would
     hold more than :data:`MODEL_COLUMN_ENTRIES`.
     """
 
@@ -135,7 +136,6 @@ class HalfPlaneModel:
         self.slot = np.full(m, -1, dtype=np.int64)  # node -> its column in ``columns``, or -1
         self.columns = np.zeros((m, 0), order="F")  # the first ``held`` are C's columns of the nodes in ``slot``
         self.held = 0
-        self.proposals = 0
 
     def __call__(self, active: np.ndarray, slack: np.ndarray, force: np.ndarray) -> np.ndarray | None:
         active = np.asarray(active, dtype=bool)
@@ -152,17 +152,14 @@ class HalfPlaneModel:
                 settled = active
                 for stage in range(1, FREE_BODY_STAGES + 1):
                     settled = self._settle(stage / FREE_BODY_STAGES * displacement - self.gap, settled)
-                    if settled is None:
-                        return None
-            else:
-                settled = self._settle(free, active & (free > 0))
+                return settled
+            return self._settle(free, active & (free > 0))
         except (LinAlgError, MemoryError):
             return None
-        self.proposals += settled is not None
-        return settled
 
-    def _settle(self, free: np.ndarray, start: np.ndarray) -> np.ndarray | None:
-        """The model's active set iteration on Λ ≥ 0, free − C Λ ≤ 0 from ``start``."""
+    def _settle(self, free: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """The model's active set iteration on Λ ≥ 0, free − C Λ ≤ 0 from ``start``: its
+        set after at most :data:`MODEL_ITERATIONS` steps."""
         current = start
         for _ in range(MODEL_ITERATIONS):
             on = np.flatnonzero(current)

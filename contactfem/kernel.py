@@ -833,8 +833,8 @@ def solve_contact(
                 and proposals < MAX_PROPOSALS and not np.array_equal(new_active, active)):
             proposal = compliance(active, slack, nodal_force)
             proposals += 1
-            if (proposal is not None and not np.array_equal(proposal, active)
-                    and np.packbits(proposal).tobytes() not in seen):
+            # ``seen`` holds the set just solved too: proposing it again is refused likewise.
+            if proposal is not None and np.packbits(proposal).tobytes() not in seen:
                 modelled = int(np.count_nonzero(proposal != new_active))
                 new_active, guessed = np.asarray(proposal, dtype=bool).copy(), True
 

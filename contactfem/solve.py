@@ -197,8 +197,8 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     model = (half_plane_model(problem.contact, problem.law, problem.mesh.points)
              if problem.free_modes is None else None)
     modelled = model is not None and len(problem.contact.nodes) <= MODEL_NODES
-    coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled
-                    and prediction_first(problem.contact.gap, tolerance)
+    predicted_first = prediction_first(problem.contact.gap, tolerance)
+    coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled and predicted_first
                     and "solve" not in kept and _worth_meshing(case, problem, kept))
     with ThreadPoolExecutor(max_workers=1) if coarse_first else _InPlace() as pool:
         # This level's kernel system (contact nodes in normal and tangent unknowns), its
@@ -223,7 +223,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             solver_soon = pool.submit(_analysed, solver())
         # A start the model takes (no node inside the obstacle) asks no coarser level first;
         # one pressed in everywhere keeps it as the second guess.
-        first_by_model = modelled and prediction_first(problem.contact.gap, tolerance)
+        first_by_model = modelled and predicted_first
         initial_active, second_guess, sequencing = starting_set(
             problem.contact.gap, tolerance,
             lambda: ((None, {}) if first_by_model else
