@@ -21,7 +21,10 @@ next solve measures the true answer for that set, so the
 model's error is corrected at every step and only decides how many steps there are; the
 kernel's own sign test still decides when the set has settled. On the rough block of
 1 000 segments the model's first proposal missed 16 of 1 000 nodes (Newton's update 653)
-and the solve took three steps. On 4 000 segments (526 active) its sets outgrow
+and the solve took three steps. Where the contact nodes are equally spaced (a profile of
+heights at equal steps), C is Toeplitz and its products FFTs (:class:`EvenCompliance`):
+the first proposal then starts from a few projected conjugate gradient steps on the
+whole boundary instead of pushing the free body in stages. On 4 000 segments (526 active) its sets outgrow
 :data:`MODEL_BLOCK` and it proposes nothing: a coarser level predicts there.
 """
 
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy import fft as sp_fft
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.linalg.blas import dgemv
 
@@ -60,6 +64,21 @@ MODEL_ITERATIONS = 5
 #: Compliance columns the model may hold (each is one per contact node): beyond, it
 #: proposes nothing and Newton's update goes on.
 MODEL_COLUMN_ENTRIES = 8_000_000
+#: Contact nodes count as equally spaced along the obstacle when no spacing differs from
+#: their mean by more than this share: a profile given as heights at equal steps, or any
+#: polygon whose contact vertices are. C is then Toeplitz in the node index (up to its
+#: diagonal, the mean over each node's own share) and its products cost two FFTs.
+EVEN_SPACING = 1e-6
+#: On equally spaced nodes the first proposal starts its active set iteration from the
+#: set of a few steps of projected conjugate gradients (Polonsky and Keer's iteration for
+#: the half-space, without its load balance: here the push is given) on the whole
+#: boundary, instead of the free body's stages: stopped when an iteration changes the
+#: forces by less than :data:`NEAR_TOLERANCE` of their sum, or after
+#: :data:`NEAR_ITERATIONS`. On the rough base of 1 000 segments: 18 iterations, 59 of
+#: 1 000 nodes off the model's own answer, which the active set iteration then reaches
+#: in 3.9 ms instead of the stages' 6.2; of 2 000: 9.4 against 16.4 ms.
+NEAR_TOLERANCE = 1e-2
+NEAR_ITERATIONS = 100
 
 
 def plane_strain_modulus(law: Elasticity) -> float:
@@ -80,6 +99,79 @@ def half_plane_model(boundary: ContactBoundary, law: Elasticity, points: np.ndar
     if not depth > 0 or depth < MIN_DEPTH_SHARE * span:
         return None
     return HalfPlaneModel(boundary.abscissa, boundary.masses.lumped, boundary.gap, plane_strain_modulus(law), depth)
+
+
+class EvenCompliance:
+    """C of :class:`HalfPlaneModel` on equally spaced nodes (``abscissa`` sorted, spacing
+    h): its off-diagonal ln(R / |i − j| h)₊ / π E* depends on i − j alone, so C x is a
+    convolution, computed with FFTs of the Toeplitz part's circulant embedding (length
+    ≥ 2m − 1), plus each node's own diagonal less the Toeplitz one."""
+
+    def __init__(self, abscissa: np.ndarray, share: np.ndarray, reach: float, scale: float):
+        m = len(abscissa)
+        spacing = (abscissa[-1] - abscissa[0]) / (m - 1)
+        offsets = np.arange(1, m) * spacing
+        toeplitz = np.empty(m)
+        toeplitz[1:] = np.maximum(np.log(reach / offsets), 0.0)
+        toeplitz[0] = np.log(2.0 * reach / spacing) + 1.0
+        self.length = sp_fft.next_fast_len(2 * m - 1, real=True)
+        embedded = np.zeros(self.length)
+        embedded[:m] = toeplitz
+        embedded[self.length - m + 1:] = toeplitz[:0:-1]
+        # The embedding is symmetric: its spectrum is real.
+        self.spectrum = sp_fft.rfft(scale * embedded).real
+        self.diagonal = scale * (np.log(2.0 * reach / share) + 1.0)
+        self.correction = self.diagonal - scale * toeplitz[0]
+        self.size = m
+
+    @classmethod
+    def of(cls, abscissa: np.ndarray, share: np.ndarray, reach: float, scale: float) -> "EvenCompliance | None":
+        """The even form of these nodes' C, or None when their spacings differ from their
+        mean by more than :data:`EVEN_SPACING` of it (or there are fewer than 2)."""
+        if len(abscissa) < 2:
+            return None
+        spacings = np.diff(abscissa)
+        mean = (abscissa[-1] - abscissa[0]) / (len(abscissa) - 1)
+        if not mean > 0 or np.abs(spacings - mean).max() > EVEN_SPACING * mean:
+            return None
+        return cls(abscissa, share, reach, scale)
+
+    def __matmul__(self, forces: np.ndarray) -> np.ndarray:
+        spread = sp_fft.irfft(sp_fft.rfft(forces, self.length) * self.spectrum, self.length)
+        return spread[:self.size] + self.correction * forces
+
+    def near_contact(self, free: np.ndarray) -> np.ndarray:
+        """Nodes near the contact set of Λ ≥ 0, free − C Λ ≤ 0, Λ (free − C Λ) = 0: a few
+        iterations of projected conjugate gradients on min ½ Λᵀ C Λ − freeᵀ Λ over Λ ≥ 0
+        (see :data:`NEAR_TOLERANCE`). A node whose force the step would make negative
+        leaves the set; one without force that the current forces leave inside the
+        obstacle joins it, and the directions restart."""
+        forces = np.maximum(free, 0.0) / self.diagonal
+        direction = np.zeros_like(forces)
+        conjugate = False
+        previous = 1.0
+        for _ in range(NEAR_ITERATIONS):
+            gradient = self @ forces - free  # minus the slack the forces leave
+            carried = forces > 0
+            if not carried.any():
+                break
+            steepest = np.where(carried, gradient, 0.0)
+            norm = float(steepest @ steepest)
+            direction = steepest + (norm / previous) * direction if conjugate else steepest
+            direction[~carried] = 0.0
+            previous = norm
+            curvature = float(direction @ (self @ direction))
+            if not curvature > 0:
+                break
+            step = float(steepest @ direction) / curvature
+            before = forces
+            forces = np.maximum(forces - step * direction, 0.0)
+            inside = (forces == 0) & (gradient < 0)
+            conjugate = not inside.any()
+            forces[inside] -= step * gradient[inside]
+            if np.abs(forces - before).sum() <= NEAR_TOLERANCE * forces.sum():
+                break
+        return forces > 0
 
 
 def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float,
@@ -118,7 +210,9 @@ class HalfPlaneModel:
     """The half-plane's compliance between the contact nodes (``abscissa`` sorted along the
     obstacle, each node's ``share`` of ΓC), C_ij = (1 / π E*) ln(R / |s_i − s_j|)₊ and on
     the diagonal the mean of that over the node's own share; ``gap`` the nodes' initial
-    gaps. Its columns are computed when an iteration needs them and kept.
+    gaps. Its columns are computed when an iteration needs them and kept; on equally
+    spaced nodes its ``even`` form (:class:`EvenCompliance`) gives the first proposal's
+    start.
 
     Called with a solved set, its slack d − G and its nodal forces, it returns the set of
     the model's contact problem anchored there (see the module), or None where it has
@@ -136,6 +230,7 @@ class HalfPlaneModel:
         self.slot = np.full(m, -1, dtype=np.int64)  # node -> its column in ``columns``, or -1
         self.columns = np.zeros((m, 0), order="F")  # the first ``held`` are C's columns of the nodes in ``slot``
         self.held = 0
+        self.even = EvenCompliance.of(self.abscissa, self.share, self.reach, self.scale)
 
     def __call__(self, active: np.ndarray, slack: np.ndarray, force: np.ndarray) -> np.ndarray | None:
         active = np.asarray(active, dtype=bool)
@@ -146,6 +241,8 @@ class HalfPlaneModel:
             self._hold(loaded)
             free = slack + self._times(loaded, force[loaded])  # the slack with no force at all
             if not active.any():
+                if self.even is not None:
+                    return self._settle(free, self.even.near_contact(free))
                 # From the free body: the same push in stages (a linear body's free
                 # displacement scales with its load), each started from the last's set.
                 displacement = free + self.gap

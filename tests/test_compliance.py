@@ -55,10 +55,11 @@ def test_columns_are_flamants_log_and_the_diagonal_its_mean_over_a_share():
     assert np.linalg.eigvalsh(matrix).min() > 0
 
 
-def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_stages(monkeypatch):
-    """From the free body pushed 2e-5 onto nodes whose gaps are random: the set proposed,
-    with the forces it implies, satisfies Λ ≥ 0 on it, slack ≤ 0 off it (to round-off of
-    the push); in one stage or eight, the same set (the solution is unique)."""
+def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_start(monkeypatch):
+    """From the free body pushed 2e-5 onto equally spaced nodes whose gaps are random: the
+    set proposed, with the forces it implies, satisfies Λ ≥ 0 on it, slack ≤ 0 off it (to
+    round-off of the push); started from the projected gradients' near set or from the free
+    body's stages (1, 2 or 8), the same set: a P-matrix problem has one solution."""
     monkeypatch.setattr(compliance_module, "MODEL_ITERATIONS", 200)
     rng = np.random.default_rng(5)
     m = 300
@@ -68,9 +69,12 @@ def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_s
     gap = rng.uniform(0.0, 4e-5, m)
     push = np.full(m, 2e-5)
     sets = []
-    for stages in (1, 2, 8):
-        monkeypatch.setattr(compliance_module, "FREE_BODY_STAGES", stages)
+    for stages in (None, 1, 2, 8):
         model = HalfPlaneModel(s, share, gap, 1.0e6, 0.5)
+        assert model.even is not None
+        if stages is not None:
+            model.even = None
+            monkeypatch.setattr(compliance_module, "FREE_BODY_STAGES", stages)
         proposed = model(np.zeros(m, dtype=bool), push - gap, np.zeros(m))
         on = np.flatnonzero(proposed)
         block = model.columns[np.ix_(on, model.slot[on])]
@@ -82,6 +86,24 @@ def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_s
         assert slack[~proposed].max() <= 1e-12 * 2e-5
         sets.append(proposed)
     assert all(np.array_equal(sets[0], other) for other in sets[1:])
+
+
+def test_even_spacing_products_are_the_columns_products():
+    """On equally spaced nodes (half shares at the ends) C x by FFTs equals the held
+    columns' product to 1e-12 of its largest entry, for random x of both signs and for a
+    single node; graded nodes have no even form."""
+    m = 257
+    s = np.linspace(-0.3, 0.7, m)
+    share = np.full(m, 1.0 / (m - 1))
+    share[[0, -1]] *= 0.5
+    model = HalfPlaneModel(s, share, np.zeros(m), 3.0e5, 0.35)
+    nodes = np.arange(m)
+    model._hold(nodes)
+    rng = np.random.default_rng(2)
+    for x in (rng.normal(size=m), np.eye(m)[0], np.eye(m)[128]):
+        exact = model._times(nodes, x)
+        assert np.abs(model.even @ x - exact).max() <= 1e-12 * np.abs(exact).max()
+    assert _model()[0].even is None
 
 
 def _kernel_pair(problem, method: str = "positive", model=None):
