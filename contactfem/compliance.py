@@ -47,10 +47,15 @@ from contactfem.discretize import ContactBoundary
 MIN_DEPTH_SHARE = 0.25
 #: Contact nodes up to which a cold start with the model is preferred to a coarser level's
 #: prediction (:mod:`contactfem.solve`). Measured (solve ms, cold with the model against
-#: sequenced): rough base of 1 000 segments 19-21 against 31; of 2 000, 38-56 against 41;
-#: the rough rim (668 nodes) 21 against 30; the Hertz disk (1 551) 55 against 68; its
+#: sequenced) with its columns of logs: rough base of 1 000 segments 19-21 against 31; of
+#: 2 000, 38-56 against 41; the rough rim (668 nodes) 21 against 30; the Hertz disk (1 551) 55 against 68; its
 #: quarter (776) 28 against 41.
 MODEL_NODES = 1_600
+#: The same on equally spaced nodes, whose model gathers its blocks and multiplies by FFTs
+#: (:class:`EvenCompliance`): the rough base of 2 000 segments 42-53 ms cold with the model
+#: against 48-64 sequenced (fastest of 15, in turns); of 2 500, 71 against 68; of 3 000,
+#: 67 against 65 (medians 122 against 86).
+EVEN_MODEL_NODES = 2_000
 #: The largest set the model factorises (dense, n³ / 3): beyond, it proposes nothing.
 MODEL_BLOCK = 600
 #: Stages in which the first proposal, from the free body (no force anywhere), is pushed
@@ -120,8 +125,9 @@ class EvenCompliance:
         embedded[self.length - m + 1:] = toeplitz[:0:-1]
         # The embedding is symmetric: its spectrum is real.
         self.spectrum = sp_fft.rfft(scale * embedded).real
+        self.toeplitz = scale * toeplitz
         self.diagonal = scale * (np.log(2.0 * reach / share) + 1.0)
-        self.correction = self.diagonal - scale * toeplitz[0]
+        self.correction = self.diagonal - self.toeplitz[0]
         self.size = m
 
     @classmethod
@@ -135,6 +141,12 @@ class EvenCompliance:
         if not mean > 0 or np.abs(spacings - mean).max() > EVEN_SPACING * mean:
             return None
         return cls(abscissa, share, reach, scale)
+
+    def block(self, nodes: np.ndarray) -> np.ndarray:
+        """C[nodes][:, nodes], gathered from the Toeplitz column."""
+        block = self.toeplitz[np.abs(nodes[:, None] - nodes[None, :])]
+        block[np.diag_indices_from(block)] = self.diagonal[nodes]
+        return block
 
     def __matmul__(self, forces: np.ndarray) -> np.ndarray:
         spread = sp_fft.irfft(sp_fft.rfft(forces, self.length) * self.spectrum, self.length)
@@ -238,7 +250,6 @@ class HalfPlaneModel:
         force = np.where(active, np.asarray(force, dtype=float), 0.0)
         try:
             loaded = np.flatnonzero(force)
-            self._hold(loaded)
             free = slack + self._times(loaded, force[loaded])  # the slack with no force at all
             if not active.any():
                 if self.even is not None:
@@ -254,6 +265,12 @@ class HalfPlaneModel:
         except (LinAlgError, MemoryError):
             return None
 
+    def replaces_coarser_level(self) -> bool:
+        """Whether a cold start with this model costs less than a coarser level's prediction:
+        for at most :data:`MODEL_NODES` contact nodes, :data:`EVEN_MODEL_NODES` equally
+        spaced ones."""
+        return len(self.abscissa) <= (EVEN_MODEL_NODES if self.even is not None else MODEL_NODES)
+
     def _settle(self, free: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The model's active set iteration on Λ ≥ 0, free − C Λ ≤ 0 from ``start``: its
         set after at most :data:`MODEL_ITERATIONS` steps."""
@@ -262,10 +279,9 @@ class HalfPlaneModel:
             on = np.flatnonzero(current)
             if len(on) > MODEL_BLOCK:
                 raise MemoryError("the half-plane model's block")
-            self._hold(on)
             forces = np.zeros(0)
             if len(on):
-                block = self.columns[np.ix_(on, self.slot[on])]
+                block = self._block(on)
                 forces = cho_solve(cho_factor(block, overwrite_a=True, check_finite=False), free[on],
                                    check_finite=False)
             slack = free - self._times(on, forces)
@@ -276,8 +292,20 @@ class HalfPlaneModel:
             current = updated
         return current
 
+    def _block(self, nodes: np.ndarray) -> np.ndarray:
+        """C[nodes][:, nodes]: from the even form, or from the nodes' columns (held now)."""
+        if self.even is not None:
+            return self.even.block(nodes)
+        self._hold(nodes)
+        return self.columns[np.ix_(nodes, self.slot[nodes])]
+
     def _times(self, nodes: np.ndarray, forces: np.ndarray) -> np.ndarray:
-        """C[:, nodes] @ forces, the nodes' columns held."""
+        """C[:, nodes] @ forces: by FFTs on the even form, else from the nodes' columns."""
+        if self.even is not None:
+            spread = np.zeros(len(self.abscissa))
+            spread[nodes] = forces
+            return self.even @ spread
+        self._hold(nodes)
         if not self.held:
             return np.zeros(len(self.abscissa))
         spread = np.zeros(self.held)

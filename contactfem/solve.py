@@ -18,7 +18,7 @@ import numpy as np
 
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
-from contactfem.compliance import MODEL_NODES, half_plane_model
+from contactfem.compliance import half_plane_model
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.meshing import estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
@@ -196,7 +196,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     # no model: it keeps the coarser level.)
     model = (half_plane_model(problem.contact, problem.law, problem.mesh.points)
              if problem.free_modes is None else None)
-    modelled = model is not None and len(problem.contact.nodes) <= MODEL_NODES
+    modelled = model is not None and model.replaces_coarser_level()
     predicted_first = prediction_first(problem.contact.gap, tolerance)
     coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled and predicted_first
                     and "solve" not in kept and _worth_meshing(case, problem, kept))

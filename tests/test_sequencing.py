@@ -342,11 +342,12 @@ def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
 @pytest.fixture
 def coarse_levels_only(monkeypatch):
     """Sequencing's machinery on meshes whose contact boundary is small enough for a cold
-    start with the half-plane model (contactfem.compliance.MODEL_NODES), which the solve
-    would otherwise take instead of a coarser level."""
-    import contactfem.solve as solve_module
+    start with the half-plane model (contactfem.compliance.MODEL_NODES, EVEN_MODEL_NODES),
+    which the solve would otherwise take instead of a coarser level."""
+    import contactfem.compliance as compliance_module
 
-    monkeypatch.setattr(solve_module, "MODEL_NODES", 0)
+    monkeypatch.setattr(compliance_module, "MODEL_NODES", 0)
+    monkeypatch.setattr(compliance_module, "EVEN_MODEL_NODES", 0)
 
 
 @pytest.mark.usefixtures("coarse_levels_only")
