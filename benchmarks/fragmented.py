@@ -58,6 +58,10 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from contactfem.threads import one_blas_thread
+
+one_blas_thread()  # as the command runs, before numpy loads (OPENBLAS_NUM_THREADS set in the environment wins)
+
 import numpy as np
 import yaml
 

@@ -47,6 +47,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from contactfem.threads import one_blas_thread
+
+one_blas_thread()  # as the command runs, before numpy loads (OPENBLAS_NUM_THREADS set in the environment wins)
+
 import numpy as np
 import yaml
 
