@@ -142,10 +142,15 @@ class EvenCompliance:
             return None
         return cls(abscissa, share, reach, scale)
 
-    def block(self, nodes: np.ndarray) -> np.ndarray:
-        """C[nodes][:, nodes], gathered from the Toeplitz column."""
-        block = self.toeplitz[np.abs(nodes[:, None] - nodes[None, :])]
-        block[np.diag_indices_from(block)] = self.diagonal[nodes]
+    def block(self, rows: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
+        """C[rows][:, columns] (``columns`` default: ``rows``), gathered from the Toeplitz column."""
+        if columns is None:
+            block = self.toeplitz[np.abs(rows[:, None] - rows[None, :])]
+            block[np.diag_indices_from(block)] = self.diagonal[rows]
+            return block
+        block = self.toeplitz[np.abs(rows[:, None] - columns[None, :])]
+        same_row, same_column = np.nonzero(rows[:, None] == columns[None, :])
+        block[same_row, same_column] = self.diagonal[rows[same_row]]
         return block
 
     def __matmul__(self, forces: np.ndarray) -> np.ndarray:
@@ -243,6 +248,7 @@ class HalfPlaneModel:
         self.columns = np.zeros((m, 0), order="F")  # the first ``held`` are C's columns of the nodes in ``slot``
         self.held = 0
         self.even = EvenCompliance.of(self.abscissa, self.share, self.reach, self.scale)
+        self.sets = _SetSolves(self._block)
 
     def __call__(self, active: np.ndarray, slack: np.ndarray, force: np.ndarray) -> np.ndarray | None:
         active = np.asarray(active, dtype=bool)
@@ -279,11 +285,7 @@ class HalfPlaneModel:
             on = np.flatnonzero(current)
             if len(on) > MODEL_BLOCK:
                 raise MemoryError("the half-plane model's block")
-            forces = np.zeros(0)
-            if len(on):
-                block = self._block(on)
-                forces = cho_solve(cho_factor(block, overwrite_a=True, check_finite=False), free[on],
-                                   check_finite=False)
+            forces = self.sets.solve(on, free) if len(on) else np.zeros(0)
             slack = free - self._times(on, forces)
             updated = slack > 0
             updated[on] = forces > 0
@@ -292,12 +294,14 @@ class HalfPlaneModel:
             current = updated
         return current
 
-    def _block(self, nodes: np.ndarray) -> np.ndarray:
-        """C[nodes][:, nodes]: from the even form, or from the nodes' columns (held now)."""
+    def _block(self, rows: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
+        """C[rows][:, columns] (default: the square block of ``rows``): from the even form,
+        or from the columns' columns (held now)."""
         if self.even is not None:
-            return self.even.block(nodes)
-        self._hold(nodes)
-        return self.columns[np.ix_(nodes, self.slot[nodes])]
+            return self.even.block(rows, columns)
+        columns = rows if columns is None else columns
+        self._hold(columns)
+        return self.columns[np.ix_(rows, self.slot[columns])]
 
     def _times(self, nodes: np.ndarray, forces: np.ndarray) -> np.ndarray:
         """C[:, nodes] @ forces: by FFTs on the even form, else from the nodes' columns."""
@@ -338,3 +342,61 @@ class HalfPlaneModel:
         self.columns[:, self.held:needed] = block
         self.slot[missing] = self.held + k
         self.held = needed
+
+
+class _SetSolves:
+    """Solves C[S, S] x = b[S] for the sets S of an active set iteration, which differ from
+    one another by a few nodes, with one Cholesky factor of a base set S0 (``block(rows,
+    columns)`` gives C's blocks). For S = S0 ∖ R ∪ A the system is solved on S0 ∪ A with
+    x_R = 0 held by multipliers μ: with Z = C00⁻¹ C0A, Y = C00⁻¹ E_R and z = C00⁻¹ b0,
+
+        [CAA − C0Aᵀ Z   −Z_Rᵀ] [x_A]   [b_A − C0Aᵀ z]
+        [    −Z_R        −Y_R] [ μ ] = [    −z_R    ],   x0 = z − Z x_A − Y μ,
+
+    a dense system of |A| + |R| unknowns and (1 + |A| + |R|) solves with the factor:
+    O(n² (|A| + |R|)) instead of n³ / 3. The base is refactorised when the changes outgrow
+    :data:`REBASE_SHARE` of it (the updates would then cost about as much)."""
+
+    #: The share of the base set that added and removed nodes may reach before a new factor.
+    REBASE_SHARE = 0.125
+
+    def __init__(self, block):
+        self.block = block
+        self.base = np.zeros(0, dtype=np.int64)
+        self.factor = None
+
+    def solve(self, on: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """x on the sorted nodes ``on``, C[on, on] x = free[on]."""
+        base = self.base
+        within = np.isin(on, base, assume_unique=True)
+        added = on[~within]
+        removed_at = np.flatnonzero(~np.isin(base, on, assume_unique=True))  # positions in the base
+        changes = len(added) + len(removed_at)
+        if self.factor is None or changes > max(4, self.REBASE_SHARE * len(base)):
+            self.base = on
+            self.factor = cho_factor(self.block(on), overwrite_a=True, check_finite=False)
+            return cho_solve(self.factor, free[on], check_finite=False)
+        b0 = free[base]
+        b0[removed_at] = 0.0  # held at zero by μ: its own entry is immaterial
+        coupling = self.block(base, added)  # C0A
+        right = np.zeros((len(base), 1 + len(added) + len(removed_at)))
+        right[:, 0] = b0
+        right[:, 1:1 + len(added)] = coupling
+        right[removed_at, 1 + len(added) + np.arange(len(removed_at))] = 1.0
+        solved = cho_solve(self.factor, right, check_finite=False)
+        z, z_added, y_removed = solved[:, 0], solved[:, 1:1 + len(added)], solved[:, 1 + len(added):]
+        a = len(added)
+        bordered = np.empty((changes, changes))
+        bordered[:a, :a] = self.block(added) - coupling.T @ z_added
+        bordered[a:, :a] = -z_added[removed_at]
+        bordered[:a, a:] = bordered[a:, :a].T
+        bordered[a:, a:] = -y_removed[removed_at]
+        rhs = np.concatenate([free[added] - coupling.T @ z, -z[removed_at]])
+        unknowns = np.linalg.solve(bordered, rhs)
+        x_added, multipliers = unknowns[:a], unknowns[a:]
+        x_base = z - z_added @ x_added - y_removed @ multipliers
+        # Back onto the sorted set: the base's kept nodes and the added ones.
+        forces = np.empty(len(on))
+        forces[within] = x_base[np.isin(base, on, assume_unique=True)]
+        forces[~within] = x_added
+        return forces
