@@ -652,6 +652,30 @@ def _translation_update(system: ContactSystem, linear, tolerance: float) -> tupl
     return slack > max(tolerance, roundoff_bound(2)) * scales.displacement, slack
 
 
+def translation_start(system: ContactSystem, linear: "ActiveSetSolver", tolerance: float,
+                      compliance: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                      ) -> tuple[np.ndarray, bool] | None:
+    """Where a cold start whose supports' own solution is ``system.translation`` begins
+    (:func:`_translation_update`), without solving: Newton's update from it, replaced by
+    ``compliance``'s proposal from the same free body when it makes one; and whether
+    ``compliance`` was asked. None when that solution is no such translation. Needs no
+    factorisation: a caller may run it while ``linear`` is analysed in another thread."""
+    translated = _translation_update(system, linear, tolerance)
+    if translated is None:
+        return None
+    active, slack = translated
+    if compliance is None:
+        return active, False
+    # Newton's update from the translation presses in every node it puts inside; the
+    # model's own contact problem, from the same free body, keeps those that stay (824
+    # and 171 of 1 000 on a rough base).
+    m = len(slack)
+    proposal = compliance(np.zeros(m, dtype=bool), slack, np.zeros(m))
+    if proposal is not None and proposal.any():
+        active = np.asarray(proposal, dtype=bool).copy()
+    return active, True
+
+
 def solve_contact(
     system: ContactSystem,
     *,
@@ -746,20 +770,13 @@ def solve_contact(
     # that solution is a translation known in advance (a body pushed by a prescribed
     # displacement, nothing loading it), Newton's update from it is known too: the nodes
     # the translation presses into the obstacle, where the iteration starts instead.
-    translated = (_translation_update(system, linear, tolerance)
+    translated = (translation_start(system, linear, tolerance, compliance)
                   if initial_active is None and holder is None and m and not active.any() else None)
     skipped = int(translated is not None)  # that update counts as the first step's
     proposals = 0  # asked of ``compliance``
     if translated is not None:
-        active, translation_slack = translated
-        if compliance is not None:
-            # Newton's update from the translation presses in every node it puts inside;
-            # the model's own contact problem, from the same free body, keeps those that
-            # stay (824 and 171 of 1 000 on a rough base).
-            proposal = compliance(np.zeros(m, dtype=bool), translation_slack, np.zeros(m))
-            proposals += 1
-            if proposal is not None and proposal.any():
-                active = np.asarray(proposal, dtype=bool).copy()
+        active, asked = translated
+        proposals += int(asked)
     seen: dict[bytes, int] = {}
     cycle_detected_at: int | None = None
     least_index, least_index_from = False, 0
