@@ -21,11 +21,13 @@ next solve measures the true answer for that set, so the
 model's error is corrected at every step and only decides how many steps there are; the
 kernel's own sign test still decides when the set has settled. On the rough block of
 1 000 segments the model's first proposal missed 16 of 1 000 nodes (Newton's update 653)
-and the solve took three steps. Where the contact nodes are equally spaced (a profile of
-heights at equal steps), C is Toeplitz and its products FFTs (:class:`EvenCompliance`):
-the first proposal then starts from a few projected conjugate gradient steps on the
-whole boundary instead of pushing the free body in stages. On 4 000 segments (526 active) its sets outgrow
-:data:`MODEL_BLOCK` and it proposes nothing: a coarser level predicts there.
+and the solve took three steps. Where the contact nodes lie on a grid (a profile of
+heights at equal steps, or one a coarser level decimated), C is Toeplitz in the grid
+index and its products FFTs (:class:`EvenCompliance`): the first proposal then starts
+from a few projected conjugate gradient steps on the whole boundary instead of pushing
+the free body in stages. The sets of one iteration differ by a few nodes, and are solved
+from one factor (:class:`_SetSolves`). Beyond :data:`EVEN_MODEL_NODES` (3 000 on a grid)
+a coarser level's prediction costs less than the model's dense blocks.
 """
 
 from __future__ import annotations
@@ -51,11 +53,12 @@ MIN_DEPTH_SHARE = 0.25
 #: 2 000, 38-56 against 41; the rough rim (668 nodes) 21 against 30; the Hertz disk (1 551) 55 against 68; its
 #: quarter (776) 28 against 41.
 MODEL_NODES = 1_600
-#: The same on equally spaced nodes, whose model gathers its blocks and multiplies by FFTs
-#: (:class:`EvenCompliance`): the rough base of 2 000 segments 42-53 ms cold with the model
-#: against 48-64 sequenced (fastest of 15, in turns); of 2 500, 71 against 68; of 3 000,
-#: 67 against 65 (medians 122 against 86).
-EVEN_MODEL_NODES = 2_000
+#: The same on nodes of a grid, whose model gathers its blocks and multiplies by FFTs
+#: (:class:`EvenCompliance`), its set solves updating one factor and its first proposal
+#: made beside the pattern's analysis, with one BLAS thread (:mod:`contactfem.threads`):
+#: the rough base of 3 000 segments 52-62 ms cold with the model against 60-70 sequenced
+#: (fastest of 7, in turns); of 4 000, 74-85 against 71-80; of 6 000, 150 against 102.
+EVEN_MODEL_NODES = 3_000
 #: The largest set the model factorises (dense, n³ / 3): beyond, it proposes nothing.
 MODEL_BLOCK = 600
 #: Stages in which the first proposal, from the free body (no force anywhere), is pushed
@@ -74,6 +77,12 @@ MODEL_COLUMN_ENTRIES = 8_000_000
 #: polygon whose contact vertices are. C is then Toeplitz in the node index (up to its
 #: diagonal, the mean over each node's own share) and its products cost two FFTs.
 EVEN_SPACING = 1e-6
+#: Contact nodes also count as on a grid when every spacing is a whole multiple of the
+#: least one over 1, 2, ... this (a profile of 3 999 segments decimated by four keeps
+#: spacings of 4 h and, at its end, 3 h), on a grid of at most :data:`GRID_GROWTH` times
+#: as many points as nodes (each product is an FFT of the grid's length).
+GRID_DIVISORS = 8
+GRID_GROWTH = 8
 #: On equally spaced nodes the first proposal starts its active set iteration from the
 #: set of a few steps of projected conjugate gradients (Polonsky and Keer's iteration for
 #: the half-space, without its load balance: here the push is given) on the whole
@@ -107,55 +116,76 @@ def half_plane_model(boundary: ContactBoundary, law: Elasticity, points: np.ndar
 
 
 class EvenCompliance:
-    """C of :class:`HalfPlaneModel` on equally spaced nodes (``abscissa`` sorted, spacing
-    h): its off-diagonal ln(R / |i − j| h)₊ / π E* depends on i − j alone, so C x is a
-    convolution, computed with FFTs of the Toeplitz part's circulant embedding (length
-    ≥ 2m − 1), plus each node's own diagonal less the Toeplitz one."""
+    """C of :class:`HalfPlaneModel` on nodes of a common grid (``abscissa`` sorted, node i
+    at s₀ + k_i h for integers k_i): equally spaced nodes (k_i = i), or a subset of such (a
+    profile a coarser level decimated, every fourth node and the last). Its off-diagonal
+    ln(R / |k_i − k_j| h)₊ / π E* depends on k_i − k_j alone, so C x is a convolution on
+    the grid, computed with FFTs of the Toeplitz part's circulant embedding (length ≥
+    2 g − 1 for g grid points), plus each node's own diagonal less the Toeplitz one."""
 
-    def __init__(self, abscissa: np.ndarray, share: np.ndarray, reach: float, scale: float):
-        m = len(abscissa)
-        spacing = (abscissa[-1] - abscissa[0]) / (m - 1)
-        offsets = np.arange(1, m) * spacing
-        toeplitz = np.empty(m)
+    def __init__(self, grid: np.ndarray, spacing: float, share: np.ndarray, reach: float, scale: float):
+        points = int(grid[-1]) + 1
+        offsets = np.arange(1, points) * spacing
+        toeplitz = np.empty(points)
         toeplitz[1:] = np.maximum(np.log(reach / offsets), 0.0)
         toeplitz[0] = np.log(2.0 * reach / spacing) + 1.0
-        self.length = sp_fft.next_fast_len(2 * m - 1, real=True)
+        self.length = sp_fft.next_fast_len(2 * points - 1, real=True)
         embedded = np.zeros(self.length)
-        embedded[:m] = toeplitz
-        embedded[self.length - m + 1:] = toeplitz[:0:-1]
+        embedded[:points] = toeplitz
+        embedded[self.length - points + 1:] = toeplitz[:0:-1]
         # The embedding is symmetric: its spectrum is real.
         self.spectrum = sp_fft.rfft(scale * embedded).real
         self.toeplitz = scale * toeplitz
         self.diagonal = scale * (np.log(2.0 * reach / share) + 1.0)
         self.correction = self.diagonal - self.toeplitz[0]
-        self.size = m
+        self.grid = grid
+        self.points = points
+        self.size = len(grid)
 
     @classmethod
     def of(cls, abscissa: np.ndarray, share: np.ndarray, reach: float, scale: float) -> "EvenCompliance | None":
-        """The even form of these nodes' C, or None when their spacings differ from their
-        mean by more than :data:`EVEN_SPACING` of it (or there are fewer than 2)."""
+        """The grid form of these nodes' C, or None: every spacing must be a whole multiple of
+        the grid's h (the least spacing over 1 to :data:`GRID_DIVISORS`) within
+        :data:`EVEN_SPACING` of h, on a grid of at most :data:`GRID_GROWTH` times the nodes
+        (or there are fewer than 2 nodes)."""
         if len(abscissa) < 2:
             return None
         spacings = np.diff(abscissa)
-        mean = (abscissa[-1] - abscissa[0]) / (len(abscissa) - 1)
-        if not mean > 0 or np.abs(spacings - mean).max() > EVEN_SPACING * mean:
+        least = float(spacings.min())
+        if not least > 0:
             return None
-        return cls(abscissa, share, reach, scale)
+        for divisor in range(1, GRID_DIVISORS + 1):
+            spacing = least / divisor
+            steps = np.rint(spacings / spacing)
+            if np.abs(spacings - steps * spacing).max() > EVEN_SPACING * spacing:
+                continue
+            if steps.sum() + 1 > GRID_GROWTH * len(abscissa):
+                return None
+            grid = np.concatenate([[0], np.cumsum(steps)]).astype(np.int64)
+            # Their mean spacing, not the least one: round-off spread over the whole span.
+            return cls(grid, float((abscissa[-1] - abscissa[0]) / grid[-1]), share, reach, scale)
+        return None
 
     def block(self, rows: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
         """C[rows][:, columns] (``columns`` default: ``rows``), gathered from the Toeplitz column."""
+        grid = self.grid
         if columns is None:
-            block = self.toeplitz[np.abs(rows[:, None] - rows[None, :])]
+            block = self.toeplitz[np.abs(grid[rows][:, None] - grid[rows][None, :])]
             block[np.diag_indices_from(block)] = self.diagonal[rows]
             return block
-        block = self.toeplitz[np.abs(rows[:, None] - columns[None, :])]
+        block = self.toeplitz[np.abs(grid[rows][:, None] - grid[columns][None, :])]
         same_row, same_column = np.nonzero(rows[:, None] == columns[None, :])
         block[same_row, same_column] = self.diagonal[rows[same_row]]
         return block
 
     def __matmul__(self, forces: np.ndarray) -> np.ndarray:
-        spread = sp_fft.irfft(sp_fft.rfft(forces, self.length) * self.spectrum, self.length)
-        return spread[:self.size] + self.correction * forces
+        if self.points == self.size:  # every grid point a node
+            spread = sp_fft.irfft(sp_fft.rfft(forces, self.length) * self.spectrum, self.length)
+            return spread[:self.size] + self.correction * forces
+        on_grid = np.zeros(self.points)
+        on_grid[self.grid] = forces
+        spread = sp_fft.irfft(sp_fft.rfft(on_grid, self.length) * self.spectrum, self.length)
+        return spread[self.grid] + self.correction * forces
 
     def near_contact(self, free: np.ndarray) -> np.ndarray:
         """Nodes near the contact set of Λ ≥ 0, free − C Λ ≤ 0, Λ (free − C Λ) = 0: a few

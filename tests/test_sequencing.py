@@ -148,6 +148,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     assert result.kernel.status is Status.CONVERGED and patch_count(result.kernel.active) >= 10
 
 
+@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("beside_from", [0, 10**9])
 def test_a_sequenced_rough_solve_has_the_answer_of_a_cold_start(monkeypatch, beside_from):
     """2 000 segments (about 15 000 unknowns, a few hundred patches): the pipeline predicts
