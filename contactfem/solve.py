@@ -229,7 +229,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
 
         def modelled_start() -> tuple[np.ndarray | None, dict]:
             # The model's first proposal, from the free body, while the worker analyses the
-            # pattern (rough base of 1 000 segments: 4 and 2.5 ms; of 4 000, 20 and 12).
+            # pattern (rough base of 1 000 segments: 3-4 and 2.5 ms; of 2 000, 7 and 5.6).
             start = translation_start(fine_soon.result()[0].system, unanalysed, tolerance, model)
             return (None if start is None else start[0]), {}
 
