@@ -59,6 +59,14 @@ MODEL_NODES = 1_600
 #: the rough base of 3 000 segments 52-62 ms cold with the model against 60-70 sequenced
 #: (fastest of 7, in turns); of 4 000, 74-85 against 71-80; of 6 000, 150 against 102.
 EVEN_MODEL_NODES = 3_000
+#: A cold start with the model replaces a coarser level only on bodies with at most this
+#: many unknowns per contact node: meshes graded onto ΓC, whose coarser level keeps much of
+#: the boundary (rough profiles 7, the Hertz disks and the rough rim 19-21). Where the
+#: interior dominates, the coarser level costs a sixteenth of the fine solve and predicts
+#: the set to a node or two: the square of 1 024 cells a side (2 048 unknowns per contact
+#: node), started cold with the model, took 6 steps and 2.5 linear solves against one step
+#: and 1.6 from its coarser level.
+MODEL_UNKNOWNS_PER_NODE = 40
 #: The largest set the model factorises (dense, n³ / 3): beyond, it proposes nothing.
 MODEL_BLOCK = 600
 #: Stages in which the first proposal, from the free body (no force anywhere), is pushed
@@ -301,11 +309,15 @@ class HalfPlaneModel:
         except (LinAlgError, MemoryError):
             return None
 
-    def replaces_coarser_level(self) -> bool:
-        """Whether a cold start with this model costs less than a coarser level's prediction:
-        for at most :data:`MODEL_NODES` contact nodes, :data:`EVEN_MODEL_NODES` equally
-        spaced ones."""
-        return len(self.abscissa) <= (EVEN_MODEL_NODES if self.even is not None else MODEL_NODES)
+    def replaces_coarser_level(self, unknowns: int) -> bool:
+        """Whether a cold start with this model costs less than a coarser level's prediction
+        for a body of ``unknowns``: for at most :data:`MODEL_NODES` contact nodes,
+        :data:`EVEN_MODEL_NODES` on a grid, and at most :data:`MODEL_UNKNOWNS_PER_NODE`
+        unknowns per contact node."""
+        nodes = len(self.abscissa)
+        if unknowns > MODEL_UNKNOWNS_PER_NODE * nodes:
+            return False
+        return nodes <= (EVEN_MODEL_NODES if self.even is not None else MODEL_NODES)
 
     def _settle(self, free: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The model's active set iteration on Λ ≥ 0, free − C Λ ≤ 0 from ``start``: its

@@ -197,7 +197,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     # no model: it keeps the coarser level.)
     model = (half_plane_model(problem.contact, problem.law, problem.mesh.points)
              if problem.free_modes is None else None)
-    modelled = model is not None and model.replaces_coarser_level()
+    modelled = model is not None and model.replaces_coarser_level(problem.n_unknowns)
     predicted_first = prediction_first(problem.contact.gap, tolerance)
     coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled and predicted_first
                     and "solve" not in kept and _worth_meshing(case, problem, kept))

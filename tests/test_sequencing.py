@@ -143,7 +143,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
                         lambda *args, **kwargs: workers.append(args) or real_executor(*args, **kwargs))
     result = solve_module.solve_case(case, problem=problem)
     model = half_plane_model(problem.contact, problem.law, problem.mesh.points)
-    model_first = model is not None and model.replaces_coarser_level()
+    model_first = model is not None and model.replaces_coarser_level(problem.n_unknowns)
     assert meshed == [] and len(workers) == int(model_first) and result.sequencing == {}
     assert result.kernel.status is Status.CONVERGED and patch_count(result.kernel.active) >= 10
 
@@ -793,3 +793,20 @@ def test_the_half_plane_correction_moves_only_nodes_near_a_predicted_patch_end()
     moved = np.flatnonzero(corrected != active)
     assert len(moved) > 0
     assert np.all(np.min(np.abs(s[moved][:, None] - ends[None, :]), axis=1) <= spacing + np.diff(s).max())
+
+
+def test_a_body_whose_interior_dominates_is_predicted_from_its_coarser_level():
+    """The square of 128 cells a side (33 000 unknowns, 129 contact nodes on a grid: well
+    within the model's node count) has 256 unknowns per contact node: its coarser level,
+    a sixteenth of it, predicts the set, and the fine solve settles in at most two steps on
+    one factorisation, where a cold start with the model would refactorise."""
+    from contactfem.solve import prepare, solve_case
+
+    case = case_from(square_case_dict(128))
+    problem = prepare(case)
+    model = half_plane_model(problem.contact, problem.law, problem.mesh.points)
+    assert model is not None and model.even is not None
+    assert not model.replaces_coarser_level(problem.n_unknowns)
+    result = solve_case(case, problem=problem)
+    assert result.sequencing["coarse_unknowns"] < problem.n_unknowns / 8
+    assert result.kernel.iterations <= 2 and result.kernel.factorizations == 1
