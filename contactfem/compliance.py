@@ -410,10 +410,10 @@ class _SetSolves:
     def solve(self, on: np.ndarray, free: np.ndarray) -> np.ndarray:
         """x on the sorted nodes ``on``, C[on, on] x = free[on]."""
         base = self.base
-        within = np.isin(on, base, assume_unique=True)
-        added = on[~within]
-        removed_at = np.flatnonzero(~np.isin(base, on, assume_unique=True))  # positions in the base
-        changes = len(added) + len(removed_at)
+        within = np.isin(on, base, assume_unique=True)  # on's nodes the base has
+        kept = np.isin(base, on, assume_unique=True)  # the base's nodes still on
+        added, removed_at = on[~within], np.flatnonzero(~kept)  # removed: positions in the base
+        a, changes = len(added), len(added) + len(removed_at)
         if self.factor is None or changes > max(4, self.REBASE_SHARE * len(base)):
             self.base = on
             self.factor = cho_factor(self.block(on), overwrite_a=True, check_finite=False)
@@ -421,13 +421,12 @@ class _SetSolves:
         b0 = free[base]
         b0[removed_at] = 0.0  # held at zero by μ: its own entry is immaterial
         coupling = self.block(base, added)  # C0A
-        right = np.zeros((len(base), 1 + len(added) + len(removed_at)))
+        right = np.zeros((len(base), 1 + changes))
         right[:, 0] = b0
-        right[:, 1:1 + len(added)] = coupling
-        right[removed_at, 1 + len(added) + np.arange(len(removed_at))] = 1.0
+        right[:, 1:1 + a] = coupling
+        right[removed_at, 1 + a + np.arange(len(removed_at))] = 1.0
         solved = cho_solve(self.factor, right, check_finite=False)
-        z, z_added, y_removed = solved[:, 0], solved[:, 1:1 + len(added)], solved[:, 1 + len(added):]
-        a = len(added)
+        z, z_added, y_removed = solved[:, 0], solved[:, 1:1 + a], solved[:, 1 + a:]
         bordered = np.empty((changes, changes))
         bordered[:a, :a] = self.block(added) - coupling.T @ z_added
         bordered[a:, :a] = -z_added[removed_at]
@@ -439,6 +438,6 @@ class _SetSolves:
         x_base = z - z_added @ x_added - y_removed @ multipliers
         # Back onto the sorted set: the base's kept nodes and the added ones.
         forces = np.empty(len(on))
-        forces[within] = x_base[np.isin(base, on, assume_unique=True)]
+        forces[within] = x_base[kept]
         forces[~within] = x_added
         return forces

@@ -74,6 +74,8 @@ def test_the_command_starts_numpy_and_scipy_with_one_openblas_thread():
                          timeout=120, check=True)
     variable, *counts = run.stdout.split()
     assert variable == "1"
+    if not counts:
+        pytest.skip("numpy and SciPy bundle no OpenBLAS to ask (not pip's wheels)")
     assert all(count == "1" for count in counts), run.stdout
 
 
@@ -82,4 +84,6 @@ def test_the_command_keeps_the_users_thread_count():
                          env=_clean_environment(OPENBLAS_NUM_THREADS="2"), timeout=120, check=True)
     variable, *counts = run.stdout.split()
     assert variable == "2"
+    if not counts:
+        pytest.skip("numpy and SciPy bundle no OpenBLAS to ask (not pip's wheels)")
     assert all(count == "2" for count in counts), run.stdout
