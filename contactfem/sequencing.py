@@ -34,6 +34,7 @@ from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.compliance import half_plane_compliance, plane_strain_modulus
 from contactfem.discretize import ContactBoundary
+from contactfem.discretize.meshing import estimate_triangles
 from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
 from contactfem.linalg import factorize
@@ -47,6 +48,21 @@ SEQUENCING_THRESHOLD = 5_000
 # against 1/4 for halving, and mispredicts only nodes next to the ends of the zone, which
 # the kernel's cached Schur columns absorb (measured on the square: 1024 from 256).
 COARSENING = 4
+#: The share of the fine level's estimated triangles a polygon's coarser level keeps at
+#: most: about the sixteenth that h four times larger leaves of a uniform mesh. A mesh
+#: graded onto its boundary (a long profile, a contact size) keeps a quarter at four times
+#: h, its triangles following the boundary's edges, and its coarse level then cost more
+#: than the fine level's system and analysis beside it: its boundary and sizes are
+#: coarsened by 8, then 16 (COARSENING squared), until the estimate is within this share.
+#: Rough profile of 4 000 points (26 700 unknowns): 62-67 ms against 69-75 with a quarter
+#: kept; of 8 000, 104-123 against 135-167; the Hertz platen (16 000 unknowns): 36 against
+#: 52 ms; each with as many fine Newton steps and one fine factorisation.
+COARSE_SHARE = 1 / 12
+#: Each further doubling must leave at most this share of the last level's estimated
+#: triangles (a half where the boundary sets them): the teeth of a tread, whose tips
+#: cannot be decimated, left 0.66 and 0.75 of the estimate, and 0.91 and 0.93 of the
+#: unknowns once meshed.
+FURTHER_COARSENING_SHARE = 0.6
 #: What a coarse level's contact solve costs, in linear solves of its own size, once
 #: predicted from the level below: 1.3–3 measured on the square and the rough profiles.
 COARSE_LEVEL_SOLVES = 3.0
@@ -128,9 +144,12 @@ def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int, meshed: bool = T
     return cost < EXPECTED_SAVING_SOLVES
 
 
-def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Case, int] | None:
+def coarser(case: Case, refinements: int, factor: int | None = None) -> tuple[Case, int] | None:
     """The same case on a mesh ``factor`` times coarser (or twice, if that is all the
-    mesh allows), with its refinement count; None if it cannot be coarsened.
+    mesh allows), with its refinement count; None if it cannot be coarsened. By default
+    :data:`COARSENING`, and for an unrefined polygon whose coarse level would keep more than
+    :data:`COARSE_SHARE` of its estimated triangles, twice or four times that, as long as
+    each doubling halves the estimate about (see :data:`FURTHER_COARSENING_SHARE`).
 
     A rectangle's divisions shrink by ``factor`` (or 2) along each side that keeps
     :data:`MIN_CELLS_ACROSS` of them, or all it has if fewer (see :func:`_coarser_rectangle`).
@@ -138,6 +157,24 @@ def coarser(case: Case, refinements: int, factor: int = COARSENING) -> tuple[Cas
     the coarse mesh's edge length are decimated by the same factor (see
     :func:`decimated_loop`); a loop whose decimation would not be simple keeps its vertices.
     """
+    if factor is not None:
+        return _coarser_by(case, refinements, factor)
+    factor = COARSENING
+    coarse = _coarser_by(case, refinements, factor)
+    if coarse is None or refinements or not isinstance(case.geometry, PolygonGeometry):
+        return coarse
+    fine, estimate = estimate_triangles(case, refinements), estimate_triangles(*coarse)
+    while factor < COARSENING**2 and estimate > COARSE_SHARE * fine:
+        further = _coarser_by(case, refinements, 2 * factor)
+        further_estimate = estimate_triangles(*further) if further is not None else estimate
+        if further_estimate > FURTHER_COARSENING_SHARE * estimate:
+            break
+        factor, coarse, estimate = 2 * factor, further, further_estimate
+    return coarse
+
+
+def _coarser_by(case: Case, refinements: int, factor: int) -> tuple[Case, int] | None:
+    """:func:`coarser` by the given ``factor``."""
     if isinstance(case.geometry, RectangleGeometry):
         return _coarser_rectangle(case, refinements, factor)
     if refinements >= 1:

@@ -74,7 +74,7 @@ def test_a_rough_base_is_decimated_with_its_mesh_and_stays_a_valid_polygon():
     """400 base segments, coarse edge length 4x the segments': every fourth vertex is kept
     (100 segments), the three other edges unchanged, counter-clockwise, named as before."""
     case = rough_polygon_case(400)
-    coarse, refine = coarser(case, 0)
+    coarse, refine = coarser(case, 0, factor=4)
     assert refine == 0 and coarse.mesh.size == pytest.approx(4 * case.mesh.size)
     loop = coarse.geometry.outer
     assert loop.edge_names.count("base") == 100
@@ -83,8 +83,41 @@ def test_a_rough_base_is_decimated_with_its_mesh_and_stays_a_valid_polygon():
     fine = case.geometry.outer.vertices
     np.testing.assert_array_equal(loop.vertices[:101], fine[:401:4])
     # Twice more: 25 segments, then 7 (the run's last vertex is always kept).
-    twice, _ = coarser(coarse, 0)
+    twice, _ = coarser(coarse, 0, factor=4)
     assert twice.geometry.outer.edge_names.count("base") == 25
+
+
+def test_a_mesh_graded_onto_its_boundary_is_coarsened_until_it_keeps_a_sixteenth():
+    """A rough base's triangles follow its edges: four times h keeps a quarter of them
+    (less where the interior's coarser mesh holds some), so the base is decimated further,
+    by 8 or 16, the first that keeps at most COARSE_SHARE (about the sixteenth that four
+    times h keeps of a uniform mesh). The teeth of a tread, whose tips keep their edges,
+    and a shipped polygon meshed uniformly stay at four."""
+    import sys
+    from pathlib import Path
+
+    from contactfem.case import load_case
+    from contactfem.discretize.meshing import estimate_triangles
+    from contactfem.sequencing import COARSE_SHARE
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from fragmented import teeth_case
+
+    cases = Path(__file__).resolve().parents[1] / "cases"
+    # The test's block, its interior meshed at 28 base segments: 0.18, 0.082 and 0.040 of
+    # the triangles at 4, 8 and 16; the shipped one at 4 segments: 0.25, 0.12 and 0.061.
+    for case, factor in ((rough_polygon_case(1600), 8), (load_case(cases / "rough.yaml"), 16)):
+        coarse, refine = coarser(case, 0)
+        assert refine == 0 and coarse.mesh.size == pytest.approx(factor * case.mesh.size)
+        segments = case.geometry.outer.edge_names.count("base")
+        assert coarse.geometry.outer.edge_names.count("base") == -(-segments // factor)
+        fine = estimate_triangles(case, 0)
+        assert estimate_triangles(coarse, 0) <= COARSE_SHARE * fine
+        half, _ = coarser(case, 0, factor=factor // 2)
+        assert estimate_triangles(half, 0) > COARSE_SHARE * fine
+    for kept in (teeth_case(80), load_case(cases / "hole.yaml")):
+        coarse, _ = coarser(kept, 0)
+        assert coarse.mesh.size == pytest.approx(4 * kept.mesh.size)
 
 
 def test_edges_already_as_long_as_the_coarse_mesh_are_kept():
