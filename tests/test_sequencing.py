@@ -792,8 +792,10 @@ def test_the_half_plane_correction_predicts_the_fine_zone_better(name, refine):
 
 
 def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monkeypatch):
-    """The correction is only a start: a compliance block the factorisation refuses leaves
-    the interpolated prediction as it was."""
+    """The correction is only a start: a compliance block the factorisation refuses (sparse,
+    or banded) leaves the interpolated prediction as it was."""
+    from scipy.linalg import LinAlgError
+
     import contactfem.sequencing as sequencing
     from contactfem.errors import SolverError
 
@@ -803,7 +805,11 @@ def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monke
     def refuse(*args, **kwargs):
         raise SolverError("not positive definite")
 
+    def refuse_banded(*args, **kwargs):
+        raise LinAlgError("not positive definite")
+
     monkeypatch.setattr(sequencing, "factorize", refuse)
+    monkeypatch.setattr(sequencing, "solveh_banded", refuse_banded)
     assert np.array_equal(sequencing.predict_active_set(problem.contact, coarse, c, problem.law), plain)
 
 
@@ -843,3 +849,32 @@ def test_a_body_whose_interior_dominates_is_predicted_from_its_coarser_level():
     result = solve_case(case, problem=problem)
     assert result.sequencing["coarse_unknowns"] < problem.n_unknowns / 8
     assert result.kernel.iterations <= 2 and result.kernel.factorizations == 1
+
+
+@pytest.mark.parametrize("neighbours", [16, 200])
+def test_the_asperity_correction_solves_its_blocks_to_round_off_banded_or_not(neighbours):
+    """A block of nodes in order along ΓC couples only within reach: with at most
+    ASPERITY_BAND diagonals it is solved banded (16 neighbours), beyond it by a sparse
+    factorisation (200, about 120 diagonals); either way to round-off of the direct solve."""
+    import scipy.sparse.linalg as spla
+
+    from contactfem import sequencing
+    from contactfem.compliance import half_plane_compliance
+
+    m = 2000
+    spacing = 1.0 / m
+    s = (np.arange(m) + np.random.default_rng(3).uniform(-0.05, 0.05, m)) * spacing  # a profile's abscissae
+    compliance = half_plane_compliance(s, np.full(m, spacing), neighbours * spacing, 1.0)
+    on = np.flatnonzero(np.random.default_rng(4).uniform(size=m) < 0.6)
+    rhs = np.random.default_rng(5).uniform(size=len(on))
+    block = compliance[on][:, on].tocsc()
+    expected = spla.spsolve(block, rhs)
+    lower = sequencing._lower_entries(compliance)
+    position = np.full(m, -1)
+    position[on] = np.arange(len(on))
+    kept = (position[lower[0]] >= 0) & (position[lower[1]] >= 0)
+    width = (position[lower[0][kept]] - position[lower[1][kept]]).max()
+    assert (width <= sequencing.ASPERITY_BAND) == (neighbours == 16)
+    solved = sequencing._block_solve(compliance, lower, on, rhs)
+    assert np.abs(block @ solved - rhs).max() <= 1e-12 * np.abs(rhs).max() * np.linalg.cond(block.toarray(), 1) ** 0.5
+    assert np.abs(solved - expected).max() <= 1e-10 * np.abs(expected).max()
