@@ -90,8 +90,9 @@ def test_the_models_contact_problem_settles_to_its_own_conditions_whatever_the_s
 def test_even_spacing_products_are_the_columns_products():
     """On equally spaced nodes (half shares at the ends) C x by FFTs equals the product
     of the columns (Flamant's log, computed node by node) to 1e-12 of its largest entry,
-    for random x of both signs and for single nodes, and its gathered blocks are the
-    columns' entries to 1e-14; graded nodes have no even form."""
+    for random x of both signs and for single nodes (the first and last ones meet the
+    circulant's wrap), and its gathered blocks are the columns' entries to 1e-14; graded
+    nodes have no even form."""
     m = 257
     s = np.linspace(-0.3, 0.7, m)
     share = np.full(m, 1.0 / (m - 1))
@@ -101,12 +102,15 @@ def test_even_spacing_products_are_the_columns_products():
     columns.even = None
     nodes = np.arange(m)
     rng = np.random.default_rng(2)
-    for x in (rng.normal(size=m), np.eye(m)[0], np.eye(m)[128]):
+    for x in (rng.normal(size=m), np.eye(m)[0], np.eye(m)[128], np.eye(m)[-1]):
         exact = columns._times(nodes, x)
         assert np.abs(even @ x - exact).max() <= 1e-12 * np.abs(exact).max()
     some = np.sort(rng.choice(m, 40, replace=False))
     assert np.abs(even.block(some) - columns._block(some)).max() <= 1e-14 * columns._block(some).max()
     assert _model()[0].even is None
+    # Offsets of R = 0.35 or more (90 h) couple nothing: the circulant needs m + 89 points,
+    # not 2 m - 1, and the products above held with it.
+    assert m + 89 <= even.length < 2 * m - 1
 
 
 def _kernel_pair(problem, method: str = "positive", model=None):
