@@ -185,7 +185,7 @@ class EvenCompliance:
         grid = self.grid
         if columns is None:
             block = self.toeplitz[np.abs(grid[rows][:, None] - grid[rows][None, :])]
-            block[np.diag_indices_from(block)] = self.diagonal[rows]
+            block.flat[::len(rows) + 1] = self.diagonal[rows]
             return block
         block = self.toeplitz[np.abs(grid[rows][:, None] - grid[columns][None, :])]
         same_row, same_column = np.nonzero(rows[:, None] == columns[None, :])

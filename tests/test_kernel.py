@@ -544,15 +544,20 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     assert (linear.scaled_store is linear.forward_store) == (route == "library")
 
 
+@pytest.mark.parametrize("dense_entries", [0, 10**12])
 @pytest.mark.parametrize("scaled", [False, True])
-def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled):
+def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled, dense_entries, monkeypatch):
     """Wᵀ S for sparse forward columns is the dense product to round-off, whether the rows
     that many columns share (the elimination tree's top) go through dense blocks and the
-    others through a sparse product, or all of them one way; and for new columns against
-    all of them (the rows a store of Schur blocks gains)."""
+    others through a sparse product, or all of them one way, or the new columns are made
+    dense (a few of them); and for new columns against all of them (the rows a store of
+    Schur blocks gains)."""
     import scipy.sparse as sp
 
+    import contactfem.kernel as kernel
     from contactfem.kernel import _cross
+
+    monkeypatch.setattr(kernel, "DENSE_CROSS_ENTRIES", dense_entries)
 
     rng = np.random.default_rng(11)
     n, k = 5000, 40
