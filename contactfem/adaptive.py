@@ -22,6 +22,7 @@ from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.estimator import Estimate, estimate
 from contactfem.mesh import Mesh
 from contactfem.mesh.adapt import bisect, dorfler_mark, label_longest_edge, min_angle
+from contactfem.mesh.core import coordinate_span
 from contactfem.mesh.transfer import interpolate_p1
 from contactfem.norms import exact_errors
 from contactfem.report import case_record
@@ -221,7 +222,7 @@ def common_refinement(mesh: Mesh, other: Mesh, *, max_rounds: int = 200) -> Mesh
     from matplotlib.tri import Triangulation
     from scipy.spatial import cKDTree
 
-    scale = float(np.ptp(mesh.points, axis=0).max())
+    scale = float(coordinate_span(mesh.points).max())
     for _ in range(max_rounds):
         distance, _ = cKDTree(mesh.points).query(other.points)
         missing = other.points[distance > 1e-12 * scale]

@@ -45,6 +45,7 @@ from contactfem.errors import CaseError, MeshError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
 from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
 from contactfem.linalg import BACKEND_CHOICES
+from contactfem.mesh.core import coordinate_span
 from contactfem.mesh.polygon import (
     CLOCKWISE,
     Arc,
@@ -1418,7 +1419,7 @@ def _hole(r: _Reader, data: Any, key: str, extent: float, source: Path, limit: i
             raise r.fail(f"{key}.name", data["name"], "a polygonal hole names each of its edges instead")
         loop = _listed_loop(r, data, key, source, limit)
         least = extent / MAX_DIVISIONS
-        span = float(np.ptp(loop.vertices, axis=0).min())
+        span = float(coordinate_span(loop.vertices).min())
         if span < least:
             raise r.fail(f"{key}.vertices", loop.vertices.tolist(),
                          f"the hole is {span:.3g} across; expected at least the body's extent / {MAX_DIVISIONS} "
@@ -1451,7 +1452,7 @@ def _check_holes_inside(r: _Reader, key: str, outer: Loop, holes: list[Loop]) ->
 def _check_extent(r: _Reader, key: str, points: np.ndarray) -> None:
     """The body must be resolvable in float64: both sides of its bounding box at least
     1/SCALE_LIMIT and 1e-9 of its distance from the origin (or the mesh degenerates)."""
-    span = np.ptp(points, axis=0)
+    span = coordinate_span(points)
     far = float(np.abs(points).max())
     least = max(1.0 / SCALE_LIMIT, 1e-9 * far)
     if span.min() < least and not (len(points) < 3 and span.max() >= least):
@@ -1539,7 +1540,7 @@ def _extent(geometry: Geometry) -> float | None:
         return max(geometry.upper[0] - geometry.lower[0], geometry.upper[1] - geometry.lower[1])
     if isinstance(geometry, PolygonGeometry):
         v = geometry.outer.vertices
-        span = np.ptp(v, axis=0).max()
+        span = coordinate_span(v).max()
         arcs = geometry.outer.edge_arcs
         radii = [np.hypot(*(v[i] - arcs[i].center)) for i in geometry.outer.arc_edges.tolist()]
         return float(max([span, *(2 * rr for rr in radii)]))

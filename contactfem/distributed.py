@@ -59,6 +59,7 @@ from contactfem.kernel import (
     solve_contact,
 )
 from contactfem.linalg import SINGULARITY_LIMIT, FactorCheck, probe_vector
+from contactfem.mesh.core import coordinate_span
 from contactfem.methods import get_method
 from contactfem.sequencing import starting_set
 
@@ -151,7 +152,7 @@ def node_order(points: np.ndarray) -> np.ndarray:
     rank's interface with its neighbours is one cut of O(√n) nodes, and the triangles a
     rank assembles touch few rows owned elsewhere. Deterministic, so every rank finds it.
     """
-    extent = np.ptp(points, axis=0)
+    extent = coordinate_span(points)
     major = 0 if extent[0] >= extent[1] else 1
     return np.lexsort((points[:, 1 - major], points[:, major]))
 

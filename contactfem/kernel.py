@@ -1281,6 +1281,7 @@ class ActiveSetSolver:
         on_diagonal = rows == k.indices
         if int(np.count_nonzero(on_diagonal)) != n:
             raise ValueError("the stiffness matrix must store its whole diagonal")
+        largest_diagonal = float(np.abs(k.data[on_diagonal]).max(initial=0.0))
         # What is factorised for an active set lives in one pattern, so that CHOLMOD's
         # analysis serves every set: K's without the couplings of the supports, which are
         # fixed for good (the contact normals are masked inside it). Kept as stored zeros,
@@ -1321,8 +1322,7 @@ class ActiveSetSolver:
         #: The force that strains the body by its whole size (largest stiffness entry times
         #: its size), the force scale of an iterate without any force (see measure); 0 without
         #: a length scale.
-        self.force_unit = (float(np.abs(k.diagonal()).max(initial=0.0)) * float(system.length_scale)
-                           if system.length_scale else 0.0)
+        self.force_unit = largest_diagonal * float(system.length_scale) if system.length_scale else 0.0
         self._masked_matrix: sp.csr_matrix | None = None
         self._probe: np.ndarray | None = None  # the singularity probe, restricted to each set's equations
         self._masked_fixed: np.ndarray | None = None

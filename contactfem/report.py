@@ -15,6 +15,7 @@ from contactfem import __version__
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem
 from contactfem.discretize.contact import contact_patches
+from contactfem.mesh.core import coordinate_span
 from contactfem.methods import get_method
 from contactfem.result import Solution
 
@@ -230,7 +231,7 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
 
     applied, contact, support = (resultant(v) for v in (problem.load, contact_force, reactions))
     total = np.add(np.add(applied, contact), support)
-    length = np.ptp(points, axis=0).max()
+    length = coordinate_span(points).max()
     scale = np.abs(applied) + np.abs(contact) + np.abs(support)
     force_scale = max(scale[0], scale[1], scale[2] / length, force_unit, np.finfo(float).tiny)
     return {
@@ -383,7 +384,7 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     moment = float(sum(entry["moment"] for entry in entries.values()))
     scale = max(sum(float(np.hypot(*entry["force"])) for entry in entries.values()), force_unit,
                 np.finfo(float).tiny)
-    length = float(np.ptp(points, axis=0).max())
+    length = float(coordinate_span(points).max())
     return {"moment_about": centre.tolist(), "parts": entries,
             "total": {"force": force.tolist(), "moment": moment,
                       "relative_force_residual": float(np.hypot(*force) / scale),

@@ -635,3 +635,15 @@ def test_a_loops_edge_attributes_as_arrays_match_its_edges():
     disk = half_disk()
     assert disk.arc_edges.tolist() == [0]
     assert disk.on_parts(["flat"]).tolist() == [False, True]
+
+
+def test_coordinate_span_is_each_coordinates_range():
+    """The range of each coordinate, as np.ptp along the first axis gives it, for points
+    in the plane and in space; zeros for no points."""
+    from contactfem.mesh import coordinate_span
+
+    rng = np.random.default_rng(7)
+    for shape in ((3600, 2), (50, 3), (1, 2)):
+        points = rng.normal(size=shape) * np.arange(1, shape[1] + 1)
+        assert np.array_equal(coordinate_span(points), np.ptp(points, axis=0))
+    assert np.array_equal(coordinate_span(np.zeros((0, 2))), np.zeros(2))

@@ -15,6 +15,7 @@ from contactfem.mesh import (
     structured_rectangle,
     triangulate_domain,
 )
+from contactfem.mesh.core import coordinate_span
 from contactfem.mesh.polygon import loop_signed_area
 
 
@@ -56,7 +57,7 @@ def estimate_triangles(case: Case, refine: int | None = None) -> int:
         base = (4 if settings.diagonal == "crossed" else 2) * nx * ny
     elif isinstance(geometry, PolygonGeometry):
         v = geometry.outer.vertices
-        span = np.ptp(v, axis=0)
+        span = coordinate_span(v)
         extent = max(span.max(), 1e-300)
         # The body's area (its outer loop's, arcs included) over the area of an equilateral
         # triangle of side h, twice: Triangle makes 1.5-1.6 triangles per such area under

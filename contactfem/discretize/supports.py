@@ -12,6 +12,7 @@ from contactfem.case import Case
 from contactfem.discretize.finite import refuse_non_finite
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
+from contactfem.mesh.core import coordinate_span
 
 if TYPE_CHECKING:
     from contactfem.discretize.contact import ContactBoundary
@@ -138,7 +139,7 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.n
     normal /= np.linalg.norm(normal)
     points = mesh.points[np.unique(edges)]
     offset = (points - points[0]) @ normal
-    extent = np.ptp(mesh.points, axis=0).max()
+    extent = coordinate_span(mesh.points).max()
     if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
         raise CaseError(
             f"{case.source.name}: boundary.{name} = {kind}: the part is not straight; "

@@ -8,7 +8,7 @@ libraries (Triangle, meshio).
 from importlib import import_module
 
 _WHERE = {
-    "Circle": "core", "Mesh": "core",
+    "Circle": "core", "Mesh": "core", "coordinate_span": "core",
     "read_gmsh": "gmsh_io", "write_gmsh": "gmsh_io",
     "Arc": "polygon", "Loop": "polygon", "circle_loop": "polygon", "polygon_problems": "polygon",
     "triangulate_domain": "polygon",
