@@ -89,9 +89,10 @@ FORWARD_COLUMNS_FROM = 100_000
 #: (a plate with a hole at 42 000 took 1.07x the time with forward ones: two changed
 #: nodes, one more full solve).
 SIMPLICIAL_FORWARD_COLUMNS_FROM = 5_000
-#: The largest share of the unknowns a forward column may touch, on average over a sample
-#: of :data:`PATH_SAMPLES` contact normals, for a simplicial factor below
-#: :data:`FORWARD_COLUMNS_FROM` unknowns to take forward columns: the column of e_j is the
+#: The largest share of the unknowns a forward column may touch, on average over the first
+#: columns a step takes (or a sample of :data:`PATH_SAMPLES` contact normals, when a cost
+#: decision needs them first), for a simplicial factor below :data:`FORWARD_COLUMNS_FROM`
+#: unknowns to go on with forward columns: the column of e_j is the
 #: elimination tree's path from j, 3% of the unknowns on a rough profile's graded mesh of
 #: 7 000, 0.7% at 52 000, but 42% on a wavy strip of 5 120 (a long thin mesh, its tree
 #: nearly a chain), where forward columns and their Schur blocks took twice the time of
@@ -1608,8 +1609,10 @@ class ActiveSetSolver:
         forward_from = (SIMPLICIAL_FORWARD_COLUMNS_FROM
                         if getattr(self.factor, "simplicial", False) or self.scalable else FORWARD_COLUMNS_FROM)
         self.forward = callable(getattr(self.factor, "forward_sparse", None)) and k.shape[0] >= forward_from
-        if self.forward and k.shape[0] < FORWARD_COLUMNS_FROM:
-            self.forward = self._short_paths(active)
+        #: Whether the forward route stands only while its paths prove short (see _slots).
+        self.checks_paths = self.forward and k.shape[0] < FORWARD_COLUMNS_FROM
+        if self.checks_paths and self.path_share is not None:
+            self.forward = self.path_share <= FORWARD_PATH_SHARE
         if self.column_seconds is None:
             self.column_seconds = self.solve_seconds * (0.25 if self.forward else 1.0)
         if self.scalable:
@@ -1669,7 +1672,8 @@ class ActiveSetSolver:
     def _short_paths(self, active: np.ndarray) -> bool:
         """Whether the forward columns of this pattern touch at most :data:`FORWARD_PATH_SHARE`
         of the unknowns, measured once from the columns of e_j at an even sample of the
-        free contact normals (a fixed one's column is e_j itself)."""
+        free contact normals (a fixed one's column is e_j itself): for a cost decision that
+        needs them before any column is taken (:meth:`_slots` measures the first ones)."""
         if self.path_share is None:
             free = self.normal_dofs[~active]
             if len(free) == 0:
@@ -1724,6 +1728,17 @@ class ActiveSetSolver:
             count = self.column_count
             if self.forward:
                 forward, scaled = self.factor.forward_sparse(rhs)
+                if self.checks_paths and count == 0:
+                    # The paths measured on the first columns a step asks for (unless a cost
+                    # decision sampled them first), instead of a sample solved for them
+                    # alone (0.6 ms of a 17 ms solve at 7 000 unknowns): a long thin mesh's
+                    # columns go on as full ones.
+                    if self.path_share is None:
+                        self.path_share = forward.nnz / len(missing) / n
+                    if self.path_share > FORWARD_PATH_SHARE:
+                        self.forward = False
+                        self.column_store = np.empty((n, 0), order="F")
+            if self.forward:
                 self.forward_store = sp.hstack([self.forward_store, forward], format="csc")
                 # An LLᵀ factor has D = I: the scaled columns are the forward ones, kept once.
                 self.scaled_store = (self.forward_store if scaled is forward
