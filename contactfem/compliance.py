@@ -65,7 +65,7 @@ EVEN_MODEL_NODES = 3_000
 #: interior dominates, the coarser level costs a sixteenth of the fine solve and predicts
 #: the set to a node or two: the square of 1 024 cells a side (2 048 unknowns per contact
 #: node), started cold with the model, took 6 steps and 2.5 linear solves against one step
-#: and 1.6 from its coarser level.
+#: and 1.1-1.3 from its coarser level.
 MODEL_UNKNOWNS_PER_NODE = 40
 #: The largest set the model factorises (dense, n³ / 3): beyond, it proposes nothing.
 MODEL_BLOCK = 600

@@ -1459,7 +1459,7 @@ class ActiveSetSolver:
                 if self.path_share is None and update + blocks_per_path * len(self.free) > self.refactorization_seconds:
                     # Sampling costs a few columns (and, for a supernodal factor, its
                     # conversion): only when even the longest paths could change the answer.
-                    self._short_paths(self.reference)
+                    self._sample_paths(self.reference)
                 path = np.sqrt(len(self.free)) if self.path_share is None else self.path_share * len(self.free)
             update += blocks_per_path * path
         return bool(update > self.refactorization_seconds)
@@ -1669,21 +1669,18 @@ class ActiveSetSolver:
         self._masked_fixed = fixed.copy()
         return self._masked_matrix
 
-    def _short_paths(self, active: np.ndarray) -> bool:
-        """Whether the forward columns of this pattern touch at most :data:`FORWARD_PATH_SHARE`
-        of the unknowns, measured once from the columns of e_j at an even sample of the
+    def _sample_paths(self, active: np.ndarray) -> None:
+        """Measure :attr:`path_share` once from the columns of e_j at an even sample of the
         free contact normals (a fixed one's column is e_j itself): for a cost decision that
-        needs them before any column is taken (:meth:`_slots` measures the first ones)."""
-        if self.path_share is None:
-            free = self.normal_dofs[~active]
-            if len(free) == 0:
-                return False  # nothing to measure this time
-            sample = np.unique(free[np.linspace(0, len(free) - 1, PATH_SAMPLES).astype(np.int64)])
-            n = self.stiffness.shape[0]
-            rhs = sp.csc_matrix((np.ones(len(sample)), (sample, np.arange(len(sample)))), shape=(n, len(sample)))
-            forward, _ = self.factor.forward_sparse(rhs)
-            self.path_share = forward.nnz / len(sample) / n
-        return self.path_share <= FORWARD_PATH_SHARE
+        needs it before any column is taken (:meth:`_slots` measures the first ones)."""
+        free = self.normal_dofs[~active]
+        if self.path_share is not None or len(free) == 0:
+            return  # measured, or nothing to measure this time
+        sample = np.unique(free[np.linspace(0, len(free) - 1, PATH_SAMPLES).astype(np.int64)])
+        n = self.stiffness.shape[0]
+        rhs = sp.csc_matrix((np.ones(len(sample)), (sample, np.arange(len(sample)))), shape=(n, len(sample)))
+        forward, _ = self.factor.forward_sparse(rhs)
+        self.path_share = forward.nnz / len(sample) / n
 
     def _entries_of(self, dofs: np.ndarray) -> np.ndarray | None:
         """Positions in the pattern of every entry in the rows and columns of ``dofs`` (the

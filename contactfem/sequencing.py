@@ -169,8 +169,8 @@ def coarser(case: Case, refinements: int, factor: int | None = None) -> tuple[Ca
     fine, estimate = estimate_triangles(case, refinements), estimate_triangles(*coarse)
     while factor < COARSENING**2 and estimate > COARSE_SHARE * fine:
         further = _coarser_by(case, refinements, 2 * factor)
-        further_estimate = estimate_triangles(*further) if further is not None else estimate
-        if further_estimate > FURTHER_COARSENING_SHARE * estimate:
+        further_estimate = None if further is None else estimate_triangles(*further)
+        if further_estimate is None or further_estimate > FURTHER_COARSENING_SHARE * estimate:
             break
         factor, coarse, estimate = 2 * factor, further, further_estimate
     return coarse
