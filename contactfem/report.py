@@ -90,7 +90,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         },
         "newton": [
             {"iteration": i + 1, **{k: getattr(r, k) for k in
-                                    ("active", "added", "removed", "extrapolated", "modelled",
+                                    ("active", "added", "removed", "proposed", "proposer",
                                      "equilibrium_residual", "complementarity_residual", "seconds")}}
             for i, r in enumerate(kernel.history)
         ],

@@ -69,8 +69,8 @@ class Solution:
     newton : dict of str to ndarray
         Per Newton iteration (1-based), equal-length arrays: ``active`` (size of the
         active set), ``added``, ``removed`` (nodes entering / leaving it),
-        ``extrapolated`` (of those, the nodes by which the set differs from Newton's
-        update: a creeping contact zone moved ahead), ``equilibrium_residual`` and
+        ``proposed`` (of those, the nodes by which the set differs from Newton's update:
+        an accelerator's proposal taken), ``equilibrium_residual`` and
         ``complementarity_residual`` (relative).
     cell_fields : dict of str to (n_triangles,) ndarray
         Extra per-triangle fields, e.g. ``error_indicator`` (η_T of the residual

@@ -29,11 +29,10 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import LinAlgError, cho_factor, cho_solve, solveh_banded
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from contactfem.assembly import Elasticity
 from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
-from contactfem.compliance import half_plane_compliance, plane_strain_modulus
 from contactfem.discretize import ContactBoundary
 from contactfem.discretize.meshing import estimate_triangles
 from contactfem.errors import SolverError
@@ -108,8 +107,6 @@ COLUMNS_PER_FACTORIZATION = 20
 ASPERITY_ITERATIONS = 8
 #: Unknowns of the half-plane correction up to which its blocks are factorised dense.
 ASPERITY_DENSE_UP_TO = 300
-#: Diagonals on either side up to which a larger block is solved as a banded matrix.
-ASPERITY_BAND = 64
 #: Fine contact nodes on either side within the half-plane correction's reach at most (the
 #: coarse level's spacing, four fine ones on the rough profiles): its compliance matrix
 #: has at most 2 x this + 1 entries a row.
@@ -422,13 +419,7 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     :data:`ASPERITY_ITERATIONS` steps; its set is the prediction. Any failure (a block
     that is not positive definite) keeps ``active``.
 
-    Measured (mispredicted nodes, then the fine level's Newton steps): rough block of 1 000,
-    4 000, 16 000 and 64 000 segments, 47 → 23, 122 → 63, 387 → 183, 1 165 → 636, and a
-    step fewer up to 16 000 (at 64 000, a factorisation fewer); the Hertz disk 2 → 0, 3
-    steps → 1. It cost 0.3 ms on a single zone, 0.9 ms at 1 000 segments, 12 ms at 64 000
-    (the whole band then: every node is near a patch end); from a level 16 times coarser,
-    whose reach is 16 fine nodes, 3.6, 6.0 and 10 ms at 4 000, 8 000 and 16 000 (banded
-    blocks: 6.1 ms at 4 000 through sparse factorisations).
+    On the rough profiles it halves the mispredicted nodes (benchmarks/results/ablation.json).
     """
     s = fine.abscissa
     m = len(s)
@@ -449,7 +440,6 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     slack = normal[band] - fine.gap[band] + compliance @ (force - held)  # u_n − g with the band's Λ = 0
     local = compliance[:, band]
     dense = local.toarray() if len(band) <= ASPERITY_DENSE_UP_TO else None
-    lower = None if dense is not None else _lower_entries(local)
     settled = active[band]
     for _ in range(ASPERITY_ITERATIONS):
         on = np.flatnonzero(settled)
@@ -458,7 +448,8 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
             if dense is not None and len(on):
                 forces[on] = cho_solve(cho_factor(dense[np.ix_(on, on)]), slack[on])
             elif len(on):
-                forces[on] = _block_solve(local, lower, on, slack[on])
+                block = local[on][:, on]
+                forces[on] = factorize(block, check=False, name="the half-plane compliance").solve(slack[on])
         except (SolverError, MemoryError, LinAlgError):
             return active
         updated = np.where(settled, forces > 0, slack - local @ forces > 0)
@@ -470,32 +461,42 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     return corrected
 
 
-def _lower_entries(matrix: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The rows, columns and values of a symmetric ``matrix``'s lower triangle."""
-    coo = matrix.tocoo()
-    lower = coo.row >= coo.col
-    return coo.row[lower], coo.col[lower], coo.data[lower]
+def plane_strain_modulus(law: Elasticity) -> float:
+    """E* of the 2D law: E / (1 − ν²) in plane strain, E in plane stress (4μ(λ+μ)/(λ+2μ)
+    with the λ the 2D law holds)."""
+    return 4.0 * law.mu * (law.lam + law.mu) / (law.lam + 2.0 * law.mu)
 
 
-def _block_solve(matrix: sp.csr_matrix, lower: tuple[np.ndarray, np.ndarray, np.ndarray], on: np.ndarray,
-                 rhs: np.ndarray) -> np.ndarray:
-    """x with matrix[on][:, on] x = rhs, for the symmetric positive definite ``matrix`` of
-    :func:`correct_at_asperities` (``lower``: its lower triangle's entries). Its nodes
-    couple only within reach along ΓC, so a block of nodes in order is banded: within
-    :data:`ASPERITY_BAND` diagonals it is solved by banded Cholesky (LAPACK pbsv: 0.1 ms
-    for 3 000 nodes, against 0.7 ms for a sparse factorisation and 0.3 ms to extract its
-    block), else by a sparse factorisation."""
-    rows, columns, values = lower
-    position = np.full(matrix.shape[0], -1)
-    position[on] = np.arange(len(on))
-    kept = (position[rows] >= 0) & (position[columns] >= 0)
-    row, column = position[rows[kept]], position[columns[kept]]
-    width = int((row - column).max(initial=0))
-    if width <= ASPERITY_BAND:
-        banded = np.zeros((width + 1, len(on)))
-        banded[row - column, column] = values[kept]
-        return solveh_banded(banded, rhs, lower=True, check_finite=False)
-    return factorize(matrix[on][:, on], check=False, name="the half-plane compliance").solve(rhs)
+def half_plane_compliance(abscissa: np.ndarray, share: np.ndarray, reach: float, modulus: float,
+                          rows: np.ndarray | None = None) -> sp.csr_matrix:
+    """C (m, m), or its ``rows``: the normal displacement at node i of the elastic
+    half-plane of plane-strain ``modulus`` under a unit force at node j spread evenly over
+    its ``share`` of ΓC, (2 / π E*) times the mean of ln(reach / |s_i − t|)₊ over that
+    segment, symmetrised (the mean of C_ij and C_ji); zero for nodes farther apart than
+    ``reach`` (whose differences the coarse level holds). ``abscissa`` sorted.
+    ln(R / r)₊ is positive definite in the plane (the Green's function of a disk), so C is
+    positive semi-definite on a line up to the segments' spreading."""
+    s = np.asarray(abscissa, dtype=float)
+    share = np.asarray(share, dtype=float)
+    rows = np.arange(len(s)) if rows is None else np.asarray(rows, dtype=np.int64)
+    low = np.searchsorted(s, s[rows] - reach, side="left")
+    high = np.searchsorted(s, s[rows] + reach, side="right")
+    counts = high - low
+    row = np.repeat(np.arange(len(rows)), counts)
+    cols = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(low, counts)
+    offset = s[rows][row] - s[cols]
+
+    def integral(t: np.ndarray) -> np.ndarray:  # ∫_0^t ln(reach / |τ|)₊ dτ, odd in t
+        a = np.minimum(np.abs(t), reach)
+        safe = np.where(a > 0, a, reach)
+        return np.sign(t) * np.where(a > 0, a * (np.log(reach / safe) + 1.0), 0.0)
+
+    def mean_over(half: np.ndarray) -> np.ndarray:  # over (s_j − half, s_j + half), seen from s_i
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (integral(offset + half) - integral(offset - half)) / np.where(half > 0, 2.0 * half, np.inf)
+
+    values = (mean_over(0.5 * share[cols]) + mean_over(0.5 * share[rows][row])) * (1.0 / (np.pi * modulus))
+    return sp.csr_matrix((values, (row, cols)), shape=(len(rows), len(s)))
 
 
 def contact_layer(points: np.ndarray, boundary: np.ndarray, depth: float) -> np.ndarray:

@@ -18,12 +18,12 @@ import numpy as np
 
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
-from contactfem.compliance import half_plane_model
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.meshing import estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
+    Accelerators,
     ActiveSetSolver,
     Iteration,
     KernelResult,
@@ -33,7 +33,6 @@ from contactfem.kernel import (
     default_c,
     solve_contact,
     solve_path,
-    translation_start,
 )
 from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
 from contactfem.mesh import Mesh
@@ -64,11 +63,7 @@ SEQUENCING_METHOD = "positive"
 #: thread beside its coarser levels (see :func:`_contact_solve`). Below, the system and
 #: solver (a few milliseconds of Python, which would only take turns with the coarse
 #: levels' own) are made first and only the analysis, which runs outside the interpreter's
-#: lock, beside them. On a rough profile's graded mesh the whole in the worker saved 18%
-#: at 209 000 unknowns and 3-7% at 52 000-105 000, and at 7 000-27 000 its effect was
-#: within this machine's noise (from 15% slower to 10% faster, in alternation in one
-#: process, the fastest of 5-10 runs); the analysis alone beside the coarse level saved
-#: 4-7% at 7 000-13 000 (the fastest and the median of 30 runs in alternation).
+#: lock, beside them.
 BESIDE_COARSER_FROM = 20_000
 
 
@@ -137,6 +132,7 @@ def solve_case(
     problem: DiscreteProblem | None = None,
     accept_uncertified: bool = False,
     coarse_levels: dict | None = None,
+    accelerators: Accelerators | None = None,
 ) -> SolveResult:
     """Mesh, assemble and solve ``case`` with ``method`` (default: the case's).
 
@@ -148,6 +144,7 @@ def solve_case(
     ``problem`` (``compare``'s two methods), keeps the coarse level
     of mesh sequencing that the first of them meshes and solves, and the next reuse it: it
     is the same whatever the fine method (it is solved with :data:`SEQUENCING_METHOD`).
+    ``accelerators`` overrides the case's ``solver.accelerators`` switches.
 
     Raises
     ------
@@ -165,7 +162,8 @@ def solve_case(
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, coarse_levels)
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, coarse_levels,
+                                                 accelerators)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -179,64 +177,49 @@ def solve_case(
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
-                   coarse_levels: dict | None = None,
+                   coarse_levels: dict | None = None, accelerators: Accelerators | None = None,
                    ) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
     what the prediction cost: what a fine solve and a coarse level share."""
     tolerance = case.solver.tolerance
+    accelerators = case_accelerators(case) if accelerators is None else accelerators
     kept = {} if coarse_levels is None else coarse_levels
     # Without a coarse level to mesh and solve first there is nothing to overlap with: a
     # small problem, one whose coarser level is not worth meshing (a tread's teeth), one
     # pressed in everywhere (the coarse level is then a second guess, after the first
     # step), or a coarse level kept from an earlier solve.
-    # A small contact boundary on a deep body starts cold, its steps proposed by the
-    # half-plane model of its compliance (contactfem.compliance), cheaper there than a
-    # coarser level's prediction.
-    # (A body that contact alone holds has its free motions held by the kernel, which asks
-    # no model: it keeps the coarser level.)
-    model = (half_plane_model(problem.contact, problem.law, problem.mesh.points)
-             if problem.free_modes is None else None)
-    modelled = model is not None and model.replaces_coarser_level(problem.n_unknowns)
-    predicted_first = prediction_first(problem.contact.gap, tolerance)
-    coarse_first = (worth_sequencing(problem.n_unknowns) and not modelled and predicted_first
+    sequenced = accelerators.sequencing
+    coarse_first = (sequenced and worth_sequencing(problem.n_unknowns)
+                    and prediction_first(problem.contact.gap, tolerance)
                     and "solve" not in kept and _worth_meshing(case, problem, kept))
-    # A start the model takes (no node inside the obstacle) asks no coarser level first;
-    # one pressed in everywhere keeps it as the second guess.
-    first_by_model = modelled and predicted_first
-    with ThreadPoolExecutor(max_workers=1) if coarse_first or first_by_model else _InPlace() as pool:
-        # This level's kernel system (contact nodes in normal and tangent unknowns), its
-        # solver and that solver's ordering and symbolic analysis are made while the
-        # coarser levels mesh and solve: on a rough profile's graded mesh they cost about
-        # one linear solve (0.3 s at 208 000 unknowns), the analysis most of it, outside the
-        # interpreter's lock. From BESIDE_COARSER_FROM unknowns all three go to the worker
-        # (the analysis alone there took 10-20% longer overall at 105 000 and 418 000
-        # unknowns); below, the system and solver are made here first.
+    with ThreadPoolExecutor(max_workers=1) if coarse_first else _InPlace() as pool:
+        # This level's kernel system, its solver and that solver's ordering and symbolic
+        # analysis are made while the coarser levels mesh and solve (the analysis runs
+        # outside the interpreter's lock). From BESIDE_COARSER_FROM unknowns all three go to
+        # the worker; below, the system and solver are made here first. Threads change
+        # when work is done, never what is computed.
         def fine() -> tuple[ReducedSystem, float]:
             reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
         def solver() -> ActiveSetSolver:
-            return ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance)
+            return ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance,
+                                   schur_updates=accelerators.schur_updates)
 
-        if problem.n_unknowns >= BESIDE_COARSER_FROM and not first_by_model:
+        if problem.n_unknowns >= BESIDE_COARSER_FROM:
             fine_soon = pool.submit(fine)
             solver_soon = pool.submit(lambda: _analysed(solver()))
         else:
             fine_soon = _InPlace.submit(fine)
-            unanalysed = solver()
-            solver_soon = pool.submit(_analysed, unanalysed)
+            solver_soon = pool.submit(_analysed, solver())
 
-        def modelled_start() -> tuple[np.ndarray | None, dict]:
-            # The model's first proposal, from the free body, while the worker analyses the
-            # pattern (rough base of 1 000 segments: 3-4 and 2.5 ms; of 2 000, 7 and 5.6).
-            start = translation_start(fine_soon.result()[0].system, unanalysed, tolerance, model)
-            return (None if start is None else start[0]), {}
-
-        initial_active, second_guess, sequencing = starting_set(
-            problem.contact.gap, tolerance,
-            lambda: (modelled_start() if first_by_model else
-                     _predict_from_coarser(case, problem, fine_soon.result, say, kept)))
+        if sequenced:
+            initial_active, second_guess, sequencing = starting_set(
+                problem.contact.gap, tolerance,
+                lambda: _predict_from_coarser(case, problem, fine_soon.result, say, kept))
+        else:
+            initial_active, second_guess, sequencing = None, None, {}
         reduced, c = fine_soon.result()
         linear = solver_soon.result()
     numbers = itertools.count(1)
@@ -262,12 +245,21 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         max_iterations=case.solver.max_iterations,
         backend=backend,
         on_iteration=on_iteration,
+        accelerators=accelerators,
         second_guess=second_guess,
-        stalled_guess=stalled_guess if initial_active is None or first_by_model else None,
+        stalled_guess=stalled_guess if initial_active is None and sequenced else None,
         linear=linear,
-        compliance=model if initial_active is None or first_by_model else None,
     )
     return reduced, kernel, sequencing
+
+
+def case_accelerators(case: Case) -> Accelerators:
+    """The kernel's accelerators as the case's ``solver.accelerators`` switches them."""
+    switches = getattr(case.solver, "accelerators", None)
+    if switches is None:
+        return Accelerators()
+    return Accelerators(sequencing=switches.sequencing, zone_fronts=switches.zone_fronts,
+                        schur_updates=switches.schur_updates)
 
 
 def _worth_meshing(case: Case, problem: DiscreteProblem, kept: dict) -> bool:
@@ -362,7 +354,9 @@ def solve_load_path(
         f"backend {backend}")
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    coarse_path = _coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
+    accelerators = case_accelerators(case)
+    coarse_path = (_coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
+                   if accelerators.sequencing else None)
     starts = None if coarse_path is None else PredictedStarts(coarse_path.predict)
     if coarse_path is not None:
         levels = coarse_path.record()["levels"]
@@ -377,7 +371,8 @@ def solve_load_path(
     last: KernelResult | None = None
     started = clock
     path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
-                      max_iterations=case.solver.max_iterations, backend=backend, starts=starts)
+                      max_iterations=case.solver.max_iterations, backend=backend, starts=starts,
+                      accelerators=accelerators)
     for index, (factor, kernel) in enumerate(zip(factors, path)):
         seconds = time.perf_counter() - started
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
@@ -748,6 +743,6 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
 
 
 def _history_arrays(history: list[Iteration]) -> dict[str, np.ndarray]:
-    names = ("active", "added", "removed", "extrapolated", "modelled", "equilibrium_residual",
-             "complementarity_residual", "seconds")
+    names = ("active", "added", "removed", "proposed", "equilibrium_residual", "complementarity_residual",
+             "seconds")
     return {name: np.array([getattr(r, name) for r in history]) for name in names}

@@ -66,7 +66,7 @@ for name, path, method in [item.split(":") for item in sys.argv[2:]]:
         fields[key + "_status"] = np.array(report["solver"]["status"])
         fields[key + "_first_active"] = np.array(report["newton"][0]["active"])
         fields[key + "_levels"] = np.array(report["solver"]["sequencing"].get("levels", 0))
-        fields[key + "_extrapolated"] = np.array([step["extrapolated"] for step in report["newton"]])
+        fields[key + "_proposed"] = np.array([step["proposed"] for step in report["newton"]])
 if fields:
     np.savez(out, **fields)
 """
@@ -118,8 +118,8 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     if name == "tilted_punch":  # which releases half of it: the coarse levels give the second guess
         assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     if name == "strip":  # peeling off in bending: its creep is extrapolated alike on every rank
-        steps = [step.extrapolated for step in solved.kernel.history]
-        assert sum(steps) > 0 and distributed[key + "_extrapolated"].tolist() == steps
+        steps = [step.proposed for step in solved.kernel.history]
+        assert sum(steps) > 0 and distributed[key + "_proposed"].tolist() == steps
     assert int(distributed[key + "_ranks"]) == RANKS
     assert str(distributed[key + "_status"]) == "converged"
     np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)

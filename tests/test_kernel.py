@@ -455,8 +455,9 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh(monkeypat
     contact = problem.contact_system(get_method("standard")).system
     linear = ActiveSetSolver(contact, "superlu")
     searches = []
-    search = linear._entries_of
-    monkeypatch.setattr(linear, "_entries_of", lambda dofs: searches.append(len(dofs)) or search(dofs))
+    masking = linear.masking
+    search = masking._entries_of
+    monkeypatch.setattr(masking, "_entries_of", lambda dofs: searches.append(len(dofs)) or search(dofs))
     rng = np.random.default_rng(7)
     m, n = len(contact.gap), len(linear.supported)
     fixed = linear.supported.copy()
@@ -468,11 +469,11 @@ def test_the_masked_matrix_rewritten_in_place_equals_one_masked_afresh(monkeypat
         else:
             fixed = fixed.copy()
             fixed[linear.normal_dofs[rng.integers(m)]] ^= True
-        masked = linear._masked(fixed)
-        pattern = linear.pattern
-        keep = ~fixed[linear.entry_rows] & ~fixed[pattern.indices]
+        masked = masking.masked(fixed)
+        pattern = masking.pattern
+        keep = ~fixed[masking.entry_rows] & ~fixed[pattern.indices]
         expected = np.where(keep, pattern.data, 0.0)
-        expected[linear.diagonal[fixed]] = 1.0
+        expected[masking.diagonal[fixed]] = 1.0
         np.testing.assert_array_equal(masked.data, expected)
         assert masked.indices is pattern.indices or np.array_equal(masked.indices, pattern.indices)
     # The single flips were searched row by row, the redrawn thirds masked in one pass.
@@ -502,10 +503,10 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
         monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
     elif linalg._cholmod_library() is None:
         pytest.skip("no CHOLMOD library bundled with cvxopt here")
-    import contactfem.kernel as kernel
+    import contactfem.kernel.costs as costs
 
-    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # a small mesh, to keep the test quick
-    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0)
+    monkeypatch.setattr(costs, "FORWARD_COLUMNS_FROM", 0)  # a small mesh, to keep the test quick
+    monkeypatch.setattr(costs, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0)
     contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
     converged = solve_contact(contact, backend="cholmod")
     rng = np.random.default_rng(5)
@@ -554,10 +555,10 @@ def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled, den
     Schur blocks gains)."""
     import scipy.sparse as sp
 
-    import contactfem.kernel as kernel
-    from contactfem.kernel import _cross
+    import contactfem.kernel.costs as costs
+    from contactfem.kernel.columns import cross as _cross
 
-    monkeypatch.setattr(kernel, "DENSE_CROSS_ENTRIES", dense_entries)
+    monkeypatch.setattr(costs, "DENSE_CROSS_ENTRIES", dense_entries)
 
     rng = np.random.default_rng(11)
     n, k = 5000, 40
@@ -582,7 +583,7 @@ def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch
     FORWARD_COLUMNS_FROM. Either way the contact solve converges to the same active set."""
     from test_sequencing import rough_polygon_case
 
-    import contactfem.kernel as kernel
+    import contactfem.kernel.costs as costs
     import contactfem.linalg as linalg
     from contactfem.kernel import ActiveSetSolver
     from contactfem.linalg import backend_provider
@@ -595,8 +596,8 @@ def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch
     reference = solve_contact(contact, backend="superlu")
     n = contact.stiffness.shape[0]
     monkeypatch.setattr(linalg, "_FACTOR_SWITCH", switch)
-    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", n // 2)
-    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 2 * n)
+    monkeypatch.setattr(costs, "SIMPLICIAL_FORWARD_COLUMNS_FROM", n // 2)
+    monkeypatch.setattr(costs, "FORWARD_COLUMNS_FROM", 2 * n)
     linear = ActiveSetSolver(contact, "cholmod")
     result = solve_contact(contact, backend="cholmod", linear=linear)
     assert linear.factor.simplicial is (switch == 0)
@@ -617,7 +618,7 @@ def test_forward_columns_only_where_the_elimination_trees_paths_are_short():
     from conftest import case_from, square_case_dict
     from test_sequencing import rough_polygon_case
 
-    import contactfem.kernel as kernel
+    import contactfem.kernel.costs as costs
     from contactfem.kernel import ActiveSetSolver
     from contactfem.methods import get_method
     from contactfem.solve import prepare
@@ -629,7 +630,7 @@ def test_forward_columns_only_where_the_elimination_trees_paths_are_short():
     for name, case in (("block", rough_polygon_case(1000)), ("strip", case_from(strip))):
         contact = prepare(case).contact_system(get_method("positive")).system
         n = contact.stiffness.shape[0]
-        assert kernel.SIMPLICIAL_FORWARD_COLUMNS_FROM <= n < kernel.FORWARD_COLUMNS_FROM
+        assert costs.SIMPLICIAL_FORWARD_COLUMNS_FROM <= n < costs.FORWARD_COLUMNS_FROM
         reference = solve_contact(contact, backend="cholmod").active.copy()
         target = reference.copy()
         target[np.random.default_rng(7).choice(len(target), 6, replace=False)] ^= True
@@ -647,7 +648,7 @@ def test_forward_columns_only_where_the_elimination_trees_paths_are_short():
         u, _ = linear.solve(target)
         assert linear.factorizations == 1 and linear.column_solves == 6
         shares[name] = linear.path_share
-        assert linear.forward is (linear.path_share <= kernel.FORWARD_PATH_SHARE)
+        assert linear.forward is (linear.path_share <= costs.FORWARD_PATH_SHARE)
         fresh = ActiveSetSolver(contact, "cholmod")
         fresh_u, _ = fresh.solve(target)
         # Two solves of the set, each within round-off times its condition estimate κ̂ (the
@@ -656,8 +657,8 @@ def test_forward_columns_only_where_the_elimination_trees_paths_are_short():
         bound = max(1e-10, fresh.condition * np.finfo(float).eps)
         assert np.abs(u - fresh_u).max() < bound * np.abs(fresh_u).max(), (name, fresh.condition)
         linear._factorize(target)
-        assert linear.forward is (linear.path_share <= kernel.FORWARD_PATH_SHARE)
-    assert shares["block"] < kernel.FORWARD_PATH_SHARE < shares["strip"]
+        assert linear.forward is (linear.path_share <= costs.FORWARD_PATH_SHARE)
+    assert shares["block"] < costs.FORWARD_PATH_SHARE < shares["strip"]
 
 
 @pytest.mark.skipif("cholmod" not in available_backends(), reason="CHOLMOD not installed")
@@ -668,13 +669,13 @@ def test_columns_past_the_memory_bound_are_not_kept(monkeypatch, forward):
     the set instead, however cheap the cost model finds the columns, with the same answer."""
     from test_sequencing import rough_polygon_case
 
-    import contactfem.kernel as kernel
+    import contactfem.kernel.costs as costs
     from contactfem.kernel import ActiveSetSolver
     from contactfem.methods import get_method
     from contactfem.solve import prepare
 
-    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
-    monkeypatch.setattr(kernel, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
+    monkeypatch.setattr(costs, "FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
+    monkeypatch.setattr(costs, "SIMPLICIAL_FORWARD_COLUMNS_FROM", 0 if forward else 10**9)
     contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
     reference = solve_contact(contact, backend="cholmod").active.copy()
     target = reference.copy()
@@ -683,7 +684,7 @@ def test_columns_past_the_memory_bound_are_not_kept(monkeypatch, forward):
     n = contact.stiffness.shape[0]
     held = 8 * (2 * 24) ** 2 if forward else 8 * 24 * n
     for bound, factorizations, columns in ((held, 1, 24), (held - 1, 2, 0)):
-        monkeypatch.setattr(kernel, "COLUMN_BYTES", bound)
+        monkeypatch.setattr(costs, "COLUMN_BYTES", bound)
         linear = ActiveSetSolver(contact, "cholmod")
         linear.solve(reference)
         if forward and not linear.forward:
@@ -707,7 +708,7 @@ def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
     refactorisation costlier than the longest possible paths leaves them unsampled."""
     from conftest import case_from, square_case_dict
 
-    import contactfem.kernel as kernel
+    import contactfem.kernel.costs as costs
     from contactfem.kernel import DENSE_FLOPS, ActiveSetSolver
     from contactfem.methods import get_method
     from contactfem.solve import prepare
@@ -717,7 +718,7 @@ def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
     strip["mesh"]["divisions"] = [800, 4]
     contact = prepare(case_from(strip)).contact_system(get_method("positive")).system
     n = contact.stiffness.shape[0]
-    monkeypatch.setattr(kernel, "FORWARD_COLUMNS_FROM", 0)  # as above it: no path check
+    monkeypatch.setattr(costs, "FORWARD_COLUMNS_FROM", 0)  # as above it: no path check
     reference = solve_contact(contact, backend="cholmod").active.copy()
     target = reference.copy()
     target[np.random.default_rng(3).choice(len(target), 200, replace=False)] ^= True

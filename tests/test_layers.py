@@ -18,7 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "contactfem"
 CORE = ("contactfem.kernel", "contactfem.linalg", "contactfem.methods", "contactfem.assembly",
         "contactfem.quadrature")
 #: What the core may import of the package.
-CORE_MAY_IMPORT = CORE + ("contactfem.errors", "contactfem.mesh.topology")
+CORE_MAY_IMPORT = CORE + ("contactfem.errors", "contactfem.mesh.topology", "contactfem.timings")
 #: The pipeline and the studies built on it: they return data and never write.
 PIPELINE = ("contactfem.case", "contactfem.discretize", "contactfem.solve", "contactfem.sequencing",
             "contactfem.result", "contactfem.report", "contactfem.estimator", "contactfem.norms",

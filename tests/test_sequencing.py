@@ -10,7 +10,6 @@ import pytest
 import yaml
 from conftest import case_from, square_case_dict
 
-from contactfem.compliance import half_plane_model
 from contactfem.case import PolygonGeometry
 from contactfem.mesh.polygon import Loop, polygon_problems
 from contactfem.sequencing import (
@@ -148,9 +147,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     """The teeth cannot be decimated: a coarser level keeps 38% of the unknowns, and meshing
     it (graded onto every tip) cost 4-8 of its linear solves, so that sequencing made the
     solve twice as slow as a cold start. The level is refused from its estimated unknowns,
-    before it is meshed; a worker thread is started only to analyse the pattern beside the
-    half-plane model's first proposal, when the model takes the start; the cold start is
-    certified."""
+    before it is meshed, and no worker thread is started; the cold start is certified."""
     import sys
     from pathlib import Path
 
@@ -169,19 +166,15 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     meshed, workers = [], []
     original = solve_module.prepare
     monkeypatch.setattr(solve_module, "prepare", lambda *args, **kwargs: meshed.append(args) or original(*args, **kwargs))
-    # With no coarse level to mesh first, only the model's first proposal runs beside the
-    # fine level's analysis.
+    # With no coarse level to mesh first, nothing runs beside the fine level's analysis.
     real_executor = solve_module.ThreadPoolExecutor
     monkeypatch.setattr(solve_module, "ThreadPoolExecutor",
                         lambda *args, **kwargs: workers.append(args) or real_executor(*args, **kwargs))
     result = solve_module.solve_case(case, problem=problem)
-    model = half_plane_model(problem.contact, problem.law, problem.mesh.points)
-    model_first = model is not None and model.replaces_coarser_level(problem.n_unknowns)
-    assert meshed == [] and len(workers) == int(model_first) and result.sequencing == {}
+    assert meshed == [] and workers == [] and result.sequencing == {}
     assert result.kernel.status is Status.CONVERGED and patch_count(result.kernel.active) >= 10
 
 
-@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("beside_from", [0, 10**9])
 def test_a_sequenced_rough_solve_has_the_answer_of_a_cold_start(monkeypatch, beside_from):
     """2 000 segments (about 15 000 unknowns, a few hundred patches): the pipeline predicts
@@ -381,18 +374,6 @@ def test_p1_interpolation_is_exact_for_linear_fields_on_a_graded_mesh():
 
 
 
-@pytest.fixture
-def coarse_levels_only(monkeypatch):
-    """Sequencing's machinery on meshes whose contact boundary is small enough for a cold
-    start with the half-plane model (contactfem.compliance.MODEL_NODES, EVEN_MODEL_NODES),
-    which the solve would otherwise take instead of a coarser level."""
-    import contactfem.compliance as compliance_module
-
-    monkeypatch.setattr(compliance_module, "MODEL_NODES", 0)
-    monkeypatch.setattr(compliance_module, "EVEN_MODEL_NODES", 0)
-
-
-@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("name", ["hertz", "hertz_platen", "hertz_quarter", "hole", "punch", "square"])
 def test_a_layer_forced_on_every_shipped_geometry_leaves_the_answer_unchanged(name, monkeypatch):
     """Curved boundaries (rim points outside the coarse mesh), holes, symmetry lines,
@@ -488,7 +469,6 @@ def test_a_face_pressed_in_that_partly_releases_is_predicted_after_its_first_ste
     assert result.kernel.iterations < cold.iterations
 
 
-@pytest.mark.usefixtures("coarse_levels_only")
 def test_a_partial_overlap_starts_from_the_coarse_prediction():
     """A tilted face pressed in over part of its width only (4e-3 at x = 1, out of reach at
     x = −1): the overlap mispredicts, so the coarse level comes first and the first step
@@ -514,7 +494,6 @@ def test_overlap_counts_a_gap_below_round_off_as_touching():
     np.testing.assert_array_equal(overlapped(np.array([-1e-3, -2e-3, 1e-3]), 1e-10), [True, True, False])
 
 
-@pytest.mark.usefixtures("coarse_levels_only")
 @pytest.mark.parametrize("beside_from", [0, 10**9])
 def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces(monkeypatch, beside_from):
     """The fine level's kernel system, solver and analysis are made in a worker thread while
@@ -549,7 +528,6 @@ def test_the_fine_system_is_made_beside_the_coarse_levels_and_its_error_surfaces
         assert coarse_systems == []
 
 
-@pytest.mark.usefixtures("coarse_levels_only")
 def test_below_the_worker_threshold_only_the_analysis_runs_beside_the_coarse_level(monkeypatch):
     """On a mesh with a coarse level but under BESIDE_COARSER_FROM unknowns, the fine
     solver's ordering and symbolic analysis (outside the interpreter's lock) run in another
@@ -581,7 +559,6 @@ def test_below_the_worker_threshold_only_the_analysis_runs_beside_the_coarse_lev
     np.testing.assert_array_equal(sequenced.kernel.active, cold.active)
 
 
-@pytest.mark.usefixtures("coarse_levels_only")
 def test_compare_meshes_and_solves_the_coarse_levels_once_for_both_methods(monkeypatch):
     """Both methods' active sets are predicted from the same coarse levels (solved with the
     positive method whatever the fine one): compare meshes and solves them once, and the
@@ -792,8 +769,8 @@ def test_the_half_plane_correction_predicts_the_fine_zone_better(name, refine):
 
 
 def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monkeypatch):
-    """The correction is only a start: a compliance block the factorisation refuses (sparse,
-    or banded) leaves the interpolated prediction as it was."""
+    """The correction is only a start: a compliance block the factorisation refuses (dense
+    or sparse) leaves the interpolated prediction as it was."""
     from scipy.linalg import LinAlgError
 
     import contactfem.sequencing as sequencing
@@ -805,11 +782,11 @@ def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monke
     def refuse(*args, **kwargs):
         raise SolverError("not positive definite")
 
-    def refuse_banded(*args, **kwargs):
+    def refuse_dense(*args, **kwargs):
         raise LinAlgError("not positive definite")
 
     monkeypatch.setattr(sequencing, "factorize", refuse)
-    monkeypatch.setattr(sequencing, "solveh_banded", refuse_banded)
+    monkeypatch.setattr(sequencing, "cho_factor", refuse_dense)
     assert np.array_equal(sequencing.predict_active_set(problem.contact, coarse, c, problem.law), plain)
 
 
@@ -838,43 +815,11 @@ def test_a_body_whose_interior_dominates_is_predicted_from_its_coarser_level():
     """The square of 128 cells a side (33 000 unknowns, 129 contact nodes on a grid: well
     within the model's node count) has 256 unknowns per contact node: its coarser level,
     a sixteenth of it, predicts the set, and the fine solve settles in at most two steps on
-    one factorisation, where a cold start with the model would refactorise."""
+    one factorisation."""
     from contactfem.solve import prepare, solve_case
 
     case = case_from(square_case_dict(128))
     problem = prepare(case)
-    model = half_plane_model(problem.contact, problem.law, problem.mesh.points)
-    assert model is not None and model.even is not None
-    assert not model.replaces_coarser_level(problem.n_unknowns)
     result = solve_case(case, problem=problem)
     assert result.sequencing["coarse_unknowns"] < problem.n_unknowns / 8
     assert result.kernel.iterations <= 2 and result.kernel.factorizations == 1
-
-
-@pytest.mark.parametrize("neighbours", [16, 200])
-def test_the_asperity_correction_solves_its_blocks_to_round_off_banded_or_not(neighbours):
-    """A block of nodes in order along ΓC couples only within reach: with at most
-    ASPERITY_BAND diagonals it is solved banded (16 neighbours), beyond it by a sparse
-    factorisation (200, about 120 diagonals); either way to round-off of the direct solve."""
-    import scipy.sparse.linalg as spla
-
-    from contactfem import sequencing
-    from contactfem.compliance import half_plane_compliance
-
-    m = 2000
-    spacing = 1.0 / m
-    s = (np.arange(m) + np.random.default_rng(3).uniform(-0.05, 0.05, m)) * spacing  # a profile's abscissae
-    compliance = half_plane_compliance(s, np.full(m, spacing), neighbours * spacing, 1.0)
-    on = np.flatnonzero(np.random.default_rng(4).uniform(size=m) < 0.6)
-    rhs = np.random.default_rng(5).uniform(size=len(on))
-    block = compliance[on][:, on].tocsc()
-    expected = spla.spsolve(block, rhs)
-    lower = sequencing._lower_entries(compliance)
-    position = np.full(m, -1)
-    position[on] = np.arange(len(on))
-    kept = (position[lower[0]] >= 0) & (position[lower[1]] >= 0)
-    width = (position[lower[0][kept]] - position[lower[1][kept]]).max()
-    assert (width <= sequencing.ASPERITY_BAND) == (neighbours == 16)
-    solved = sequencing._block_solve(compliance, lower, on, rhs)
-    assert np.abs(block @ solved - rhs).max() <= 1e-12 * np.abs(rhs).max() * np.linalg.cond(block.toarray(), 1) ** 0.5
-    assert np.abs(solved - expected).max() <= 1e-10 * np.abs(expected).max()
