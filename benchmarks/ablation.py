@@ -9,7 +9,8 @@ Each scene is solved with every accelerator on, then with one switched off at a 
 (:class:`contactfem.kernel.Accelerators`: ``sequencing``, ``zone_fronts``,
 ``schur_updates``), and with the two refinements of the coarse prediction switched off
 (the half-plane ``asperity`` correction and the fine ``layer`` correction, parts of
-sequencing). The contact solve's seconds (``timings["solve"]``: coarse levels and every
+sequencing), the Schur solver's sparse ``forward columns`` (full columns instead) and the
+``worker thread`` that builds a level's system beside its coarser levels. The contact solve's seconds (``timings["solve"]``: coarse levels and every
 Newton step; for a load path the whole path) are the fastest of ``--repeat`` runs, in
 alternation so that a slow phase of the machine hits every configuration alike. Every
 run must converge to the same active set (the accelerators change the cost, never the
@@ -42,8 +43,8 @@ one_blas_thread()
 
 OUT = ROOT / "benchmarks" / "results" / "ablation.json"
 CONFIGURATIONS = ("all", "no sequencing", "no zone fronts", "no schur updates", "no asperity correction",
-                  "no layer correction")
-SCENES = ("square", "rough", "hertz", "punch", "rough_loading")
+                  "no layer correction", "no forward columns", "no worker thread")
+SCENES = ("square", "rough", "hertz", "punch", "strip", "rough_loading")
 
 
 def scene_case(name: str, directory: Path):
@@ -60,27 +61,35 @@ def scene_case(name: str, directory: Path):
         csv = directory / "profile.csv"
         write_surface(csv, 16_000)
         return parse_case(case_text(csv), source=directory / "rough.yaml"), 0
-    refinements = {"hertz": 1, "punch": 3, "rough_loading": 1}[name]
+    refinements = {"hertz": 1, "punch": 3, "strip": 3, "rough_loading": 1}[name]
     return load_case(ROOT / "cases" / f"{name}.yaml"), refinements
 
 
 @contextlib.contextmanager
 def switched(configuration: str):
     """The accelerators of ``configuration``, and the sequencing parts it switches off."""
+    import contactfem.kernel.costs as costs
     import contactfem.sequencing as sequencing
+    import contactfem.solve as solve_module
     from contactfem.kernel import Accelerators
 
-    saved = sequencing.correct_at_asperities, sequencing.layer_pays
+    saved = (sequencing.correct_at_asperities, sequencing.layer_pays, costs.FORWARD_COLUMNS_FROM,
+             costs.SIMPLICIAL_FORWARD_COLUMNS_FROM, solve_module.ThreadPoolExecutor)
     if configuration == "no asperity correction":
         sequencing.correct_at_asperities = lambda fine, normal, force, law, active, spacing: active
     if configuration == "no layer correction":
         sequencing.layer_pays = lambda *args: False
+    if configuration == "no forward columns":
+        costs.FORWARD_COLUMNS_FROM = costs.SIMPLICIAL_FORWARD_COLUMNS_FROM = 2**62
+    if configuration == "no worker thread":
+        solve_module.ThreadPoolExecutor = lambda *args, **kwargs: solve_module._InPlace()
     try:
         yield Accelerators(sequencing=configuration != "no sequencing",
                            zone_fronts=configuration != "no zone fronts",
                            schur_updates=configuration != "no schur updates")
     finally:
-        sequencing.correct_at_asperities, sequencing.layer_pays = saved
+        (sequencing.correct_at_asperities, sequencing.layer_pays, costs.FORWARD_COLUMNS_FROM,
+         costs.SIMPLICIAL_FORWARD_COLUMNS_FROM, solve_module.ThreadPoolExecutor) = saved
 
 
 def run(case, refine: int, configuration: str, problem) -> dict:
@@ -114,6 +123,7 @@ def measure(name: str, repeat: int, directory: Path) -> dict:
     problem = None if case.load_path is not None else prepare(case, refine=refine)
     unknowns = problem.n_unknowns if problem is not None else prepare(case, refine=refine).n_unknowns
     runs: dict[str, list[dict]] = {c: [] for c in CONFIGURATIONS}
+    run(case, refine, "all", problem)  # warm-up: the process's first touch of this size's memory
     for _ in range(repeat):
         for configuration in CONFIGURATIONS:
             runs[configuration].append(run(case, refine, configuration, problem))
