@@ -13,6 +13,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import contactfem.linalg as linalg
+from contactfem.linalg import (
+    cholmod_ctypes,
+    cholmod_cvxopt,
+    cholmod_direct,
+    cholmod_sksparse,
+    pardiso,
+    registry,
+    superlu,
+)
 from contactfem.errors import SolverError
 
 
@@ -28,20 +37,20 @@ def _elasticity_like(size: int, seed: int) -> sp.csr_matrix:
 
 
 def _providers() -> list[tuple[str, object]]:
-    found = [("superlu", linalg._SuperLU)]
-    if linalg._installed("cvxopt"):
-        found.append(("cvxopt-interface", linalg._CvxoptCholmod))
-        if linalg._cholmod_library() is not None:
-            found.append(("cholmod-library", linalg._LibraryCholmod))
-    if linalg._installed("sksparse"):
-        found.append(("scikit-sparse", linalg._Cholmod))
-    if linalg._installed("pypardiso"):
-        found.append(("pardiso", linalg._Pardiso))
+    found = [("superlu", superlu.SuperLUFactor)]
+    if registry.installed("cvxopt"):
+        found.append(("cvxopt-interface", cholmod_cvxopt.CvxoptCholmodFactor))
+        if cholmod_ctypes.cholmod_library() is not None:
+            found.append(("cholmod-library", cholmod_direct.DirectCholmodFactor))
+    if registry.installed("sksparse"):
+        found.append(("scikit-sparse", cholmod_sksparse.SksparseCholmodFactor))
+    if registry.installed("pypardiso"):
+        found.append(("pardiso", pardiso.PardisoFactor))
     return found
 
 
 PROVIDERS = _providers()
-needs_library = pytest.mark.skipif(not linalg._installed("cvxopt") or linalg._cholmod_library() is None,
+needs_library = pytest.mark.skipif(not registry.installed("cvxopt") or cholmod_ctypes.cholmod_library() is None,
                                    reason="no CHOLMOD library bundled with cvxopt here")
 
 
@@ -89,14 +98,14 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B to 1e-12 through
     either route, whichever kind of factor (always an LLᵀ, even for a 2 × 2 grid); only a
     supernodal one is converted by the pattern solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
     matrix = _elasticity_like(size, seed=4)
     n = matrix.shape[0]
     rng = np.random.default_rng(5)
     columns = 37 if n > 100 else 3
     rhs = sp.random(n, columns, density=min(1.0, 4.0 / n), random_state=6, format="csc") + \
         sp.csc_matrix((np.ones(columns), (rng.choice(n, columns, replace=False), np.arange(columns))), shape=(n, columns))
-    factor = linalg._LibraryCholmod(matrix, "the test matrix")
+    factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
     dense = factor.solve(rhs.toarray())
     full = factor.solve_sparse(sp.csc_matrix(rhs))
     assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
@@ -128,8 +137,8 @@ def test_library_and_cvxopt_interface_give_the_same_factor():
     matrix = sp.csr_matrix(kept @ system.stiffness @ kept + sp.diags(fixed.astype(float)))
     matrix.eliminate_zeros()
     rhs = np.where(fixed, 0.0, system.load)
-    library = linalg._LibraryCholmod(matrix, "the square")
-    interface = linalg._CvxoptCholmod(matrix, "the square")
+    library = cholmod_direct.DirectCholmodFactor(matrix, "the square")
+    interface = cholmod_cvxopt.CvxoptCholmodFactor(matrix, "the square")
     x, y = library.solve(rhs), np.asarray(interface.solve(rhs)).ravel()
     assert np.abs(x - y).max() < 1e-12 * np.abs(y).max()
     assert np.abs(rhs - matrix @ x).max() < 1e-12 * np.abs(rhs).max() * 1e3
@@ -139,16 +148,16 @@ def test_library_and_cvxopt_interface_give_the_same_factor():
 def test_library_is_used_only_when_its_layout_is_the_known_one(monkeypatch):
     """cholmod_common's fields are written only after cholmod_start's defaults read back
     at the offsets relied on; a library with another layout is left to cvxopt's interface."""
-    library = linalg._cholmod_library()
+    library = cholmod_ctypes.cholmod_library()
     common = library.start()
     assert common is not None
     library.library.cholmod_finish(common)
-    offset, kind, value = linalg._COMMON_DEFAULTS[-1]
-    monkeypatch.setattr(linalg, "_COMMON_DEFAULTS", (*linalg._COMMON_DEFAULTS[:-1], (offset, kind, value + 7)))
+    offset, kind, value = cholmod_ctypes._COMMON_DEFAULTS[-1]
+    monkeypatch.setattr(cholmod_ctypes, "_COMMON_DEFAULTS", (*cholmod_ctypes._COMMON_DEFAULTS[:-1], (offset, kind, value + 7)))
     assert library.start() is None
-    monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
+    monkeypatch.setitem(cholmod_ctypes._LIBRARY_STATE, "library", None)
     matrix = _elasticity_like(400, seed=7)
-    assert isinstance(linalg._cvxopt_cholmod(matrix, "m"), linalg._CvxoptCholmod)
+    assert isinstance(cholmod_cvxopt.cvxopt_cholmod(matrix, "m"), cholmod_cvxopt.CvxoptCholmodFactor)
 
 
 @needs_library
@@ -156,8 +165,8 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
     """The symbolic and numeric factor live as long as a factorisation or the Factorizer
     still holds them, and are freed (cholmod_free_factor, cholmod_finish) after."""
     freed = []
-    original = linalg._free_analysis
-    monkeypatch.setattr(linalg, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
+    original = cholmod_direct._free_analysis
+    monkeypatch.setattr(cholmod_direct, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(_elasticity_like(400, seed=8))
     address = first.analysis.symbolic
@@ -176,7 +185,7 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
     symbolic analysis, so it is a supernodal LLᵀ again (its forward columns still give
     Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the factorisation it replaced refuses to
     solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=13)
     n = matrix.shape[0]
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
@@ -203,10 +212,10 @@ def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypat
     MEASURED_FROM: the call's fixed cost); a batch of MEASURED_FROM columns is measured.
     Once the conversion and both routes are measured, the choice follows the measured
     figures: many columns through the pattern solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=14)
     n = matrix.shape[0]
-    factor = linalg._LibraryCholmod(matrix, "the test matrix")
+    factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
     factor.solve(np.ones(n))  # the kernel always solves first: the per-column scale
     few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
     factor.forward_sparse(few)
@@ -214,7 +223,7 @@ def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypat
     blocked, pattern = factor._route_seconds(2)
     assert blocked < pattern
     factor.analysis.conversion_seconds = 1e3  # as if measured: a costly conversion
-    k = linalg._LibraryCholmod.MEASURED_FROM
+    k = cholmod_direct.DirectCholmodFactor.MEASURED_FROM
     batch = sp.csc_matrix((np.ones(k), (np.arange(0, 50 * k, 50), np.arange(k))), shape=(n, k))
     factor.forward_sparse(batch)
     assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
@@ -235,15 +244,15 @@ def test_library_guesses_a_pattern_column_from_the_factors_fill(monkeypatch):
     0.1, larger for a factor with more fill, for a supernodal factor as for a simplicial
     one (its column counts); where the factor's fields do not read back as a factor of this
     size, the costly end (0.1)."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
-    simplicial = linalg._LibraryCholmod(_elasticity_like(6400, seed=15), "m")
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 0)
+    simplicial = cholmod_direct.DirectCholmodFactor(_elasticity_like(6400, seed=15), "m")
     assert simplicial.analysis.simplicial and 0.0 < simplicial._pattern_column_guess() <= 0.1
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
-    sparse_grid = linalg._LibraryCholmod(_elasticity_like(400, seed=15), "m")
-    dense_grid = linalg._LibraryCholmod(_elasticity_like(40000, seed=15), "m")
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
+    sparse_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(400, seed=15), "m")
+    dense_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(40000, seed=15), "m")
     low, high = sparse_grid._pattern_column_guess(), dense_grid._pattern_column_guess()
     assert 0.0 < low < high <= 0.1
-    monkeypatch.setattr(linalg, "_FACTOR_IS_SUPER", linalg._FACTOR_XSIZE)
+    monkeypatch.setattr(cholmod_direct, "_FACTOR_IS_SUPER", cholmod_direct._FACTOR_XSIZE)
     assert dense_grid._pattern_column_guess() == 0.1
 
 
@@ -253,10 +262,10 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     fill of a small grid, supernodal for a larger one. A simplicial factor is an LLᵀ as
     well (forward columns give Bᵀ A⁻¹ B = Wᵀ W), refuses a matrix that is not positive
     definite, and is refactorised in place after pattern solves (nothing to convert)."""
-    small = linalg._LibraryCholmod(_elasticity_like(400, seed=16), "m")
-    large = linalg._LibraryCholmod(_elasticity_like(6400, seed=16), "m")
+    small = cholmod_direct.DirectCholmodFactor(_elasticity_like(400, seed=16), "m")
+    large = cholmod_direct.DirectCholmodFactor(_elasticity_like(6400, seed=16), "m")
     assert small.analysis.analysed_simplicial and not large.analysis.analysed_simplicial
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 0)
     matrix = _elasticity_like(6400, seed=17)
     n = matrix.shape[0]
     factorizer = linalg.Factorizer("cholmod")
@@ -273,7 +282,7 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
     bad = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(n - 1), 10.0]))
     with pytest.raises(SolverError, match="not positive definite"):
-        linalg._LibraryCholmod(bad, "the shifted matrix")
+        cholmod_direct.DirectCholmodFactor(bad, "the shifted matrix")
 
 
 @pytest.mark.parametrize("backend", linalg.available_backends())
@@ -296,7 +305,7 @@ def test_an_analysis_made_ahead_in_another_thread_serves_the_first_factorisation
                for other, other_size in zip(others, (800, 1800, 3200)))
     factor = ahead.factorize(matrix)
     provider = linalg.backend_provider(backend)
-    reuses = provider == "sksparse" or (provider == "cvxopt" and linalg._cholmod_library() is not None)
+    reuses = provider == "sksparse" or (provider == "cvxopt" and cholmod_ctypes.cholmod_library() is not None)
     if reuses:
         assert ahead.ahead_seconds > 0 and ahead.analysis_seconds == [pytest.approx(0.0, abs=1e-3)]
     else:
@@ -319,11 +328,11 @@ def test_a_matrix_past_superlus_first_guess_is_refused_before_it_is_tried(monkey
     """The limit checked on the matrix itself, before SuperLU spends anything on it."""
     from contactfem.errors import FactorCapacityError
 
-    monkeypatch.setattr(linalg, "superlu_max_nonzeros", lambda: 10)
-    monkeypatch.setattr(linalg.spla, "splu", lambda *args, **kwargs: pytest.fail("SuperLU was called"))
+    monkeypatch.setattr(superlu, "superlu_max_nonzeros", lambda: 10)
+    monkeypatch.setattr(superlu.spla, "splu", lambda *args, **kwargs: pytest.fail("SuperLU was called"))
     with pytest.raises(FactorCapacityError, match=r"the test matrix: SciPy's SuperLU cannot factorise a matrix of "
                                                   r"1\.6e-05 million nonzeros \(4 unknowns\).*32-bit integer"):
-        linalg._SuperLU(sp.csc_matrix(np.ones((4, 4)) + 4 * np.eye(4)), "the test matrix")
+        superlu.SuperLUFactor(sp.csc_matrix(np.ones((4, 4)) + 4 * np.eye(4)), "the test matrix")
 
 
 @pytest.mark.slow
@@ -361,9 +370,9 @@ def test_superlu_running_out_of_room_says_both_causes_through_the_command_line(t
     def overflowing(*args, **kwargs):
         raise MemoryError("Not enough memory to perform factorization.")
 
-    monkeypatch.setattr(linalg.spla, "splu", overflowing)
+    monkeypatch.setattr(superlu.spla, "splu", overflowing)
     with pytest.raises(FactorCapacityError, match="32-bit") as caught:
-        linalg._SuperLU(sp.identity(3, format="csc"), "the test matrix")
+        superlu.SuperLUFactor(sp.identity(3, format="csc"), "the test matrix")
     assert isinstance(caught.value, MemoryError)
     case = Path(__file__).resolve().parents[1] / "cases" / "square.yaml"
     result = CliRunner().invoke(main, ["solve", str(case), "--backend", "superlu", "--out", str(tmp_path / "out")])
@@ -390,14 +399,14 @@ def test_a_pardiso_factor_is_released_with_its_last_user():
             return int(status.read().split("VmRSS:")[1].split()[0]) * 1024.0
 
     def factorise_once() -> None:
-        factor = linalg._Pardiso(matrix, "the Laplacian")
+        factor = pardiso.PardisoFactor(matrix, "the Laplacian")
         assert np.abs(matrix @ factor.solve(np.ones(n * n)) - 1.0).max() < 1e-10
         del factor
         gc.collect()
 
     factorise_once()
     before = resident()
-    factor = linalg._Pardiso(matrix, "the Laplacian")
+    factor = pardiso.PardisoFactor(matrix, "the Laplacian")
     held = resident() - before  # one factor, resident
     del factor
     gc.collect()

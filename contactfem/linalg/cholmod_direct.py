@@ -1,0 +1,403 @@
+"""CHOLMOD called directly through ctypes in the library cvxopt's wheel bundles: the
+``cholmod`` backend's fastest route, quarantined.
+
+What it assumes, and where that is checked:
+
+- a CHOLMOD shared library inside cvxopt's wheel (``cvxopt.libs/*cholmod*`` beside the
+  package, or ``.libs`` / ``.dylibs`` inside it), loaded after ``cvxopt.cholmod`` has
+  loaded its dependencies (:func:`~contactfem.linalg.cholmod_ctypes.cholmod_library`);
+- CHOLMOD's C interface with 32-bit integer indices (``cholmod_start``, ``cholmod_analyze``,
+  ``cholmod_factorize``, ``cholmod_solve``, ``cholmod_spsolve``, ``cholmod_solve2``,
+  ``cholmod_copy_factor``, the ``cholmod_free_*``), so matrices of fewer than 2**31
+  stored entries (:func:`serves`);
+- the layout of cholmod_sparse and cholmod_dense declared in
+  :mod:`contactfem.linalg.cholmod_ctypes`, and the byte offsets of the fields of
+  cholmod_common and cholmod_factor read or written there, those of CHOLMOD 3 on a 64-bit
+  machine (the wheel bundles CHOLMOD 3.0.6). Checked at load: cholmod_start's defaults must
+  read back at the offsets written (``_COMMON_DEFAULTS``), else the library is never
+  written into and every factorisation goes through cvxopt's interface; and each factor's
+  size and kind must read back as this matrix's before its fields are trusted.
+
+cvxopt's interface (:class:`~contactfem.linalg.cholmod_cvxopt.CvxoptCholmodFactor`) gives
+the same factor and the same solves; it is the fallback wherever an assumption fails.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import time
+import weakref
+
+import numpy as np
+import scipy.sparse as sp
+
+from contactfem.errors import SolverError
+from contactfem.linalg.cholmod_ctypes import (
+    _DENSE_P,
+    _DTYPE_DOUBLE,
+    _FACTOR_COLCOUNT,
+    _FACTOR_IS_SUPER,
+    _FACTOR_MINOR,
+    _FACTOR_PERM,
+    _FACTOR_XSIZE,
+    _SPARSE_P,
+    _SYS_A,
+    _SYS_L,
+    _SYS_P,
+    _XTYPE_REAL,
+    CholmodLibrary,
+    _c_array,
+    _DenseStruct,
+    _SparseStruct,
+    cholmod_library,
+)
+from contactfem.linalg.storage import canonical_csr
+
+
+class DirectAnalysis:
+    """What a later matrix of the same pattern reuses: CHOLMOD's symbolic factor and the
+    cholmod_common it was made with, for the pattern (indptr, indices) it was computed
+    from; and the latest numeric factor made from it. Each factorisation numbers a fresh
+    copy of the symbolic factor after a solve with a sparse right-hand side, which converts
+    its factor to a simplicial one in place (whose refactorisation would be a slow
+    simplicial LDLᵀ), and refactorises the previous one in place otherwise; the previous
+    one is freed first, so two never coexist. Freed with it."""
+
+    def __init__(self, library: CholmodLibrary, common: ctypes.Array, symbolic: int,
+                 indptr: np.ndarray, indices: np.ndarray) -> None:
+        self.library, self.common, self.symbolic = library, common, symbolic
+        self.indptr, self.indices = indptr, indices
+        #: The numeric factor (0 when none) and how many have been made: a factorisation
+        #: whose generation is not the latest was freed and may not be used.
+        self.numeric, self.generation = ctypes.c_void_p(0), 0
+        #: Whether the numeric factor is simplicial (as analysed, or converted by a sparse
+        #: solve), whether a sparse solve converted it, and what that conversion took (None
+        #: until measured): 9.5 ms on a rough profile's graded mesh at 418 000 unknowns,
+        #: 0.65 s on a uniform one at 695 000 (its factor has large dense supernodes, each
+        #: entry of which gets its own row index).
+        self.analysed_simplicial = ctypes.c_int.from_address(symbolic + _FACTOR_IS_SUPER).value == 0
+        self.simplicial, self.converted = self.analysed_simplicial, False
+        self.conversion_seconds: float | None = None
+        #: Measured seconds per forward column through each route (None until measured).
+        self.blocked_column_seconds: float | None = None
+        self.pattern_column_seconds: float | None = None
+        #: The pattern solve's cost per column guessed from the supernodal factor's fill.
+        self.pattern_column_guess: float | None = None
+        weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric)
+
+    def matches(self, matrix: sp.csr_matrix) -> bool:
+        if self.indptr is matrix.indptr and self.indices is matrix.indices:
+            return True  # the kernel's masked matrices share their pattern's arrays
+        return (np.array_equal(self.indptr, matrix.indptr) and np.array_equal(self.indices, matrix.indices))
+
+    def fresh_numeric(self) -> int:
+        """The factor to number next: the previous numeric one, refactorised in place, unless a
+        sparse solve converted it to a simplicial one; then it is freed for a copy of the
+        symbolic one (a fresh factor costs its memory's first touch: 0.3 s more at 526 000
+        unknowns)."""
+        functions = self.library.library
+        self.generation += 1
+        if self.numeric.value and not self.converted:
+            return self.numeric.value
+        if self.numeric.value:
+            functions.cholmod_free_factor(ctypes.byref(self.numeric), self.common)
+        copy = functions.cholmod_copy_factor(self.symbolic, self.common)
+        if not copy:
+            raise MemoryError("CHOLMOD could not copy its symbolic factor")
+        self.numeric.value, self.simplicial, self.converted = copy, self.analysed_simplicial, False
+        return copy
+
+
+def _free_analysis(library: CholmodLibrary, common: ctypes.Array, symbolic: int, numeric: ctypes.c_void_p) -> None:
+    functions = library.library
+    if numeric.value:
+        functions.cholmod_free_factor(ctypes.byref(numeric), common)
+    functions.cholmod_free_factor(ctypes.byref(ctypes.c_void_p(symbolic)), common)
+    functions.cholmod_finish(common)
+
+
+class DirectCholmodFactor:
+    """CHOLMOD through the library cvxopt's wheel bundles (see :class:`CholmodLibrary`):
+    AMD ordering, an LLᵀ factor (supernodal or simplicial, CHOLMOD's choice; see
+    :data:`_FACTOR_SWITCH`), the matrix read in place. A non-positive pivot is
+    reported as a SolverError. Only the latest factorisation of a pattern may be used
+    (see :class:`DirectAnalysis`); an earlier one refuses to solve."""
+
+    #: Right-hand sides per dense block of a sparse solve (n × 16 doubles at a time).
+    SPARSE_BLOCK = 16
+    #: Columns from which a batch's time per column is recorded for its route: a smaller
+    #: batch measures the call's fixed cost more than its columns' (a probe of 8 columns at
+    #: 13 000 unknowns measured 0.15 ms a pattern column, twice a batch of 78's, and sent
+    #: that batch through the blocked route at 0.23 ms a column).
+    MEASURED_FROM = 16
+    #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
+    #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
+    BLOCKED_COLUMN_SHARE = 0.3
+    #: What the conversion to a simplicial factor is taken to cost, in full solves, until
+    #: it is measured for the pattern: 0.3–0.7 on a rough profile's graded mesh at 418 000
+    #: unknowns, 1.0–1.2 on the square (33k–526k), 3.5–6.5 on a uniform mesh under a rough
+    #: base at 695 000.
+    CONVERSION_GUESS = 3.0
+
+    @staticmethod
+    def _view(matrix: sp.spmatrix) -> tuple[sp.csr_matrix, _SparseStruct, tuple[np.ndarray, ...]]:
+        """The canonical CSR of ``matrix``, CHOLMOD's view of it and the arrays the view reads."""
+        csr = canonical_csr(matrix)
+        arrays = (csr.indptr.astype(np.int32, copy=False), csr.indices.astype(np.int32, copy=False),
+                  np.ascontiguousarray(csr.data, dtype=float))
+        # Upper triangle (stype = 1) of the symmetric matrix whose CSC arrays are the CSR ones.
+        return csr, CholmodLibrary.sparse(*arrays, csr.shape[0], 1), arrays
+
+    @classmethod
+    def analyse(cls, matrix: sp.spmatrix, name: str) -> DirectAnalysis:
+        """The ordering and symbolic analysis of ``matrix``'s pattern (its values unread)."""
+        csr, view, _arrays = cls._view(matrix)
+        library = cholmod_library()
+        common = library.start()
+        symbolic = library.library.cholmod_analyze(ctypes.byref(view), common)
+        if not symbolic:
+            library.library.cholmod_finish(common)
+            raise MemoryError(f"CHOLMOD could not analyse {name}")
+        return DirectAnalysis(library, common, symbolic, csr.indptr, csr.indices)
+
+    def __init__(self, matrix: sp.spmatrix, name: str, analysis: "DirectAnalysis | None" = None) -> None:
+        csr, view, _arrays = self._view(matrix)
+        n = csr.shape[0]
+        started = time.perf_counter()
+        if analysis is None or not analysis.matches(csr):
+            analysis = self.analyse(csr, name)
+        self.analysis_seconds = time.perf_counter() - started
+        library, common = analysis.library, analysis.common
+        factor = analysis.fresh_numeric()
+        self.analysis, self.generation, self.size = analysis, analysis.generation, n
+        #: Seconds per right-hand side of the latest dense solve (the scale of the route
+        #: estimates), what the latest forward_sparse spent converting the factor, and the
+        #: inverse fill-reducing permutation once needed.
+        self.column_solve_seconds, self.setup_seconds = 0.0, 0.0
+        self._iperm: np.ndarray | None = None
+        if not library.library.cholmod_factorize(ctypes.byref(view), factor, common):
+            raise MemoryError(f"CHOLMOD could not factorise {name}")
+        minor = ctypes.c_size_t.from_address(factor + _FACTOR_MINOR).value
+        if minor < n:
+            raise SolverError(f"{name} is singular or not positive definite "
+                              f"(CHOLMOD: a non-positive pivot at column {minor} of {n})")
+
+    @property
+    def factor(self) -> int:
+        """The numeric factor's address, if this is still the latest factorisation."""
+        if self.generation != self.analysis.generation:
+            raise SolverError("a factorisation was used after a later one of its pattern replaced it")
+        return self.analysis.numeric.value
+
+    def _dense_solve(self, system: int, rhs: np.ndarray) -> np.ndarray:
+        """X (n, k), Fortran-ordered, for one of CHOLMOD's systems and a dense block."""
+        block = np.asfortranarray(rhs.reshape(self.size, -1), dtype=float)
+        width = block.shape[1]
+        view = _DenseStruct(self.size, width, self.size * width, self.size, block.ctypes.data, None,
+                            _XTYPE_REAL, _DTYPE_DOUBLE)
+        library, common = self.analysis.library, self.analysis.common
+        started = time.perf_counter()
+        result = library.library.cholmod_solve(system, self.factor, ctypes.byref(view), common)
+        self.column_solve_seconds = (time.perf_counter() - started) / width
+        if not result:
+            raise MemoryError("CHOLMOD could not allocate a solve's result")
+        values = _c_array(result.contents.x, ctypes.c_double, width * self.size).reshape(width, self.size)
+        solved = values.T.copy(order="F")  # CHOLMOD's array is freed next
+        library.library.cholmod_free_dense(ctypes.byref(result), common)
+        return solved
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        rhs = np.asarray(rhs, dtype=float)
+        return self._dense_solve(_SYS_A, rhs).reshape(rhs.shape)
+
+    def solve_sparse(self, rhs: sp.csc_matrix) -> np.ndarray:
+        n, k = rhs.shape
+        out = np.empty((n, k), order="F")
+        for start in range(0, k, self.SPARSE_BLOCK):
+            out[:, start:start + self.SPARSE_BLOCK] = self._dense_solve(
+                _SYS_A, rhs[:, start:start + self.SPARSE_BLOCK].toarray(order="F"))
+        return out
+
+    @property
+    def simplicial(self) -> bool:
+        """Whether the factor is simplicial (its pattern solves then convert nothing)."""
+        return self.analysis.simplicial
+
+    def _inverse_permutation(self) -> np.ndarray:
+        """Where row r of a right-hand side goes in P b: the inverse of the factor's fill-reducing
+        permutation (cholmod_factor's Perm, the third field)."""
+        if self._iperm is None:
+            perm = _c_array(ctypes.c_void_p.from_address(self.factor + _FACTOR_PERM).value, ctypes.c_int32, self.size)
+            self._iperm = np.empty(self.size, dtype=np.int64)
+            self._iperm[perm] = np.arange(self.size)
+        return self._iperm
+
+    def _pattern_column_guess(self) -> float:
+        """A column through the pattern solve, in full solves, until measured: it follows the
+        factor's fill (its entries per column, xsize / n), which sets how long the columns
+        on a path are. Measured: 0.003 at 31 entries per column (a rough profile's graded
+        mesh, 418 000 unknowns), 0.05–0.07 at 98–145 (the square), 0.08 at 105 (a uniform
+        mesh under a rough base): about 0.003 (fill / 31)^2.2, at most 0.1."""
+        address = self.factor
+        size = ctypes.c_size_t.from_address(address).value
+        supernodal = ctypes.c_int.from_address(address + _FACTOR_IS_SUPER).value
+        if size != self.size or supernodal not in (0, 1):
+            return 0.1  # not the layout these offsets assume: the costly end
+        if supernodal:
+            entries = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
+        else:  # a simplicial factor's entries: its column counts
+            counts = ctypes.c_void_p.from_address(address + _FACTOR_COLCOUNT).value
+            entries = int(_c_array(counts, ctypes.c_int32, size).sum()) if counts else 0
+        if not size <= entries < 2**40:
+            return 0.1
+        return min(0.1, 0.003 * (entries / size / 31.0) ** 2.2)
+
+    def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W = L⁻¹ P B for a sparse B (n, k), sparse, so that Bᵀ A⁻¹ B = Wᵀ W (the factor is
+        an LLᵀ), returned twice as (W, D⁻¹ W) with D = I.
+
+        L⁻¹ P b has nonzeros only on the elimination tree's paths from b's nonzeros (about
+        600 of 418 000 on a rough profile's mesh, 3 000 of 132 000 on the square). CHOLMOD's
+        solve with a sparse right-hand side (cholmod_solve2 with its pattern, Bset) visits
+        only those, one column at a time, but converts a supernodal factor to a simplicial
+        one first; its sparse solve in dense blocks of 4 sweeps the whole factor for each
+        block and converts nothing. The cheaper route for these k columns is taken, with
+        the conversion's measured cost once it is known for the pattern (``setup_seconds``:
+        what this call spent converting).
+        """
+        self.setup_seconds = 0.0
+        k = rhs.shape[1]
+        blocked, pattern = self._route_seconds(k)
+        started = time.perf_counter()
+        if blocked < pattern:
+            result = self._blocked_forward(rhs)
+            if k >= self.MEASURED_FROM:
+                self.analysis.blocked_column_seconds = (time.perf_counter() - started) / k
+        else:
+            result = self._pattern_forward(rhs)
+            if k >= self.MEASURED_FROM:
+                self.analysis.pattern_column_seconds = (time.perf_counter() - started - self.setup_seconds) / k
+        return result
+
+    def _route_seconds(self, k: int) -> tuple[float, float]:
+        """What k forward columns are expected to cost through the blocked sparse solve and
+        through the pattern solve (its conversion included while the factor is supernodal),
+        from the pattern's measured figures, or from one full solve's until measured."""
+        analysis = self.analysis
+        solve = self.column_solve_seconds
+        blocked = k * (analysis.blocked_column_seconds if analysis.blocked_column_seconds is not None
+                       else self.BLOCKED_COLUMN_SHARE * solve)
+        conversion = 0.0 if analysis.simplicial else (
+            analysis.conversion_seconds if analysis.conversion_seconds is not None else self.CONVERSION_GUESS * solve)
+        if analysis.pattern_column_seconds is not None:
+            column = analysis.pattern_column_seconds
+        else:
+            if analysis.pattern_column_guess is None:
+                analysis.pattern_column_guess = self._pattern_column_guess()
+            column = analysis.pattern_column_guess * solve
+        pattern = conversion + k * column
+        return blocked, pattern
+
+    def forward_seconds(self, k: int) -> float:
+        """What k more forward columns are expected to cost (the cheaper route)."""
+        return min(self._route_seconds(k))
+
+    def _blocked_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through CHOLMOD's sparse solve (x = P b, then L x = b in its dense blocks)."""
+        forward = self._sparse_solve(_SYS_L, self._sparse_solve(_SYS_P, rhs))
+        return forward, forward
+
+    def _sparse_solve(self, system: int, rhs: sp.csc_matrix) -> sp.csc_matrix:
+        rhs = sp.csc_matrix(rhs)
+        rhs.sort_indices()
+        indptr, indices = rhs.indptr.astype(np.int32), rhs.indices.astype(np.int32)
+        data = np.ascontiguousarray(rhs.data, dtype=float)
+        view = CholmodLibrary.sparse(indptr, indices, data, rhs.shape[0], 0)
+        library, common = self.analysis.library.library, self.analysis.common
+        result = library.cholmod_spsolve(system, self.factor, ctypes.byref(view), common)
+        if not result:
+            raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
+        s = result.contents
+        indptr = _c_array(s.p, ctypes.c_int32, s.ncol + 1).copy()
+        count = int(indptr[-1])
+        indices = _c_array(s.i, ctypes.c_int32, count).copy()
+        values = _c_array(s.x, ctypes.c_double, count).copy()
+        shape = (s.nrow, s.ncol)
+        library.cholmod_free_sparse(ctypes.byref(result), common)
+        return sp.csc_matrix((values, indices, indptr), shape=shape)
+
+    def _pattern_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through CHOLMOD's solve with each column's pattern (converting the factor once)."""
+        n, k = rhs.shape
+        # The right-hand sides in the factor's order (P b), each column's rows sorted, at once.
+        permuted = sp.csc_matrix(rhs)
+        permuted = sp.csc_matrix((permuted.data.copy(), self._inverse_permutation()[permuted.indices].astype(np.int32),
+                                  permuted.indptr.copy()), shape=(n, k))  # sorted in place next: the caller's stay
+        permuted.sort_indices()
+        starts, all_rows, all_values = permuted.indptr, permuted.indices, permuted.data
+        converting = not self.analysis.simplicial
+        library, common = self.analysis.library.library, self.analysis.common
+        dense = np.zeros(n)
+        right = _DenseStruct(n, 1, n, n, dense.ctypes.data, None, _XTYPE_REAL, _DTYPE_DOUBLE)
+        solution, pattern, work_y, work_e = _DENSE_P(), _SPARSE_P(), _DENSE_P(), _DENSE_P()
+        # One cholmod_sparse for every column's pattern (Bset), pointed at each in turn; the
+        # per-column Python work is most of a column's cost on a graded mesh (26 µs in CHOLMOD).
+        set_pointers = np.zeros(2, dtype=np.int32)
+        ones = np.ones(max(int(np.diff(starts).max(initial=0)), 1))
+        given = CholmodLibrary.sparse(set_pointers, all_rows, ones, n, 0)
+        counts = np.zeros(k + 1, dtype=np.int64)
+        rows_out: list[np.ndarray] = []
+        values_out: list[np.ndarray] = []
+        views: dict[tuple[int, type, int], np.ndarray] = {}  # CHOLMOD reuses its result arrays
+
+        def view(address: int, kind: type, length: int) -> np.ndarray:
+            key = (address, kind, length)
+            if key not in views:
+                views[key] = _c_array(address, kind, length)
+            return views[key]
+
+        row_bytes, first_row, factor = all_rows.itemsize, all_rows.ctypes.data, self.factor
+        try:
+            for column in range(k):
+                start, stop = int(starts[column]), int(starts[column + 1])
+                if start == stop:
+                    continue
+                rows = all_rows[start:stop]
+                dense[rows] = all_values[start:stop]
+                set_pointers[1] = stop - start
+                given.nzmax = stop - start
+                given.i = first_row + start * row_bytes
+                started = time.perf_counter()
+                if not library.cholmod_solve2(_SYS_L, factor, ctypes.byref(right), ctypes.byref(given),
+                                              ctypes.byref(solution), ctypes.byref(pattern), ctypes.byref(work_y),
+                                              ctypes.byref(work_e), common):
+                    raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
+                if converting:  # CHOLMOD made the factor simplicial: its first column's solve, near enough
+                    self.setup_seconds = self.analysis.conversion_seconds = time.perf_counter() - started
+                    self.analysis.simplicial = self.analysis.converted = True
+                    converting = False
+                dense[rows] = 0.0
+                reach = pattern.contents
+                count = int(view(reach.p, ctypes.c_int32, 2)[1])
+                touched = view(reach.i, ctypes.c_int32, reach.nzmax)[:count].copy()
+                rows_out.append(touched)
+                values_out.append(view(solution.contents.x, ctypes.c_double, n)[touched])  # only the reach is valid
+                counts[column + 1] = count
+        finally:
+            for handle in (solution, work_y, work_e):
+                if handle:
+                    library.cholmod_free_dense(ctypes.byref(handle), common)
+            if pattern:
+                library.cholmod_free_sparse(ctypes.byref(pattern), common)
+        indptr = np.cumsum(counts)
+        indices = np.concatenate(rows_out) if rows_out else np.zeros(0, dtype=np.int32)
+        data = np.concatenate(values_out) if values_out else np.zeros(0)
+        forward = sp.csc_matrix((data, indices, indptr), shape=(n, k))
+        forward.sort_indices()
+        return forward, forward
+
+
+def serves(matrix: sp.spmatrix) -> bool:
+    """Whether cvxopt's bundled CHOLMOD is called directly for ``matrix`` (found here, and
+    the matrix within its int interface)."""
+    return cholmod_library() is not None and matrix.nnz < 2**31
