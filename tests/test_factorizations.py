@@ -13,6 +13,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import contactfem.linalg as linalg
+from contactfem.errors import SolverError
 from contactfem.linalg import (
     cholmod_ctypes,
     cholmod_cvxopt,
@@ -22,7 +23,6 @@ from contactfem.linalg import (
     registry,
     superlu,
 )
-from contactfem.errors import SolverError
 
 
 def _elasticity_like(size: int, seed: int) -> sp.csr_matrix:
@@ -414,3 +414,86 @@ def test_a_pardiso_factor_is_released_with_its_last_user():
         factorise_once()
     assert held > 50e6  # the factor is large enough to see
     assert resident() - before < 0.5 * held
+
+
+@needs_library
+@pytest.mark.parametrize("size", [400, 6400])
+def test_the_direct_route_switched_off_gives_the_same_answers_through_cvxopts_interface(size, monkeypatch):
+    """``cholmod`` with the direct route on (the bundled library through ctypes) and off
+    (cvxopt's interface): the same solves and the same Schur blocks Bᵀ A⁻¹ B from forward
+    columns, to 1e-12 relative, through a Factorizer refactorising one pattern. Switched
+    off, the library is not asked for at all."""
+    matrix = _elasticity_like(size, seed=21)
+    n = matrix.shape[0]
+    changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
+    rhs = np.random.default_rng(22).standard_normal((n, 3))
+    columns = sp.csc_matrix((np.ones(6), (np.arange(0, n, n // 6)[:6], np.arange(6))), shape=(n, 6))
+
+    def run() -> tuple[type, list[np.ndarray]]:
+        factorizer = linalg.Factorizer("cholmod", name="the test matrix")
+        results = []
+        for values in (matrix, changed):
+            factor = factorizer.factorize(values)
+            forward, scaled = factor.forward_sparse(columns)
+            results += [np.asarray(factor.solve(rhs)).reshape(rhs.shape), (forward.T @ scaled).toarray()]
+        return type(factor), results
+
+    assert linalg.direct_cholmod_enabled()
+    on_kind, on = run()
+    with linalg.direct_cholmod(False):
+        assert not linalg.direct_cholmod_enabled()
+        for module in (cholmod_ctypes, cholmod_direct):
+            monkeypatch.setattr(module, "cholmod_library", lambda: pytest.fail("the library was asked for"))
+        off_kind, off = run()
+    monkeypatch.undo()
+    assert linalg.direct_cholmod_enabled()
+    assert (on_kind, off_kind) == (cholmod_direct.DirectCholmodFactor, cholmod_cvxopt.CvxoptCholmodFactor)
+    for direct, interface in zip(on, off):
+        assert np.abs(direct - interface).max() <= 1e-12 * np.abs(interface).max()
+
+
+@pytest.mark.skipif(not registry.installed("cvxopt"), reason="cvxopt is not installed")
+@pytest.mark.parametrize("setting", ["0", "off", "1"])
+def test_the_environment_switch_keeps_ctypes_away_from_cholmod(setting):
+    """In a fresh process with ``CONTACTFEM_CHOLMOD_DIRECT=0`` (or ``off``), factorising,
+    solving and forward columns with ``cholmod`` load no CHOLMOD library through ctypes and
+    never import the direct route's modules; with ``1`` they do (where the wheel bundles it)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent("""
+        import ctypes, json, sys
+        import numpy as np, scipy.sparse as sp
+        loaded = []
+        original = ctypes.CDLL.__init__
+        def recording(self, name, *args, **kwargs):
+            loaded.append(str(name))
+            original(self, name, *args, **kwargs)
+        ctypes.CDLL.__init__ = recording
+        from contactfem.linalg import Factorizer, direct_cholmod_enabled
+        grid = sp.diags([-1.0, -1.0, 4.2, -1.0, -1.0], [-20, -1, 0, 1, 20], shape=(400, 400), format="csr")
+        factor = Factorizer("cholmod").factorize(grid)
+        x = factor.solve(np.ones(400))
+        factor.forward_sparse(sp.csc_matrix(sp.identity(400, format="csc")[:, :3]))
+        print(json.dumps({"enabled": direct_cholmod_enabled(), "kind": type(factor).__name__,
+                          "cholmod_loaded": [name for name in loaded if "cholmod" in name.lower()],
+                          "direct_imported": "contactfem.linalg.cholmod_direct" in sys.modules,
+                          "bindings_imported": "contactfem.linalg.cholmod_ctypes" in sys.modules,
+                          "residual": float(np.abs(grid @ x - 1.0).max())}))
+    """)
+    environment = dict(os.environ, CONTACTFEM_CHOLMOD_DIRECT=setting)
+    done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["residual"] < 1e-12
+    if setting == "1":
+        assert report["enabled"] and report["direct_imported"]
+        if cholmod_ctypes.cholmod_library() is not None:
+            assert report["kind"] == "DirectCholmodFactor" and report["cholmod_loaded"]
+    else:
+        assert not report["enabled"] and report["kind"] == "CvxoptCholmodFactor"
+        assert report["cholmod_loaded"] == [] and not report["direct_imported"] and not report["bindings_imported"]

@@ -15,6 +15,10 @@ Matrices that share one sparsity pattern (the contact kernel's, masked different
 each active set) are factorised through a :class:`Factorizer`, which keeps CHOLMOD's
 ordering and symbolic analysis and redoes only the numeric factorisation. Every
 factorisation is probed for singularity (:func:`check_factorization`).
+
+The direct route to cvxopt's CHOLMOD reads the library's structs at fixed offsets (see
+:mod:`~contactfem.linalg.cholmod_direct`); ``CONTACTFEM_CHOLMOD_DIRECT=0`` or
+:func:`set_direct_cholmod` (``False``) sends ``cholmod`` through cvxopt's interface instead.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from __future__ import annotations
 # The backends register themselves on import; providers of one name are preferred in the
 # order imported (cvxopt's CHOLMOD before scikit-sparse's).
 from contactfem.linalg import cholmod_cvxopt, cholmod_sksparse, pardiso, superlu  # noqa: F401
+from contactfem.linalg.cholmod_cvxopt import direct_cholmod, direct_cholmod_enabled, set_direct_cholmod
 from contactfem.linalg.factorizer import Factorizer, factorize, solve_sparse_columns
 from contactfem.linalg.probe import (
     SINGULARITY_LIMIT,
@@ -64,10 +69,13 @@ __all__ = [
     "available_backends",
     "backend_provider",
     "check_factorization",
+    "direct_cholmod",
+    "direct_cholmod_enabled",
     "factorize",
     "probe_vector",
     "register_backend",
     "resolve_backend",
+    "set_direct_cholmod",
     "solve_sparse_columns",
     "superlu_max_nonzeros",
     "superlu_refusal",

@@ -1,14 +1,22 @@
 """CHOLMOD from cvxopt's wheel (a default dependency where cvxopt publishes one): the
 ``cholmod`` backend's first provider.
 
-A factorisation goes to the CHOLMOD library the wheel bundles, called directly
-(:mod:`contactfem.linalg.cholmod_direct`), where that library is found and its layout is
-the known one, and through cvxopt's own interface (:class:`CvxoptCholmodFactor`) otherwise.
+A factorisation goes to the CHOLMOD library the wheel bundles, called directly through
+ctypes (:mod:`contactfem.linalg.cholmod_direct`), where that library is found and its
+layout is the known one, and through cvxopt's own interface (:class:`CvxoptCholmodFactor`)
+otherwise. The direct route can be switched off: ``CONTACTFEM_CHOLMOD_DIRECT=0`` in the
+environment, or :func:`set_direct_cholmod` / :func:`direct_cholmod` in the program. Switched
+off, every factorisation goes through cvxopt's interface, and the direct route's modules
+are not even imported (nothing is loaded through ctypes).
 """
 
 from __future__ import annotations
 
+import os
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +28,56 @@ from contactfem.linalg.storage import canonical_csr, release_freed_memory
 
 #: CHOLMOD's Common->supernodal value that always asks for a supernodal factor.
 _CHOLMOD_SUPERNODAL = 2
+#: The environment variable that switches the direct route off when it is 0 (or false, no, off).
+DIRECT_ENVIRONMENT = "CONTACTFEM_CHOLMOD_DIRECT"
+_OFF = ("0", "false", "no", "off")
+#: The program's setting (:func:`set_direct_cholmod`), None to follow the environment.
+_direct_setting: bool | None = None
+_SETTING_LOCK = threading.Lock()
+
+
+def direct_cholmod_enabled() -> bool:
+    """Whether CHOLMOD from cvxopt's wheel may be called directly through ctypes: the
+    setting of :func:`set_direct_cholmod`, or else the environment variable
+    ``CONTACTFEM_CHOLMOD_DIRECT`` (on unless it is ``0``, ``false``, ``no`` or ``off``)."""
+    if _direct_setting is not None:
+        return _direct_setting
+    return os.environ.get(DIRECT_ENVIRONMENT, "1").strip().lower() not in _OFF
+
+
+def set_direct_cholmod(enabled: bool | None) -> None:
+    """Switch the direct route to cvxopt's bundled CHOLMOD on or off for this process.
+
+    Parameters
+    ----------
+    enabled : bool or None
+        False: every later factorisation goes through cvxopt's interface, and the library
+        is never loaded through ctypes (unless it was already); True: the direct route
+        where the library is found; None: back to the environment variable
+        ``CONTACTFEM_CHOLMOD_DIRECT``. A :class:`~contactfem.linalg.Factorizer` whose
+        analysis was made by the other route analyses its pattern afresh.
+    """
+    global _direct_setting
+    with _SETTING_LOCK:
+        _direct_setting = None if enabled is None else bool(enabled)
+
+
+@contextmanager
+def direct_cholmod(enabled: bool) -> Iterator[None]:
+    """:func:`set_direct_cholmod` for a ``with`` block; the previous setting is restored after it.
+
+    Examples
+    --------
+    >>> from contactfem.linalg import direct_cholmod, factorize
+    >>> with direct_cholmod(False):          # doctest: +SKIP
+    ...     factor = factorize(matrix, "cholmod")  # through cvxopt's interface
+    """
+    previous = _direct_setting
+    set_direct_cholmod(enabled)
+    try:
+        yield
+    finally:
+        set_direct_cholmod(previous)
 
 
 @dataclass
@@ -144,7 +202,11 @@ class CvxoptCholmodFactor:
 
 
 def _direct_serves(matrix: sp.spmatrix) -> bool:
-    """Whether cvxopt's bundled CHOLMOD is called directly for ``matrix``."""
+    """Whether cvxopt's bundled CHOLMOD is called directly for ``matrix``: the route is
+    switched on (:func:`direct_cholmod_enabled`), and the library found and the matrix
+    within its int interface (:func:`contactfem.linalg.cholmod_direct.serves`)."""
+    if not direct_cholmod_enabled():
+        return False
     from contactfem.linalg import cholmod_direct
 
     return cholmod_direct.serves(matrix)
