@@ -60,13 +60,17 @@ _COMMON_PRINT, _COMMON_SUPERNODAL, _COMMON_FINAL_ASIS, _COMMON_FINAL_LL = 144, 4
 _CHOLMOD_AUTO, _CHOLMOD_SUPERNODAL = 1, 2
 _FACTOR_SWITCH = _CHOLMOD_AUTO
 #: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it),
-#: Perm (the fill-reducing permutation) and ColCount (a simplicial factor's column counts);
-#: further on, xsize (a supernodal factor's entries) and is_super, at the offsets of
-#: CHOLMOD 3 to 5's layout on 64-bit machines (read only to guess a cost and to tell the
-#: kinds apart; checked: n must match and is_super be 0 or 1).
+#: Perm (the fill-reducing permutation) and ColCount (the column counts of L, which the
+#: symbolic analysis sets for either kind of factor); further on, xsize (a supernodal
+#: factor's stored entries) and is_super, at the offsets of CHOLMOD 3 to 5's layout on
+#: 64-bit machines (read to count the factor's cost and to tell the kinds apart; checked:
+#: n must match and is_super be 0 or 1, see :func:`factor_counts`).
 _FACTOR_MINOR, _FACTOR_PERM = ctypes.sizeof(ctypes.c_size_t), 2 * ctypes.sizeof(ctypes.c_size_t)
 _FACTOR_XSIZE, _FACTOR_IS_SUPER = 120, 184
 _FACTOR_COLCOUNT = 3 * ctypes.sizeof(ctypes.c_size_t)
+#: CHOLMOD major versions whose struct layouts the offsets above are those of; a library
+#: that reports another (cholmod_version) is not used.
+KNOWN_MAJOR_VERSIONS = (3, 4, 5)
 
 
 class CholmodLibrary:
@@ -134,6 +138,39 @@ def _c_array(address: int, kind: type, count: int) -> np.ndarray:
     return np.ctypeslib.as_array(ctypes.cast(address, ctypes.POINTER(kind)), (count,))
 
 
+def factor_counts(address: int, size: int) -> tuple[np.ndarray, int, bool] | None:
+    """(column counts of L, stored entries, whether supernodal) of the cholmod_factor at
+    ``address``, the counts copied; None where its fields do not read back as those of a
+    factor of ``size`` columns (another layout)."""
+    n = ctypes.c_size_t.from_address(address).value
+    supernodal = ctypes.c_int.from_address(address + _FACTOR_IS_SUPER).value
+    counts_at = ctypes.c_void_p.from_address(address + _FACTOR_COLCOUNT).value
+    if n != size or supernodal not in (0, 1) or (size and not counts_at):
+        return None
+    counts = _c_array(counts_at, ctypes.c_int32, size).copy()
+    if size and (counts.min() < 1 or counts.max() > size):
+        return None
+    if supernodal:
+        stored = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
+    else:
+        stored = int(counts.sum(dtype=np.int64))
+    if not size <= stored < 2**40:
+        return None
+    return counts, stored, bool(supernodal)
+
+
+def library_version(library: ctypes.CDLL) -> tuple[int, int, int] | None:
+    """CHOLMOD's version (cholmod_version), or None where the library does not say."""
+    try:
+        function = library.cholmod_version
+    except AttributeError:
+        return None
+    version = (ctypes.c_int * 3)()
+    function.argtypes = [ctypes.POINTER(ctypes.c_int)]
+    function(version)
+    return version[0], version[1], version[2]
+
+
 def _bundled_cholmod_files() -> list[str]:
     """CHOLMOD shared libraries shipped inside cvxopt's wheel (auditwheel puts them in
     cvxopt.libs beside the package, delvewheel and delocate inside it)."""
@@ -169,7 +206,12 @@ def _load_cholmod_library() -> CholmodLibrary | None:
             import cvxopt.cholmod  # noqa: F401  (loads the bundled library and its dependencies)
 
             for path in _bundled_cholmod_files():
-                candidate = CholmodLibrary(ctypes.CDLL(path))
+                library = ctypes.CDLL(path)
+                version = library_version(library)
+                if ctypes.sizeof(ctypes.c_size_t) != 8 or (version is not None
+                                                          and version[0] not in KNOWN_MAJOR_VERSIONS):
+                    continue
+                candidate = CholmodLibrary(library)
                 common = candidate.start()
                 if common is not None:
                     candidate.library.cholmod_finish(common)
