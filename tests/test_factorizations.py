@@ -78,6 +78,35 @@ def test_every_provider_solves_to_round_off_and_reuses_its_analysis(label, provi
     assert np.abs(np.asarray(refactored.solve(rhs[:, 0])).ravel() - expected).max() < 1e-12 * np.abs(expected).max()
 
 
+@pytest.mark.parametrize(("label", "provider"), PROVIDERS, ids=[label for label, _ in PROVIDERS])
+def test_every_factorisation_counts_its_entries_and_flops(label, provider):
+    """Every factorisation has a counted cost: its factor's stored entries (at least one per
+    column) and its numeric factorisation's flops, the same for the same matrix; SuperLU's
+    from its L and U (nnz(L) + nnz(U), flops from L's column counts and U's row counts),
+    its free estimate with the same entries. A Factorizer keeps each one, and its seconds
+    are the modelled ones: analysis plus counted work over the rates of costs.py."""
+    from contactfem.linalg.costs import MODEL, FactorCost, lu_flops
+
+    matrix = _elasticity_like(1600, seed=30)
+    n = matrix.shape[0]
+    factor = provider(matrix, "the test matrix")
+    cost = factor.cost
+    assert isinstance(cost, FactorCost) and cost.size == n and cost.kind in MODEL.rates
+    assert n <= cost.entries and cost.flops > 0 and cost.matrix_entries == matrix.nnz
+    assert provider(matrix, "the test matrix").cost == cost
+    if label == "superlu":
+        lower, upper = factor._lu.L, factor._lu.U
+        assert cost.entries == lower.nnz + upper.nnz
+        assert cost.flops == lu_flops(np.diff(lower.indptr), np.bincount(upper.indices, minlength=n))
+        assert factor.estimated_cost.entries == cost.entries
+    factorizer = linalg.Factorizer({"superlu": "superlu", "pardiso": "pardiso"}.get(label, "cholmod"))
+    if type(factorizer.factorize(matrix)) is type(factor):  # the provider this backend uses here
+        factorizer.factorize(matrix)
+        assert len(factorizer.costs) == 2 and factorizer.costs[0].entries == factorizer.costs[1].entries
+        assert factorizer.seconds == [analysis + MODEL.factorize_seconds(c)
+                                      for c, analysis in zip(factorizer.costs, factorizer.analysis_seconds)]
+
+
 @pytest.mark.parametrize(("label", "provider"), [p for p in PROVIDERS if p[0] != "superlu"],
                          ids=[label for label, _ in PROVIDERS if label != "superlu"])
 def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capfd):
@@ -118,7 +147,7 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
         schur = (forward.T @ scaled).toarray()
         assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
     assert factor.analysis.simplicial
-    assert factor.analysis.converted is (factor.analysis.conversion_seconds is not None) is (kind == "supernodal")
+    assert factor.analysis.converted is (kind == "supernodal")
 
 
 @needs_library
@@ -206,54 +235,70 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
 
 
 @needs_library
-def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypatch):
+def test_library_picks_the_cheaper_forward_route_from_counts(monkeypatch):
     """A few columns go through the blocked solve while converting the (supernodal) factor
-    is expected to cost more than it saves, and say nothing of a column's cost (fewer than
-    MEASURED_FROM: the call's fixed cost); a batch of MEASURED_FROM columns is measured.
-    Once the conversion and both routes are measured, the choice follows the measured
-    figures: many columns through the pattern solve."""
+    is modelled to cost more than it saves; every forward call counts the factor entries
+    its columns' paths reach (Σ of L's column counts over each column's rows), and with
+    those counts (not a guess) the choice for many columns is the pattern solve, whose
+    conversion is then modelled in setup_seconds. The choice is the cheaper of the
+    modelled routes, from counts alone."""
+    from contactfem.linalg.costs import MODEL
+
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=14)
     n = matrix.shape[0]
     factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
-    factor.solve(np.ones(n))  # the kernel always solves first: the per-column scale
+    analysis = factor.analysis
+    assert factor.cost.kind == "cholmod-supernodal" and analysis.path_entries is None
     few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
-    factor.forward_sparse(few)
-    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is None
     blocked, pattern = factor._route_seconds(2)
-    assert blocked < pattern
-    factor.analysis.conversion_seconds = 1e3  # as if measured: a costly conversion
-    k = cholmod_direct.DirectCholmodFactor.MEASURED_FROM
-    batch = sp.csc_matrix((np.ones(k), (np.arange(0, 50 * k, 50), np.arange(k))), shape=(n, k))
-    factor.forward_sparse(batch)
-    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
-    assert factor.analysis.pattern_column_seconds is None
-    factor.analysis.conversion_seconds = 0.0  # as if measured: a cheap conversion
-    factor.analysis.blocked_column_seconds = 1.0
-    factor.analysis.pattern_column_seconds = 1e-6
-    many = sp.csc_matrix((np.ones(40), (np.arange(0, 40 * 50, 50), np.arange(40))), shape=(n, 40))
-    factor.forward_sparse(many)
-    assert factor.analysis.simplicial
-    assert factor.forward_seconds(40) == pytest.approx(factor._route_seconds(40)[1])
+    assert blocked < pattern and pattern > MODEL.conversion_seconds(factor.cost) > 0
+    forward, _ = factor.forward_sparse(few)
+    assert factor.route == "blocked" and factor.setup_seconds == 0.0 and not analysis.simplicial
+    reached = int(analysis.column_counts[forward.indices].sum())
+    assert (analysis.path_columns, analysis.path_entries) == (2, reached / 2)
+    k = 400
+    many = sp.csc_matrix((np.ones(k), (np.arange(0, 8 * k, 8), np.arange(k))), shape=(n, k))
+    blocked, pattern = factor._route_seconds(k)
+    assert factor.forward_seconds(k) == min(blocked, pattern)
+    assert pattern == MODEL.conversion_seconds(factor.cost) + MODEL.pattern_forward_seconds(
+        factor.cost, k, reached / 2)
+    forward, scaled = factor.forward_sparse(many)
+    assert factor.route == ("blocked" if blocked < pattern else "pattern")
+    if factor.route == "pattern":
+        assert analysis.simplicial and factor.setup_seconds == MODEL.conversion_seconds(factor.cost)
+        assert factor._route_seconds(k)[1] == MODEL.pattern_forward_seconds(factor.cost, k, analysis.path_entries)
+    expected = many.T @ factor.solve(many.toarray())
+    assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
 
 
 @needs_library
-def test_library_guesses_a_pattern_column_from_the_factors_fill(monkeypatch):
-    """Until measured, a pattern-solve column is guessed from the factor's entries per
-    column (longer columns on a path cost more): a positive share of a full solve, at most
-    0.1, larger for a factor with more fill, for a supernodal factor as for a simplicial
-    one (its column counts); where the factor's fields do not read back as a factor of this
-    size, the costly end (0.1)."""
+def test_the_direct_factors_cost_is_counted_from_its_column_counts(monkeypatch):
+    """The factor's cost is read from CHOLMOD's own counts: its column counts sum to the
+    entries of a simplicial factor, a supernodal one stores at least as many; flops are
+    Σ c_j². Before any path is counted, a pattern column is guessed from the fill, a
+    positive share of a full solve, larger with more fill and at most 0.1 of it. Where the
+    factor's fields do not read back as its own (another layout), the cost falls back to
+    the matrix's counts and the factor still solves."""
+    from contactfem.linalg.costs import MODEL, PATTERN_GUESS_CAP, cholesky_flops
+
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 0)
     simplicial = cholmod_direct.DirectCholmodFactor(_elasticity_like(6400, seed=15), "m")
-    assert simplicial.analysis.simplicial and 0.0 < simplicial._pattern_column_guess() <= 0.1
+    counts = simplicial.analysis.column_counts
+    assert simplicial.cost.kind == "cholmod-simplicial" and simplicial.cost.entries == counts.sum()
+    assert simplicial.cost.flops == cholesky_flops(counts) and simplicial.cost.size == 2 * 6400
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     sparse_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(400, seed=15), "m")
     dense_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(40000, seed=15), "m")
-    low, high = sparse_grid._pattern_column_guess(), dense_grid._pattern_column_guess()
-    assert 0.0 < low < high <= 0.1
-    monkeypatch.setattr(cholmod_direct, "_FACTOR_IS_SUPER", cholmod_direct._FACTOR_XSIZE)
-    assert dense_grid._pattern_column_guess() == 0.1
+    assert dense_grid.cost.kind == "cholmod-supernodal"
+    assert dense_grid.cost.entries >= dense_grid.analysis.column_counts.sum()
+    shares = [MODEL.pattern_column_guess(f.cost) / MODEL.solve_seconds(f.cost) for f in (sparse_grid, dense_grid)]
+    assert 0.0 < shares[0] < shares[1] <= PATTERN_GUESS_CAP
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_IS_SUPER", cholmod_ctypes._FACTOR_XSIZE)
+    matrix = _elasticity_like(400, seed=16)
+    fallback = cholmod_direct.DirectCholmodFactor(matrix, "m")
+    assert fallback.cost.entries >= fallback.cost.size and fallback.cost.flops > 0
+    assert np.abs(matrix @ fallback.solve(np.ones(800)) - 1.0).max() < 1e-10
 
 
 @needs_library

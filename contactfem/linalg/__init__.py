@@ -16,6 +16,11 @@ each active set) are factorised through a :class:`Factorizer`, which keeps CHOLM
 ordering and symbolic analysis and redoes only the numeric factorisation. Every
 factorisation is probed for singularity (:func:`check_factorization`).
 
+Every factorisation's cost is counted (``factor.cost``, a :class:`FactorCost`: its factor's
+entries and its flops), and every figure in seconds the package gives is modelled from
+such counts by the rates in :mod:`~contactfem.linalg.costs` (:data:`MODEL`): nothing here
+reads a clock, so the same matrices always get the same choices.
+
 The direct route to cvxopt's CHOLMOD reads the library's structs at fixed offsets (see
 :mod:`~contactfem.linalg.cholmod_direct`); ``CONTACTFEM_CHOLMOD_DIRECT=0`` or
 :func:`set_direct_cholmod` (``False``) sends ``cholmod`` through cvxopt's interface instead.
@@ -27,6 +32,7 @@ from __future__ import annotations
 # order imported (cvxopt's CHOLMOD before scikit-sparse's).
 from contactfem.linalg import cholmod_cvxopt, cholmod_sksparse, pardiso, superlu  # noqa: F401
 from contactfem.linalg.cholmod_cvxopt import direct_cholmod, direct_cholmod_enabled, set_direct_cholmod
+from contactfem.linalg.costs import MODEL, CostModel, FactorCost
 from contactfem.linalg.factorizer import Factorizer, factorize, solve_sparse_columns
 from contactfem.linalg.probe import (
     SINGULARITY_LIMIT,
@@ -59,11 +65,14 @@ BACKEND_CHOICES = backend_choices()
 __all__ = [
     "BACKEND_CHOICES",
     "BACKEND_NAMES",
+    "MODEL",
+    "CostModel",
     "DISTRIBUTED_BACKENDS",
     "SINGULARITY_LIMIT",
     "SUPERLU_FILL_GUESS",
     "SUPERLU_REMEDY",
     "FactorCheck",
+    "FactorCost",
     "Factorization",
     "Factorizer",
     "available_backends",

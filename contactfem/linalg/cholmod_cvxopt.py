@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import threading
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from contactfem.errors import SolverError
+from contactfem.linalg.costs import MODEL, FactorCost, estimated_flops
 from contactfem.linalg.registry import register_backend
 from contactfem.linalg.storage import canonical_csr, release_freed_memory
 
@@ -117,8 +117,8 @@ class CvxoptCholmodFactor:
         from cvxopt import cholmod
 
         csr = canonical_csr(matrix)
-        started = time.perf_counter()
-        if analysis is not None and analysis.matches(csr):
+        reused = analysis is not None and analysis.matches(csr)
+        if reused:
             stored, symbolic, positions = analysis.stored, analysis.symbolic, analysis.positions
             # ``stored.V`` reads a copy; assigning the attribute replaces the values in place.
             stored.V = cvxopt.matrix(np.ascontiguousarray(csr.data[positions], dtype=float))
@@ -140,7 +140,14 @@ class CvxoptCholmodFactor:
             # sparse factors, which passes a negative pivot silently.
             cholmod.options["supernodal"] = _CHOLMOD_SUPERNODAL  # cvxopt cannot ask for a simplicial LLᵀ
             symbolic = cholmod.symbolic(stored, uplo="U")
-        self.analysis_seconds = time.perf_counter() - started
+        n = csr.shape[0]
+        entries = (csr.nnz + n) // 2
+        #: A lower estimate of the cost: cvxopt's interface does not show its factor (reading
+        #: it converts it to a pattern), so the matrix's upper triangle stands for its entries.
+        self.cost = FactorCost(size=n, entries=entries, flops=estimated_flops(entries, n), kind="cholmod-interface",
+                               matrix_entries=int(csr.nnz))
+        #: Modelled seconds of the ordering, symbolic analysis and copy made here (0 when reused).
+        self.analysis_seconds = 0.0 if reused else MODEL.analysis_seconds(self.cost)
         try:
             cholmod.numeric(stored, symbolic)
         except ArithmeticError as error:

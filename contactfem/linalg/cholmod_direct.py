@@ -25,7 +25,6 @@ the same factor and the same solves; it is the fallback wherever an assumption f
 from __future__ import annotations
 
 import ctypes
-import time
 import weakref
 
 import numpy as np
@@ -35,11 +34,8 @@ from contactfem.errors import SolverError
 from contactfem.linalg.cholmod_ctypes import (
     _DENSE_P,
     _DTYPE_DOUBLE,
-    _FACTOR_COLCOUNT,
-    _FACTOR_IS_SUPER,
     _FACTOR_MINOR,
     _FACTOR_PERM,
-    _FACTOR_XSIZE,
     _SPARSE_P,
     _SYS_A,
     _SYS_L,
@@ -50,7 +46,9 @@ from contactfem.linalg.cholmod_ctypes import (
     _DenseStruct,
     _SparseStruct,
     cholmod_library,
+    factor_counts,
 )
+from contactfem.linalg.costs import MODEL, FactorCost, cholesky_flops, estimated_flops
 from contactfem.linalg.storage import canonical_csr
 
 
@@ -70,20 +68,41 @@ class DirectAnalysis:
         #: The numeric factor (0 when none) and how many have been made: a factorisation
         #: whose generation is not the latest was freed and may not be used.
         self.numeric, self.generation = ctypes.c_void_p(0), 0
-        #: Whether the numeric factor is simplicial (as analysed, or converted by a sparse
-        #: solve), whether a sparse solve converted it, and what that conversion took (None
-        #: until measured): 9.5 ms on a rough profile's graded mesh at 418 000 unknowns,
-        #: 0.65 s on a uniform one at 695 000 (its factor has large dense supernodes, each
-        #: entry of which gets its own row index).
-        self.analysed_simplicial = ctypes.c_int.from_address(symbolic + _FACTOR_IS_SUPER).value == 0
-        self.simplicial, self.converted = self.analysed_simplicial, False
-        self.conversion_seconds: float | None = None
-        #: Measured seconds per forward column through each route (None until measured).
-        self.blocked_column_seconds: float | None = None
-        self.pattern_column_seconds: float | None = None
-        #: The pattern solve's cost per column guessed from the supernodal factor's fill.
-        self.pattern_column_guess: float | None = None
         weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric)
+        size = len(indptr) - 1
+        counted = factor_counts(symbolic, size)
+        if counted is None:  # fields that do not read back as this factor's: the matrix's own counts
+            counts = np.bincount(np.repeat(np.arange(size), np.diff(indptr)), minlength=size).astype(np.int32)
+            entries, supernodal = int(counts.sum()), True
+            flops = estimated_flops(entries, size)
+        else:
+            counts, entries, supernodal = counted
+            flops = cholesky_flops(counts)
+        #: L's column counts (factor order): what a forward column reaching column j costs there.
+        self.column_counts = counts
+        #: The factor's counted cost, the same for every factorisation of the pattern.
+        self.cost = FactorCost(size=size, entries=entries, flops=flops,
+                               kind="cholmod-supernodal" if supernodal else "cholmod-simplicial",
+                               matrix_entries=len(indices))
+        #: Whether the numeric factor is simplicial (as analysed, or converted by a pattern
+        #: solve), and whether a pattern solve converted it.
+        self.analysed_simplicial = not supernodal
+        self.simplicial, self.converted = self.analysed_simplicial, False
+        #: Forward columns solved with this pattern's factors so far, and the factor entries
+        #: on the elimination-tree paths they reached (Σ over each column's rows of L's
+        #: column count there): counted, so the same columns always give the same figure.
+        self.path_columns, self.path_entries_reached = 0, 0
+
+    @property
+    def path_entries(self) -> float | None:
+        """Factor entries a forward column reaches, on average over the columns counted so
+        far (None before any)."""
+        return self.path_entries_reached / self.path_columns if self.path_columns else None
+
+    def count_paths(self, forward: sp.csc_matrix) -> None:
+        """Count the paths of solved forward columns W = L⁻¹ P B (rows in the factor's order)."""
+        self.path_columns += forward.shape[1]
+        self.path_entries_reached += int(self.column_counts[forward.indices].sum(dtype=np.int64))
 
     def matches(self, matrix: sp.csr_matrix) -> bool:
         if self.indptr is matrix.indptr and self.indices is matrix.indices:
@@ -119,25 +138,17 @@ def _free_analysis(library: CholmodLibrary, common: ctypes.Array, symbolic: int,
 class DirectCholmodFactor:
     """CHOLMOD through the library cvxopt's wheel bundles (see :class:`CholmodLibrary`):
     AMD ordering, an LLᵀ factor (supernodal or simplicial, CHOLMOD's choice; see
-    :data:`_FACTOR_SWITCH`), the matrix read in place. A non-positive pivot is
-    reported as a SolverError. Only the latest factorisation of a pattern may be used
-    (see :class:`DirectAnalysis`); an earlier one refuses to solve."""
+    :data:`~contactfem.linalg.cholmod_ctypes._FACTOR_SWITCH`), the matrix read in place.
+    A non-positive pivot is reported as a SolverError. Only the latest factorisation of a
+    pattern may be used (see :class:`DirectAnalysis`); an earlier one refuses to solve.
+
+    Its cost is counted (:attr:`cost`, the same for every factorisation of a pattern), and
+    the figures named ``*_seconds`` are modelled seconds: counted work divided by the rates
+    in :mod:`contactfem.linalg.costs`, never read from a clock.
+    """
 
     #: Right-hand sides per dense block of a sparse solve (n × 16 doubles at a time).
     SPARSE_BLOCK = 16
-    #: Columns from which a batch's time per column is recorded for its route: a smaller
-    #: batch measures the call's fixed cost more than its columns' (a probe of 8 columns at
-    #: 13 000 unknowns measured 0.15 ms a pattern column, twice a batch of 78's, and sent
-    #: that batch through the blocked route at 0.23 ms a column).
-    MEASURED_FROM = 16
-    #: A column through CHOLMOD's sparse solve in dense blocks (no conversion), in full
-    #: solves: 9 ms of 30 ms on a rough profile's mesh at 418 000 unknowns.
-    BLOCKED_COLUMN_SHARE = 0.3
-    #: What the conversion to a simplicial factor is taken to cost, in full solves, until
-    #: it is measured for the pattern: 0.3–0.7 on a rough profile's graded mesh at 418 000
-    #: unknowns, 1.0–1.2 on the square (33k–526k), 3.5–6.5 on a uniform mesh under a rough
-    #: base at 695 000.
-    CONVERSION_GUESS = 3.0
 
     @staticmethod
     def _view(matrix: sp.spmatrix) -> tuple[sp.csr_matrix, _SparseStruct, tuple[np.ndarray, ...]]:
@@ -163,17 +174,22 @@ class DirectCholmodFactor:
     def __init__(self, matrix: sp.spmatrix, name: str, analysis: "DirectAnalysis | None" = None) -> None:
         csr, view, _arrays = self._view(matrix)
         n = csr.shape[0]
-        started = time.perf_counter()
-        if analysis is None or not analysis.matches(csr):
+        analysed = analysis is None or not analysis.matches(csr)
+        if analysed:
             analysis = self.analyse(csr, name)
-        self.analysis_seconds = time.perf_counter() - started
         library, common = analysis.library, analysis.common
         factor = analysis.fresh_numeric()
         self.analysis, self.generation, self.size = analysis, analysis.generation, n
-        #: Seconds per right-hand side of the latest dense solve (the scale of the route
-        #: estimates), what the latest forward_sparse spent converting the factor, and the
-        #: inverse fill-reducing permutation once needed.
-        self.column_solve_seconds, self.setup_seconds = 0.0, 0.0
+        #: The counted cost of this factorisation (:class:`~contactfem.linalg.costs.FactorCost`).
+        self.cost: FactorCost = analysis.cost
+        #: Modelled seconds of the ordering and symbolic analysis made for this factorisation
+        #: (0 when it reused one).
+        self.analysis_seconds = MODEL.analysis_seconds(self.cost) if analysed else 0.0
+        #: Modelled seconds of the conversion the latest :meth:`forward_sparse` made (0 if none),
+        #: the route it took (``blocked`` or ``pattern``; None before any), and the inverse
+        #: fill-reducing permutation once needed.
+        self.setup_seconds = 0.0
+        self.route: str | None = None
         self._iperm: np.ndarray | None = None
         if not library.library.cholmod_factorize(ctypes.byref(view), factor, common):
             raise MemoryError(f"CHOLMOD could not factorise {name}")
@@ -196,9 +212,7 @@ class DirectCholmodFactor:
         view = _DenseStruct(self.size, width, self.size * width, self.size, block.ctypes.data, None,
                             _XTYPE_REAL, _DTYPE_DOUBLE)
         library, common = self.analysis.library, self.analysis.common
-        started = time.perf_counter()
         result = library.library.cholmod_solve(system, self.factor, ctypes.byref(view), common)
-        self.column_solve_seconds = (time.perf_counter() - started) / width
         if not result:
             raise MemoryError("CHOLMOD could not allocate a solve's result")
         values = _c_array(result.contents.x, ctypes.c_double, width * self.size).reshape(width, self.size)
@@ -223,6 +237,12 @@ class DirectCholmodFactor:
         """Whether the factor is simplicial (its pattern solves then convert nothing)."""
         return self.analysis.simplicial
 
+    @property
+    def column_solve_seconds(self) -> float:
+        """Modelled seconds of a full solve with one right-hand side (the scale of the
+        pattern route's guess before any path is counted)."""
+        return MODEL.solve_seconds(self.cost, 1)
+
     def _inverse_permutation(self) -> np.ndarray:
         """Where row r of a right-hand side goes in P b: the inverse of the factor's fill-reducing
         permutation (cholmod_factor's Perm, the third field)."""
@@ -231,26 +251,6 @@ class DirectCholmodFactor:
             self._iperm = np.empty(self.size, dtype=np.int64)
             self._iperm[perm] = np.arange(self.size)
         return self._iperm
-
-    def _pattern_column_guess(self) -> float:
-        """A column through the pattern solve, in full solves, until measured: it follows the
-        factor's fill (its entries per column, xsize / n), which sets how long the columns
-        on a path are. Measured: 0.003 at 31 entries per column (a rough profile's graded
-        mesh, 418 000 unknowns), 0.05–0.07 at 98–145 (the square), 0.08 at 105 (a uniform
-        mesh under a rough base): about 0.003 (fill / 31)^2.2, at most 0.1."""
-        address = self.factor
-        size = ctypes.c_size_t.from_address(address).value
-        supernodal = ctypes.c_int.from_address(address + _FACTOR_IS_SUPER).value
-        if size != self.size or supernodal not in (0, 1):
-            return 0.1  # not the layout these offsets assume: the costly end
-        if supernodal:
-            entries = ctypes.c_size_t.from_address(address + _FACTOR_XSIZE).value
-        else:  # a simplicial factor's entries: its column counts
-            counts = ctypes.c_void_p.from_address(address + _FACTOR_COLCOUNT).value
-            entries = int(_c_array(counts, ctypes.c_int32, size).sum()) if counts else 0
-        if not size <= entries < 2**40:
-            return 0.1
-        return min(0.1, 0.003 * (entries / size / 31.0) ** 2.2)
 
     def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """W = L⁻¹ P B for a sparse B (n, k), sparse, so that Bᵀ A⁻¹ B = Wᵀ W (the factor is
@@ -261,45 +261,35 @@ class DirectCholmodFactor:
         solve with a sparse right-hand side (cholmod_solve2 with its pattern, Bset) visits
         only those, one column at a time, but converts a supernodal factor to a simplicial
         one first; its sparse solve in dense blocks of 4 sweeps the whole factor for each
-        block and converts nothing. The cheaper route for these k columns is taken, with
-        the conversion's measured cost once it is known for the pattern (``setup_seconds``:
-        what this call spent converting).
+        block and converts nothing. The route is chosen by :meth:`_route_seconds`, from
+        counts alone: the factor's entries, the k columns, the paths of the columns solved
+        before (``route`` says which was taken, ``setup_seconds`` the modelled seconds of the
+        conversion it made). The columns' paths are counted for the next choice.
         """
-        self.setup_seconds = 0.0
         k = rhs.shape[1]
         blocked, pattern = self._route_seconds(k)
-        started = time.perf_counter()
+        converting = not self.analysis.simplicial
         if blocked < pattern:
+            self.route, self.setup_seconds = "blocked", 0.0
             result = self._blocked_forward(rhs)
-            if k >= self.MEASURED_FROM:
-                self.analysis.blocked_column_seconds = (time.perf_counter() - started) / k
         else:
+            self.route = "pattern"
+            self.setup_seconds = MODEL.conversion_seconds(self.cost) if converting else 0.0
             result = self._pattern_forward(rhs)
-            if k >= self.MEASURED_FROM:
-                self.analysis.pattern_column_seconds = (time.perf_counter() - started - self.setup_seconds) / k
+        self.analysis.count_paths(result[0])
         return result
 
     def _route_seconds(self, k: int) -> tuple[float, float]:
-        """What k forward columns are expected to cost through the blocked sparse solve and
-        through the pattern solve (its conversion included while the factor is supernodal),
-        from the pattern's measured figures, or from one full solve's until measured."""
-        analysis = self.analysis
-        solve = self.column_solve_seconds
-        blocked = k * (analysis.blocked_column_seconds if analysis.blocked_column_seconds is not None
-                       else self.BLOCKED_COLUMN_SHARE * solve)
-        conversion = 0.0 if analysis.simplicial else (
-            analysis.conversion_seconds if analysis.conversion_seconds is not None else self.CONVERSION_GUESS * solve)
-        if analysis.pattern_column_seconds is not None:
-            column = analysis.pattern_column_seconds
-        else:
-            if analysis.pattern_column_guess is None:
-                analysis.pattern_column_guess = self._pattern_column_guess()
-            column = analysis.pattern_column_guess * solve
-        pattern = conversion + k * column
-        return blocked, pattern
+        """Modelled seconds of k forward columns through the blocked sparse solve and through
+        the pattern solve (its conversion included while the factor is supernodal): the
+        factor's counted entries and the paths counted on this pattern's earlier columns
+        (until there are some, the pattern route's guess from the factor's fill), divided
+        by the rates of :mod:`contactfem.linalg.costs`."""
+        return MODEL.forward_routes(self.cost, k, converted=self.analysis.simplicial,
+                                    path_entries=self.analysis.path_entries)
 
     def forward_seconds(self, k: int) -> float:
-        """What k more forward columns are expected to cost (the cheaper route)."""
+        """Modelled seconds of k more forward columns (the cheaper route)."""
         return min(self._route_seconds(k))
 
     def _blocked_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
@@ -367,13 +357,11 @@ class DirectCholmodFactor:
                 set_pointers[1] = stop - start
                 given.nzmax = stop - start
                 given.i = first_row + start * row_bytes
-                started = time.perf_counter()
                 if not library.cholmod_solve2(_SYS_L, factor, ctypes.byref(right), ctypes.byref(given),
                                               ctypes.byref(solution), ctypes.byref(pattern), ctypes.byref(work_y),
                                               ctypes.byref(work_e), common):
                     raise MemoryError("CHOLMOD could not solve with a sparse right-hand side")
-                if converting:  # CHOLMOD made the factor simplicial: its first column's solve, near enough
-                    self.setup_seconds = self.analysis.conversion_seconds = time.perf_counter() - started
+                if converting:  # CHOLMOD made the factor simplicial in its first column's solve
                     self.analysis.simplicial = self.analysis.converted = True
                     converting = False
                 dense[rows] = 0.0

@@ -6,12 +6,11 @@ probes every factorisation for singularity (:func:`~contactfem.linalg.check_fact
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import scipy.sparse as sp
 
 from contactfem.errors import SolverError
+from contactfem.linalg.costs import MODEL, FactorCost
 from contactfem.linalg.probe import Factorization, check_factorization
 from contactfem.linalg.registry import backend_entry, resolve_backend
 
@@ -31,33 +30,53 @@ class Factorizer:
     backend can reuse between them (CHOLMOD's ordering and symbolic analysis).
 
     A factorisation returned by :meth:`factorize` may share its storage with the next one
-    (CHOLMOD overwrites the numeric factor in place): use only the latest. ``seconds``
-    holds the wall time of each factorisation, the first one with its analysis, and
-    ``analysis_seconds`` the part of it a refactorisation of the same pattern skips (the
-    ordering, the symbolic analysis and the backend's copy of the pattern; 0 when reused,
-    and the whole time for a backend that reuses nothing).
+    (CHOLMOD overwrites the numeric factor in place): use only the latest.
+
+    Attributes
+    ----------
+    costs : list of FactorCost
+        The counted cost of each factorisation (for a backend that counts only on request,
+        SuperLU and scikit-sparse's CHOLMOD, its free estimate: ``estimated_cost``).
+    analysis_seconds : list of float
+        Modelled seconds of the part of each factorisation that a refactorisation of the
+        same pattern skips (the ordering, the symbolic analysis and the backend's copy of
+        the pattern): 0 when an analysis was reused, and for a backend that reuses none.
+    seconds : list of float
+        Modelled seconds of each factorisation, its analysis included.
+    ahead_seconds : float
+        Modelled seconds of the analysis made ahead (:meth:`analyse`; 0 if none).
+
+    Every figure in seconds is modelled: counted work divided by the rates in
+    :mod:`contactfem.linalg.costs`; none is read from a clock.
     """
 
     def __init__(self, backend: str = "auto", *, name: str = "the matrix") -> None:
         self.backend = resolve_backend(backend)
         self.name = name
-        self.seconds: list[float] = []
+        self.costs: list[FactorCost] = []
         self.analysis_seconds: list[float] = []
         self._analysis: object | None = None
         self._pattern: tuple[int, int] | None = None
-        #: Seconds of the analysis made ahead of the factorisations (:meth:`analyse`).
         self.ahead_seconds = 0.0
+
+    @property
+    def seconds(self) -> list[float]:
+        """Modelled seconds of each factorisation so far, its analysis included."""
+        return [analysis + MODEL.factorize_seconds(cost) for cost, analysis in zip(self.costs, self.analysis_seconds)]
 
     def analyse(self, matrix: sp.spmatrix) -> None:
         """Order and analyse ``matrix``'s pattern now, for the factorisations to come (a
         backend that reuses no analysis does nothing): the first then costs only its numbers.
         May run in another thread than this Factorizer's factorisations, not during one."""
-        started = time.perf_counter()
         analyse = backend_entry(self.backend).analyse
         analysis = analyse(matrix, self.name) if analyse is not None else None
         if analysis is not None:
             self._analysis, self._pattern = analysis, (matrix.shape[0], matrix.nnz)
-            self.ahead_seconds = time.perf_counter() - started
+            cost = getattr(analysis, "cost", None)
+            if not isinstance(cost, FactorCost):  # only the matrix's entries are needed
+                cost = FactorCost(size=matrix.shape[0], entries=matrix.shape[0], flops=0.0,
+                                  matrix_entries=int(matrix.nnz))
+            self.ahead_seconds = MODEL.analysis_seconds(cost)
 
     def factorize(self, matrix: sp.spmatrix, *, check: bool = True,
                   equations: np.ndarray | None = None) -> Factorization:
@@ -68,10 +87,9 @@ class Factorizer:
                 f"{self.name} has non-finite entries ({int(np.sum(~np.isfinite(matrix.data)))} of them)")
         pattern = (matrix.shape[0], matrix.nnz)
         analysis = self._analysis if pattern == self._pattern else None
-        started = time.perf_counter()
         factor = backend_entry(self.backend).factory(matrix, self.name, analysis)
-        self.seconds.append(time.perf_counter() - started)
-        self.analysis_seconds.append(getattr(factor, "analysis_seconds", 0.0))
+        self.costs.append(factor.estimated_cost if getattr(factor, "COUNTS_ON_REQUEST", False) else factor.cost)
+        self.analysis_seconds.append(float(getattr(factor, "analysis_seconds", 0.0)))
         self._analysis = getattr(factor, "analysis", None)
         self._pattern = pattern if self._analysis is not None else None
         if check:

@@ -36,7 +36,7 @@ _PROBE_SEED = 20050101
 
 class Factorization(Protocol):
     """What every backend's factorisation offers: ``solve(rhs)``, A⁻¹ rhs for a vector or a
-    block of columns."""
+    block of columns, and ``cost``, its counted :class:`~contactfem.linalg.costs.FactorCost`."""
 
     def solve(self, rhs: np.ndarray) -> np.ndarray: ...
 

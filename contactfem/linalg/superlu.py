@@ -16,6 +16,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from contactfem.errors import FactorCapacityError, SolverError
+from contactfem.linalg.costs import FactorCost, estimated_flops, lu_flops
 from contactfem.linalg.registry import register_backend
 from contactfem.linalg.storage import symmetric_csc
 
@@ -53,12 +54,21 @@ def superlu_refusal(nonzeros: int, unknowns: int, at_least: bool = False) -> str
 
 class SuperLUFactor:
     """A SuperLU factorisation (see the module's docstring); ``analysis`` is always None:
-    nothing is reused."""
+    nothing is reused.
+
+    Its counted cost (:attr:`cost`) needs L's column counts and U's row counts, which SciPy
+    only gives through CSC copies of L and U that it then keeps with the factor (0.9 s and
+    0.3 GB for a factorisation of 1.4 s at 132 000 unknowns): they are counted on request,
+    once. :attr:`estimated_cost` is free: the stored entries, flops estimated from them.
+    """
 
     analysis = None
+    #: Whether :attr:`cost` is counted only on request (see :attr:`estimated_cost`).
+    COUNTS_ON_REQUEST = True
 
     def __init__(self, matrix: sp.spmatrix, name: str, analysis: object | None = None) -> None:
         full = symmetric_csc(matrix)
+        self._matrix_entries = int(full.nnz)
         refusal = superlu_refusal(full.nnz, full.shape[0])
         if refusal is not None:
             raise FactorCapacityError(f"{name}: {refusal}")
@@ -81,6 +91,26 @@ class SuperLUFactor:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         return self._lu.solve(rhs)
+
+    @property
+    def estimated_cost(self) -> FactorCost:
+        """The factors' stored entries (counted), and flops estimated from them as those of a
+        Cholesky factor of half of them (:func:`~contactfem.linalg.costs.estimated_flops`),
+        twice over for L and U."""
+        size, entries = self._lu.shape[0], int(self._lu.nnz)
+        return FactorCost(size=size, entries=entries, flops=2.0 * estimated_flops((entries + size) // 2, size),
+                          kind="superlu", matrix_entries=self._matrix_entries)
+
+    @functools.cached_property
+    def cost(self) -> FactorCost:
+        """The counted cost: nnz(L) + nnz(U), and flops from L's column counts and U's row
+        counts (:func:`~contactfem.linalg.costs.lu_flops`). Costs SciPy's copies of L and U
+        the first time (see the class)."""
+        lower, upper = self._lu.L, self._lu.U
+        size = self._lu.shape[0]
+        flops = lu_flops(np.diff(lower.indptr), np.bincount(upper.indices, minlength=size))
+        return FactorCost(size=size, entries=int(lower.nnz + upper.nnz), flops=flops, kind="superlu",
+                          matrix_entries=self._matrix_entries)
 
 
 register_backend("superlu", SuperLUFactor)
