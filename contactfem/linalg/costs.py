@@ -170,6 +170,12 @@ RATES: dict[str, Rates] = {
 #: (1.6e10 at 250, 2.5e10 at 500, 4.0e10 at 1 000, 5.1e10 at 2 000).
 DENSE_FLOPS = 3.2e10
 
+# The direct CHOLMOD route's old guesses in full solves, BLOCKED_COLUMN_SHARE (a blocked
+# forward column, 0.3) and CONVERSION_GUESS (the conversion, 3.0), are gone: both are now
+# counted exactly (the factor's stored entries) and priced by the rates above (a blocked
+# column 0.19 of a supernodal full solve, a conversion 0.9 of one). So is MEASURED_FROM (the
+# batch size from which a batch's time per column was trusted): counts carry no fixed cost.
+
 #: Until a factor's forward columns have been counted, a pattern-solve column is guessed
 #: as this share of a full solve, from the factor's fill (entries per column), which sets
 #: how long the columns on a path are: PATTERN_GUESS_SHARE (fill / PATTERN_GUESS_FILL) **
