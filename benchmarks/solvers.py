@@ -38,8 +38,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "solvers.json"
-PROVIDERS = {"cvxopt": "_cvxopt_cholmod", "cvxopt-interface": "_CvxoptCholmod", "scikit-sparse": "_Cholmod",
-             "pypardiso": "_Pardiso", "superlu": "_SuperLU"}
+#: Provider → (module of contactfem.linalg, its factory).
+PROVIDERS = {"cvxopt": ("cholmod_cvxopt", "cvxopt_cholmod"),
+             "cvxopt-interface": ("cholmod_cvxopt", "CvxoptCholmodFactor"),
+             "scikit-sparse": ("cholmod_sksparse", "SksparseCholmodFactor"),
+             "pypardiso": ("pardiso", "PardisoFactor"), "superlu": ("superlu", "SuperLUFactor")}
 MODULES = {"cvxopt": "cvxopt", "cvxopt-interface": "cvxopt", "scikit-sparse": "sksparse", "pypardiso": "pypardiso",
            "superlu": None}
 RECORD_PREFIX = "SOLVER-RECORD "
@@ -72,12 +75,15 @@ def kernel_matrix(divisions: int):
 
 
 def single(divisions: int, provider: str) -> dict:
-    import contactfem.linalg as linalg
+    import importlib
+
+    from contactfem.linalg.storage import release_freed_memory
 
     matrix, rhs = kernel_matrix(divisions)
-    implementation = getattr(linalg, PROVIDERS[provider])
+    module, factory = PROVIDERS[provider]
+    implementation = getattr(importlib.import_module(f"contactfem.linalg.{module}"), factory)
     gc.collect()
-    linalg._release_freed_memory()
+    release_freed_memory()
     before = _status("VmRSS")
     _reset_peak()
     started = time.perf_counter()

@@ -14,6 +14,15 @@ import scipy.sparse.linalg as spla
 
 import contactfem.linalg as linalg
 from contactfem.errors import SolverError
+from contactfem.linalg import (
+    cholmod_ctypes,
+    cholmod_cvxopt,
+    cholmod_direct,
+    cholmod_sksparse,
+    pardiso,
+    registry,
+    superlu,
+)
 
 
 def _elasticity_like(size: int, seed: int) -> sp.csr_matrix:
@@ -28,20 +37,20 @@ def _elasticity_like(size: int, seed: int) -> sp.csr_matrix:
 
 
 def _providers() -> list[tuple[str, object]]:
-    found = [("superlu", linalg._SuperLU)]
-    if linalg._installed("cvxopt"):
-        found.append(("cvxopt-interface", linalg._CvxoptCholmod))
-        if linalg._cholmod_library() is not None:
-            found.append(("cholmod-library", linalg._LibraryCholmod))
-    if linalg._installed("sksparse"):
-        found.append(("scikit-sparse", linalg._Cholmod))
-    if linalg._installed("pypardiso"):
-        found.append(("pardiso", linalg._Pardiso))
+    found = [("superlu", superlu.SuperLUFactor)]
+    if registry.installed("cvxopt"):
+        found.append(("cvxopt-interface", cholmod_cvxopt.CvxoptCholmodFactor))
+        if cholmod_ctypes.cholmod_library() is not None:
+            found.append(("cholmod-library", cholmod_direct.DirectCholmodFactor))
+    if registry.installed("sksparse"):
+        found.append(("scikit-sparse", cholmod_sksparse.SksparseCholmodFactor))
+    if registry.installed("pypardiso"):
+        found.append(("pardiso", pardiso.PardisoFactor))
     return found
 
 
 PROVIDERS = _providers()
-needs_library = pytest.mark.skipif(not linalg._installed("cvxopt") or linalg._cholmod_library() is None,
+needs_library = pytest.mark.skipif(not registry.installed("cvxopt") or cholmod_ctypes.cholmod_library() is None,
                                    reason="no CHOLMOD library bundled with cvxopt here")
 
 
@@ -69,6 +78,35 @@ def test_every_provider_solves_to_round_off_and_reuses_its_analysis(label, provi
     assert np.abs(np.asarray(refactored.solve(rhs[:, 0])).ravel() - expected).max() < 1e-12 * np.abs(expected).max()
 
 
+@pytest.mark.parametrize(("label", "provider"), PROVIDERS, ids=[label for label, _ in PROVIDERS])
+def test_every_factorisation_counts_its_entries_and_flops(label, provider):
+    """Every factorisation has a counted cost: its factor's stored entries (at least one per
+    column) and its numeric factorisation's flops, the same for the same matrix; SuperLU's
+    from its L and U (nnz(L) + nnz(U), flops from L's column counts and U's row counts),
+    its free estimate with the same entries. A Factorizer keeps each one, and its seconds
+    are the modelled ones: analysis plus counted work over the rates of costs.py."""
+    from contactfem.linalg.costs import MODEL, FactorCost, lu_flops
+
+    matrix = _elasticity_like(1600, seed=30)
+    n = matrix.shape[0]
+    factor = provider(matrix, "the test matrix")
+    cost = factor.cost
+    assert isinstance(cost, FactorCost) and cost.size == n and cost.kind in MODEL.rates
+    assert n <= cost.entries and cost.flops > 0 and cost.matrix_entries == matrix.nnz
+    assert provider(matrix, "the test matrix").cost == cost
+    if label == "superlu":
+        lower, upper = factor._lu.L, factor._lu.U
+        assert cost.entries == lower.nnz + upper.nnz
+        assert cost.flops == lu_flops(np.diff(lower.indptr), np.bincount(upper.indices, minlength=n))
+        assert factor.estimated_cost.entries == cost.entries
+    factorizer = linalg.Factorizer({"superlu": "superlu", "pardiso": "pardiso"}.get(label, "cholmod"))
+    if type(factorizer.factorize(matrix)) is type(factor):  # the provider this backend uses here
+        factorizer.factorize(matrix)
+        assert len(factorizer.costs) == 2 and factorizer.costs[0].entries == factorizer.costs[1].entries
+        assert factorizer.seconds == [analysis + MODEL.factorize_seconds(c)
+                                      for c, analysis in zip(factorizer.costs, factorizer.analysis_seconds)]
+
+
 @pytest.mark.parametrize(("label", "provider"), [p for p in PROVIDERS if p[0] != "superlu"],
                          ids=[label for label, _ in PROVIDERS if label != "superlu"])
 def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capfd):
@@ -89,14 +127,14 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B to 1e-12 through
     either route, whichever kind of factor (always an LLᵀ, even for a 2 × 2 grid); only a
     supernodal one is converted by the pattern solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
     matrix = _elasticity_like(size, seed=4)
     n = matrix.shape[0]
     rng = np.random.default_rng(5)
     columns = 37 if n > 100 else 3
     rhs = sp.random(n, columns, density=min(1.0, 4.0 / n), random_state=6, format="csc") + \
         sp.csc_matrix((np.ones(columns), (rng.choice(n, columns, replace=False), np.arange(columns))), shape=(n, columns))
-    factor = linalg._LibraryCholmod(matrix, "the test matrix")
+    factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
     dense = factor.solve(rhs.toarray())
     full = factor.solve_sparse(sp.csc_matrix(rhs))
     assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
@@ -109,7 +147,7 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
         schur = (forward.T @ scaled).toarray()
         assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
     assert factor.analysis.simplicial
-    assert factor.analysis.converted is (factor.analysis.conversion_seconds is not None) is (kind == "supernodal")
+    assert factor.analysis.converted is (kind == "supernodal")
 
 
 @needs_library
@@ -128,8 +166,8 @@ def test_library_and_cvxopt_interface_give_the_same_factor():
     matrix = sp.csr_matrix(kept @ system.stiffness @ kept + sp.diags(fixed.astype(float)))
     matrix.eliminate_zeros()
     rhs = np.where(fixed, 0.0, system.load)
-    library = linalg._LibraryCholmod(matrix, "the square")
-    interface = linalg._CvxoptCholmod(matrix, "the square")
+    library = cholmod_direct.DirectCholmodFactor(matrix, "the square")
+    interface = cholmod_cvxopt.CvxoptCholmodFactor(matrix, "the square")
     x, y = library.solve(rhs), np.asarray(interface.solve(rhs)).ravel()
     assert np.abs(x - y).max() < 1e-12 * np.abs(y).max()
     assert np.abs(rhs - matrix @ x).max() < 1e-12 * np.abs(rhs).max() * 1e3
@@ -139,16 +177,16 @@ def test_library_and_cvxopt_interface_give_the_same_factor():
 def test_library_is_used_only_when_its_layout_is_the_known_one(monkeypatch):
     """cholmod_common's fields are written only after cholmod_start's defaults read back
     at the offsets relied on; a library with another layout is left to cvxopt's interface."""
-    library = linalg._cholmod_library()
+    library = cholmod_ctypes.cholmod_library()
     common = library.start()
     assert common is not None
     library.library.cholmod_finish(common)
-    offset, kind, value = linalg._COMMON_DEFAULTS[-1]
-    monkeypatch.setattr(linalg, "_COMMON_DEFAULTS", (*linalg._COMMON_DEFAULTS[:-1], (offset, kind, value + 7)))
+    offset, kind, value = cholmod_ctypes._COMMON_DEFAULTS[-1]
+    monkeypatch.setattr(cholmod_ctypes, "_COMMON_DEFAULTS", (*cholmod_ctypes._COMMON_DEFAULTS[:-1], (offset, kind, value + 7)))
     assert library.start() is None
-    monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
+    monkeypatch.setitem(cholmod_ctypes._LIBRARY_STATE, "library", None)
     matrix = _elasticity_like(400, seed=7)
-    assert isinstance(linalg._cvxopt_cholmod(matrix, "m"), linalg._CvxoptCholmod)
+    assert isinstance(cholmod_cvxopt.cvxopt_cholmod(matrix, "m"), cholmod_cvxopt.CvxoptCholmodFactor)
 
 
 @needs_library
@@ -156,8 +194,8 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
     """The symbolic and numeric factor live as long as a factorisation or the Factorizer
     still holds them, and are freed (cholmod_free_factor, cholmod_finish) after."""
     freed = []
-    original = linalg._free_analysis
-    monkeypatch.setattr(linalg, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
+    original = cholmod_direct._free_analysis
+    monkeypatch.setattr(cholmod_direct, "_free_analysis", lambda *args: (freed.append(args[2]), original(*args)))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(_elasticity_like(400, seed=8))
     address = first.analysis.symbolic
@@ -176,7 +214,7 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
     symbolic analysis, so it is a supernodal LLᵀ again (its forward columns still give
     Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the factorisation it replaced refuses to
     solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=13)
     n = matrix.shape[0]
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
@@ -197,54 +235,70 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
 
 
 @needs_library
-def test_library_picks_the_cheaper_forward_route_from_what_it_measured(monkeypatch):
+def test_library_picks_the_cheaper_forward_route_from_counts(monkeypatch):
     """A few columns go through the blocked solve while converting the (supernodal) factor
-    is expected to cost more than it saves, and say nothing of a column's cost (fewer than
-    MEASURED_FROM: the call's fixed cost); a batch of MEASURED_FROM columns is measured.
-    Once the conversion and both routes are measured, the choice follows the measured
-    figures: many columns through the pattern solve."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
+    is modelled to cost more than it saves; every forward call counts the factor entries
+    its columns' paths reach (Σ of L's column counts over each column's rows), and with
+    those counts (not a guess) the choice for many columns is the pattern solve, whose
+    conversion is then modelled in setup_seconds. The choice is the cheaper of the
+    modelled routes, from counts alone."""
+    from contactfem.linalg.costs import MODEL
+
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
     matrix = _elasticity_like(6400, seed=14)
     n = matrix.shape[0]
-    factor = linalg._LibraryCholmod(matrix, "the test matrix")
-    factor.solve(np.ones(n))  # the kernel always solves first: the per-column scale
+    factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
+    analysis = factor.analysis
+    assert factor.cost.kind == "cholmod-supernodal" and analysis.path_entries is None
     few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
-    factor.forward_sparse(few)
-    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is None
     blocked, pattern = factor._route_seconds(2)
-    assert blocked < pattern
-    factor.analysis.conversion_seconds = 1e3  # as if measured: a costly conversion
-    k = linalg._LibraryCholmod.MEASURED_FROM
-    batch = sp.csc_matrix((np.ones(k), (np.arange(0, 50 * k, 50), np.arange(k))), shape=(n, k))
-    factor.forward_sparse(batch)
-    assert not factor.analysis.simplicial and factor.analysis.blocked_column_seconds is not None
-    assert factor.analysis.pattern_column_seconds is None
-    factor.analysis.conversion_seconds = 0.0  # as if measured: a cheap conversion
-    factor.analysis.blocked_column_seconds = 1.0
-    factor.analysis.pattern_column_seconds = 1e-6
-    many = sp.csc_matrix((np.ones(40), (np.arange(0, 40 * 50, 50), np.arange(40))), shape=(n, 40))
-    factor.forward_sparse(many)
-    assert factor.analysis.simplicial
-    assert factor.forward_seconds(40) == pytest.approx(factor._route_seconds(40)[1])
+    assert blocked < pattern and pattern > MODEL.conversion_seconds(factor.cost) > 0
+    forward, _ = factor.forward_sparse(few)
+    assert factor.route == "blocked" and factor.setup_seconds == 0.0 and not analysis.simplicial
+    reached = int(analysis.column_counts[forward.indices].sum())
+    assert (analysis.path_columns, analysis.path_entries) == (2, reached / 2)
+    k = 400
+    many = sp.csc_matrix((np.ones(k), (np.arange(0, 8 * k, 8), np.arange(k))), shape=(n, k))
+    blocked, pattern = factor._route_seconds(k)
+    assert factor.forward_seconds(k) == min(blocked, pattern)
+    assert pattern == MODEL.conversion_seconds(factor.cost) + MODEL.pattern_forward_seconds(
+        factor.cost, k, reached / 2)
+    forward, scaled = factor.forward_sparse(many)
+    assert factor.route == ("blocked" if blocked < pattern else "pattern")
+    if factor.route == "pattern":
+        assert analysis.simplicial and factor.setup_seconds == MODEL.conversion_seconds(factor.cost)
+        assert factor._route_seconds(k)[1] == MODEL.pattern_forward_seconds(factor.cost, k, analysis.path_entries)
+    expected = many.T @ factor.solve(many.toarray())
+    assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
 
 
 @needs_library
-def test_library_guesses_a_pattern_column_from_the_factors_fill(monkeypatch):
-    """Until measured, a pattern-solve column is guessed from the factor's entries per
-    column (longer columns on a path cost more): a positive share of a full solve, at most
-    0.1, larger for a factor with more fill, for a supernodal factor as for a simplicial
-    one (its column counts); where the factor's fields do not read back as a factor of this
-    size, the costly end (0.1)."""
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
-    simplicial = linalg._LibraryCholmod(_elasticity_like(6400, seed=15), "m")
-    assert simplicial.analysis.simplicial and 0.0 < simplicial._pattern_column_guess() <= 0.1
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 2)
-    sparse_grid = linalg._LibraryCholmod(_elasticity_like(400, seed=15), "m")
-    dense_grid = linalg._LibraryCholmod(_elasticity_like(40000, seed=15), "m")
-    low, high = sparse_grid._pattern_column_guess(), dense_grid._pattern_column_guess()
-    assert 0.0 < low < high <= 0.1
-    monkeypatch.setattr(linalg, "_FACTOR_IS_SUPER", linalg._FACTOR_XSIZE)
-    assert dense_grid._pattern_column_guess() == 0.1
+def test_the_direct_factors_cost_is_counted_from_its_column_counts(monkeypatch):
+    """The factor's cost is read from CHOLMOD's own counts: its column counts sum to the
+    entries of a simplicial factor, a supernodal one stores at least as many; flops are
+    Σ c_j². Before any path is counted, a pattern column is guessed from the fill, a
+    positive share of a full solve, larger with more fill and at most 0.1 of it. Where the
+    factor's fields do not read back as its own (another layout), the cost falls back to
+    the matrix's counts and the factor still solves."""
+    from contactfem.linalg.costs import MODEL, PATTERN_GUESS_CAP, cholesky_flops
+
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 0)
+    simplicial = cholmod_direct.DirectCholmodFactor(_elasticity_like(6400, seed=15), "m")
+    counts = simplicial.analysis.column_counts
+    assert simplicial.cost.kind == "cholmod-simplicial" and simplicial.cost.entries == counts.sum()
+    assert simplicial.cost.flops == cholesky_flops(counts) and simplicial.cost.size == 2 * 6400
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
+    sparse_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(400, seed=15), "m")
+    dense_grid = cholmod_direct.DirectCholmodFactor(_elasticity_like(40000, seed=15), "m")
+    assert dense_grid.cost.kind == "cholmod-supernodal"
+    assert dense_grid.cost.entries >= dense_grid.analysis.column_counts.sum()
+    shares = [MODEL.pattern_column_guess(f.cost) / MODEL.solve_seconds(f.cost) for f in (sparse_grid, dense_grid)]
+    assert 0.0 < shares[0] < shares[1] <= PATTERN_GUESS_CAP
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_IS_SUPER", cholmod_ctypes._FACTOR_XSIZE)
+    matrix = _elasticity_like(400, seed=16)
+    fallback = cholmod_direct.DirectCholmodFactor(matrix, "m")
+    assert fallback.cost.entries >= fallback.cost.size and fallback.cost.flops > 0
+    assert np.abs(matrix @ fallback.solve(np.ones(800)) - 1.0).max() < 1e-10
 
 
 @needs_library
@@ -253,10 +307,10 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     fill of a small grid, supernodal for a larger one. A simplicial factor is an LLᵀ as
     well (forward columns give Bᵀ A⁻¹ B = Wᵀ W), refuses a matrix that is not positive
     definite, and is refactorised in place after pattern solves (nothing to convert)."""
-    small = linalg._LibraryCholmod(_elasticity_like(400, seed=16), "m")
-    large = linalg._LibraryCholmod(_elasticity_like(6400, seed=16), "m")
+    small = cholmod_direct.DirectCholmodFactor(_elasticity_like(400, seed=16), "m")
+    large = cholmod_direct.DirectCholmodFactor(_elasticity_like(6400, seed=16), "m")
     assert small.analysis.analysed_simplicial and not large.analysis.analysed_simplicial
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", 0)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 0)
     matrix = _elasticity_like(6400, seed=17)
     n = matrix.shape[0]
     factorizer = linalg.Factorizer("cholmod")
@@ -273,7 +327,7 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
     bad = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(n - 1), 10.0]))
     with pytest.raises(SolverError, match="not positive definite"):
-        linalg._LibraryCholmod(bad, "the shifted matrix")
+        cholmod_direct.DirectCholmodFactor(bad, "the shifted matrix")
 
 
 @pytest.mark.parametrize("backend", linalg.available_backends())
@@ -296,7 +350,7 @@ def test_an_analysis_made_ahead_in_another_thread_serves_the_first_factorisation
                for other, other_size in zip(others, (800, 1800, 3200)))
     factor = ahead.factorize(matrix)
     provider = linalg.backend_provider(backend)
-    reuses = provider == "sksparse" or (provider == "cvxopt" and linalg._cholmod_library() is not None)
+    reuses = provider == "sksparse" or (provider == "cvxopt" and cholmod_ctypes.cholmod_library() is not None)
     if reuses:
         assert ahead.ahead_seconds > 0 and ahead.analysis_seconds == [pytest.approx(0.0, abs=1e-3)]
     else:
@@ -319,11 +373,11 @@ def test_a_matrix_past_superlus_first_guess_is_refused_before_it_is_tried(monkey
     """The limit checked on the matrix itself, before SuperLU spends anything on it."""
     from contactfem.errors import FactorCapacityError
 
-    monkeypatch.setattr(linalg, "superlu_max_nonzeros", lambda: 10)
-    monkeypatch.setattr(linalg.spla, "splu", lambda *args, **kwargs: pytest.fail("SuperLU was called"))
+    monkeypatch.setattr(superlu, "superlu_max_nonzeros", lambda: 10)
+    monkeypatch.setattr(superlu.spla, "splu", lambda *args, **kwargs: pytest.fail("SuperLU was called"))
     with pytest.raises(FactorCapacityError, match=r"the test matrix: SciPy's SuperLU cannot factorise a matrix of "
                                                   r"1\.6e-05 million nonzeros \(4 unknowns\).*32-bit integer"):
-        linalg._SuperLU(sp.csc_matrix(np.ones((4, 4)) + 4 * np.eye(4)), "the test matrix")
+        superlu.SuperLUFactor(sp.csc_matrix(np.ones((4, 4)) + 4 * np.eye(4)), "the test matrix")
 
 
 @pytest.mark.slow
@@ -361,9 +415,9 @@ def test_superlu_running_out_of_room_says_both_causes_through_the_command_line(t
     def overflowing(*args, **kwargs):
         raise MemoryError("Not enough memory to perform factorization.")
 
-    monkeypatch.setattr(linalg.spla, "splu", overflowing)
+    monkeypatch.setattr(superlu.spla, "splu", overflowing)
     with pytest.raises(FactorCapacityError, match="32-bit") as caught:
-        linalg._SuperLU(sp.identity(3, format="csc"), "the test matrix")
+        superlu.SuperLUFactor(sp.identity(3, format="csc"), "the test matrix")
     assert isinstance(caught.value, MemoryError)
     case = Path(__file__).resolve().parents[1] / "cases" / "square.yaml"
     result = CliRunner().invoke(main, ["solve", str(case), "--backend", "superlu", "--out", str(tmp_path / "out")])
@@ -390,14 +444,14 @@ def test_a_pardiso_factor_is_released_with_its_last_user():
             return int(status.read().split("VmRSS:")[1].split()[0]) * 1024.0
 
     def factorise_once() -> None:
-        factor = linalg._Pardiso(matrix, "the Laplacian")
+        factor = pardiso.PardisoFactor(matrix, "the Laplacian")
         assert np.abs(matrix @ factor.solve(np.ones(n * n)) - 1.0).max() < 1e-10
         del factor
         gc.collect()
 
     factorise_once()
     before = resident()
-    factor = linalg._Pardiso(matrix, "the Laplacian")
+    factor = pardiso.PardisoFactor(matrix, "the Laplacian")
     held = resident() - before  # one factor, resident
     del factor
     gc.collect()
@@ -405,3 +459,86 @@ def test_a_pardiso_factor_is_released_with_its_last_user():
         factorise_once()
     assert held > 50e6  # the factor is large enough to see
     assert resident() - before < 0.5 * held
+
+
+@needs_library
+@pytest.mark.parametrize("size", [400, 6400])
+def test_the_direct_route_switched_off_gives_the_same_answers_through_cvxopts_interface(size, monkeypatch):
+    """``cholmod`` with the direct route on (the bundled library through ctypes) and off
+    (cvxopt's interface): the same solves and the same Schur blocks Bᵀ A⁻¹ B from forward
+    columns, to 1e-12 relative, through a Factorizer refactorising one pattern. Switched
+    off, the library is not asked for at all."""
+    matrix = _elasticity_like(size, seed=21)
+    n = matrix.shape[0]
+    changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
+    rhs = np.random.default_rng(22).standard_normal((n, 3))
+    columns = sp.csc_matrix((np.ones(6), (np.arange(0, n, n // 6)[:6], np.arange(6))), shape=(n, 6))
+
+    def run() -> tuple[type, list[np.ndarray]]:
+        factorizer = linalg.Factorizer("cholmod", name="the test matrix")
+        results = []
+        for values in (matrix, changed):
+            factor = factorizer.factorize(values)
+            forward, scaled = factor.forward_sparse(columns)
+            results += [np.asarray(factor.solve(rhs)).reshape(rhs.shape), (forward.T @ scaled).toarray()]
+        return type(factor), results
+
+    assert linalg.direct_cholmod_enabled()
+    on_kind, on = run()
+    with linalg.direct_cholmod(False):
+        assert not linalg.direct_cholmod_enabled()
+        for module in (cholmod_ctypes, cholmod_direct):
+            monkeypatch.setattr(module, "cholmod_library", lambda: pytest.fail("the library was asked for"))
+        off_kind, off = run()
+    monkeypatch.undo()
+    assert linalg.direct_cholmod_enabled()
+    assert (on_kind, off_kind) == (cholmod_direct.DirectCholmodFactor, cholmod_cvxopt.CvxoptCholmodFactor)
+    for direct, interface in zip(on, off):
+        assert np.abs(direct - interface).max() <= 1e-12 * np.abs(interface).max()
+
+
+@pytest.mark.skipif(not registry.installed("cvxopt"), reason="cvxopt is not installed")
+@pytest.mark.parametrize("setting", ["0", "off", "1"])
+def test_the_environment_switch_keeps_ctypes_away_from_cholmod(setting):
+    """In a fresh process with ``CONTACTFEM_CHOLMOD_DIRECT=0`` (or ``off``), factorising,
+    solving and forward columns with ``cholmod`` load no CHOLMOD library through ctypes and
+    never import the direct route's modules; with ``1`` they do (where the wheel bundles it)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent("""
+        import ctypes, json, sys
+        import numpy as np, scipy.sparse as sp
+        loaded = []
+        original = ctypes.CDLL.__init__
+        def recording(self, name, *args, **kwargs):
+            loaded.append(str(name))
+            original(self, name, *args, **kwargs)
+        ctypes.CDLL.__init__ = recording
+        from contactfem.linalg import Factorizer, direct_cholmod_enabled
+        grid = sp.diags([-1.0, -1.0, 4.2, -1.0, -1.0], [-20, -1, 0, 1, 20], shape=(400, 400), format="csr")
+        factor = Factorizer("cholmod").factorize(grid)
+        x = factor.solve(np.ones(400))
+        factor.forward_sparse(sp.csc_matrix(sp.identity(400, format="csc")[:, :3]))
+        print(json.dumps({"enabled": direct_cholmod_enabled(), "kind": type(factor).__name__,
+                          "cholmod_loaded": [name for name in loaded if "cholmod" in name.lower()],
+                          "direct_imported": "contactfem.linalg.cholmod_direct" in sys.modules,
+                          "bindings_imported": "contactfem.linalg.cholmod_ctypes" in sys.modules,
+                          "residual": float(np.abs(grid @ x - 1.0).max())}))
+    """)
+    environment = dict(os.environ, CONTACTFEM_CHOLMOD_DIRECT=setting)
+    done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["residual"] < 1e-12
+    if setting == "1":
+        assert report["enabled"] and report["direct_imported"]
+        if cholmod_ctypes.cholmod_library() is not None:
+            assert report["kind"] == "DirectCholmodFactor" and report["cholmod_loaded"]
+    else:
+        assert not report["enabled"] and report["kind"] == "CvxoptCholmodFactor"
+        assert report["cholmod_loaded"] == [] and not report["direct_imported"] and not report["bindings_imported"]

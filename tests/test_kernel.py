@@ -491,17 +491,16 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     library called directly (W alone), and cvxopt's interface (W and D⁻¹ W kept apart)."""
     from test_sequencing import rough_polygon_case
 
-    import contactfem.linalg as linalg
     from contactfem.kernel import ActiveSetSolver
-    from contactfem.linalg import backend_provider
+    from contactfem.linalg import backend_provider, cholmod_ctypes
     from contactfem.methods import get_method
     from contactfem.solve import prepare
 
     if backend_provider("cholmod") != "cvxopt":
         pytest.skip("the forward columns are cvxopt's")
     if route == "interface":
-        monkeypatch.setitem(linalg._LIBRARY_STATE, "library", None)
-    elif linalg._cholmod_library() is None:
+        monkeypatch.setitem(cholmod_ctypes._LIBRARY_STATE, "library", None)
+    elif cholmod_ctypes.cholmod_library() is None:
         pytest.skip("no CHOLMOD library bundled with cvxopt here")
     import contactfem.kernel.costs as costs
 
@@ -584,18 +583,17 @@ def test_forward_columns_start_lower_for_a_simplicial_factor(monkeypatch, switch
     from test_sequencing import rough_polygon_case
 
     import contactfem.kernel.costs as costs
-    import contactfem.linalg as linalg
     from contactfem.kernel import ActiveSetSolver
-    from contactfem.linalg import backend_provider
+    from contactfem.linalg import backend_provider, cholmod_ctypes
     from contactfem.methods import get_method
     from contactfem.solve import prepare
 
-    if backend_provider("cholmod") != "cvxopt" or linalg._cholmod_library() is None:
+    if backend_provider("cholmod") != "cvxopt" or cholmod_ctypes.cholmod_library() is None:
         pytest.skip("the kinds of factor are chosen in the library called directly")
     contact = prepare(rough_polygon_case(600)).contact_system(get_method("positive")).system
     reference = solve_contact(contact, backend="superlu")
     n = contact.stiffness.shape[0]
-    monkeypatch.setattr(linalg, "_FACTOR_SWITCH", switch)
+    monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", switch)
     monkeypatch.setattr(costs, "SIMPLICIAL_FORWARD_COLUMNS_FROM", n // 2)
     monkeypatch.setattr(costs, "FORWARD_COLUMNS_FROM", 2 * n)
     linear = ActiveSetSolver(contact, "cholmod")
@@ -709,7 +707,8 @@ def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
     from conftest import case_from, square_case_dict
 
     import contactfem.kernel.costs as costs
-    from contactfem.kernel import DENSE_FLOPS, ActiveSetSolver
+    from contactfem.kernel import ActiveSetSolver
+    from contactfem.linalg import MODEL
     from contactfem.methods import get_method
     from contactfem.solve import prepare
 
@@ -738,8 +737,8 @@ def test_a_first_schur_batch_is_costed_on_the_sampled_paths(monkeypatch):
     true_path = columns.nnz / len(free)
     assert true_path > 12 * np.sqrt(n), (true_path, np.sqrt(n))
     changed = int((target != reference).sum())
-    base = linear.factor.forward_seconds(changed) + changed**3 / 3 / DENSE_FLOPS + linear.solve_seconds
-    blocks = 2.0 * changed * changed / DENSE_FLOPS
+    base = linear.factor.forward_seconds(changed) + costs.dense_seconds(changed) + linear.solve_seconds
+    blocks = 2.0 * changed * changed / MODEL.dense_flops
     # Between the √n estimate and the true paths' one: the sampled paths must decide.
     linear.refactorization_seconds = base + blocks * np.sqrt(3 * np.sqrt(n) * true_path)
     assert linear._refactorize_first(target) is True

@@ -28,7 +28,6 @@ from contactfem.kernel.certificate import (
     build_certificate,
     roundoff_bound,
 )
-from contactfem.kernel.costs import DENSE_FLOPS
 from contactfem.kernel.fronts import MAX_OVERSHOOTS, ZoneFronts
 from contactfem.kernel.newton import (
     MIN_ITERATIONS,
@@ -45,8 +44,7 @@ from contactfem.kernel.starts import translation_start
 from contactfem.kernel.system import ContactSystem, default_c
 
 __all__ = [
-    "Accelerators", "ActiveSetSolver", "EPS", "REFINEMENT_STEPS", "Certificate", "Check", "ContactSystem", "DENSE_FLOPS",
-    "FORCE_RESOLUTION_LIMIT", "Iteration", "KernelResult", "MAX_OVERSHOOTS", "MIN_ITERATIONS", "PathSolver",
+    "Accelerators", "ActiveSetSolver", "EPS", "REFINEMENT_STEPS", "Certificate", "Check", "ContactSystem", "FORCE_RESOLUTION_LIMIT", "Iteration", "KernelResult", "MAX_OVERSHOOTS", "MIN_ITERATIONS", "PathSolver",
     "PathStarts", "Proposer", "STALL_ITERATIONS", "Scales", "Status", "Step", "ZERO_FORCE_STRAIN", "ZoneFronts",
     "build_certificate", "default_c", "default_max_iterations", "extrapolated_active", "roundoff_bound",
     "solve_contact", "solve_path", "translation_start",

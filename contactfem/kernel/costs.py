@@ -3,18 +3,19 @@
 :class:`contactfem.kernel.schur.ActiveSetSolver` chooses, for each active set, between a
 Schur-complement update of its factorisation and factorising the set anew. Both sides are
 *modelled* seconds: counted work (factor entries, factorisation flops, columns, dense
-flops) divided by the rates below, so that the same case takes the same path on a quiet
-or a busy machine. The rates are those of the machine the benchmarks run on (2 cores,
-see ``benchmarks/results/linalg_costs.json`` and the performance page of the docs); a
-faster or slower machine scales both sides alike and changes no decision.
+flops) divided by the rates of :mod:`contactfem.linalg.costs`, so that the same case takes
+the same path on a quiet or a busy machine. The rates are those of the machine the
+benchmarks run on (2 cores, ``benchmarks/results/linalg_costs.json``); a faster or slower
+machine scales both sides alike and changes no decision. The thresholds below are the
+kernel's own.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Rate of the dense LU of a Schur complement (flop/s): k³/3 flops for k changed nodes.
-DENSE_FLOPS = 5e9
+from contactfem.linalg import MODEL, Factorizer
+
 #: The most bytes the cached Schur columns (one full-length vector each) may hold: beyond
 #: it the solver refactorises, whatever the model says. Sparse forward columns are not
 #: capped; their dense blocks in a Schur product are.
@@ -43,37 +44,24 @@ FACTORIZATION_EXTRA_SOLVES = 3.0
 #: A forward column in full solves, for a backend that does not model its forward routes
 #: (CHOLMOD's blocked sparse solve through cvxopt's interface).
 FORWARD_COLUMN_SHARE = 0.25
-#: Full solves per second per factor entry, for a backend that counts no cost of its own:
-#: a forward and a backward sweep, two flops per entry each.
-SOLVE_ENTRY_RATE = 1.0e9 / 4.0
-#: Factorisation flops per second, for a backend that counts no cost of its own.
-FACTOR_FLOP_RATE = 2.0e9
-#: Factor entries per stiffness entry, for a backend whose factor cannot be counted (P1
-#: elasticity in 2D with a fill-reducing ordering).
-FILL_GUESS = 8.0
 
 
-def factor_figures(factor, stiffness_entries: int, unknowns: int) -> tuple[float, float]:
-    """(seconds of one full solve, seconds of the numeric factorisation) of ``factor``,
-    modelled from what its backend counts (``factor.cost``) or, for a backend that counts
-    nothing, from the stiffness's entries."""
-    cost = getattr(factor, "cost", None)
-    if cost is not None and hasattr(cost, "solve_seconds"):
-        return float(cost.solve_seconds), float(cost.factorize_seconds)
-    entries = FILL_GUESS * stiffness_entries
-    per_column = entries / max(unknowns, 1)
-    return entries / SOLVE_ENTRY_RATE, unknowns * per_column**2 / FACTOR_FLOP_RATE
+def factor_figures(factorizer: Factorizer) -> tuple[float, float]:
+    """(modelled seconds of one full solve, of the numeric factorisation) of the latest
+    factorisation of ``factorizer``, from its counted cost (:class:`contactfem.linalg.FactorCost`)."""
+    cost = factorizer.costs[-1]
+    return MODEL.solve_seconds(cost, 1), MODEL.factorize_seconds(cost)
 
 
 def dense_seconds(changed: int) -> float:
     """The dense LU of a Schur complement over ``changed`` nodes."""
-    return changed**3 / 3 / DENSE_FLOPS
+    return MODEL.dense_factorize_seconds(changed)
 
 
 def cross_seconds(missing: int, stored: int, path: float) -> float:
     """The Schur blocks of ``missing`` new forward columns against ``stored`` ones, each a
     path of ``path`` entries (Wᵀ W: two flops per shared entry)."""
-    return 2.0 * missing * stored * path / DENSE_FLOPS
+    return 2.0 * missing * stored * path / MODEL.dense_flops
 
 
 def typical_path(unknowns: int, share: float | None) -> float:

@@ -358,7 +358,7 @@ class ActiveSetSolver(SchurColumns):
         #: Modelled seconds of one full solve with the factor, and of factorising another set
         #: of the pattern (the numeric factorisation, the masking, the probe and the first
         #: solves; not the analysis a refactorisation reuses).
-        self.solve_seconds, factorize_seconds = costs.factor_figures(self.factor, masked.nnz, n)
+        self.solve_seconds, factorize_seconds = costs.factor_figures(self.factorizer)
         self.refactorization_seconds = factorize_seconds + costs.FACTORIZATION_EXTRA_SOLVES * self.solve_seconds
         # With a backend that solves with L alone, the Schur complement comes from sparse
         # forward columns (see SchurColumns._slots), which are not capped; the backend
