@@ -30,12 +30,12 @@ from contactfem.case import PolygonGeometry, parse_case
 from contactfem.cli import main
 from contactfem.discretize.meshing import build_mesh, estimate_triangles
 from contactfem.errors import CaseError
+from contactfem.case.crossings import _first_crossing_by_pairs
+from contactfem.case.predicates import segments_intersect as _segments_intersect
 from contactfem.mesh.polygon import (
     Loop,
-    _first_crossing_by_pairs,
     _graded_parameters,
     _lines_points,
-    _segments_intersect,
     first_crossing,
     polygon_problems,
     triangulate_domain,

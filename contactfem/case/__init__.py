@@ -45,16 +45,8 @@ from contactfem.errors import CaseError, MeshError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
 from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
 from contactfem.linalg import BACKEND_CHOICES
-from contactfem.mesh.core import coordinate_span
-from contactfem.mesh.polygon import (
-    CLOCKWISE,
-    Arc,
-    Loop,
-    circle_loop,
-    first_crossing_among,
-    loop_outline,
-    polygon_problems,
-)
+from contactfem.case.crossings import CLOCKWISE, first_crossing_among, polygon_problems
+from contactfem.case.loops import Arc, Loop, circle_loop, coordinate_span, loop_outline
 from contactfem.methods import METHOD_NAMES
 
 if TYPE_CHECKING:
