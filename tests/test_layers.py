@@ -27,7 +27,7 @@ PIPELINE = ("contactfem.case", "contactfem.discretize", "contactfem.solve", "con
 #: Writers, pictures and the terminal: only the command line calls them.
 WRITERS = ("contactfem.io", "contactfem.render", "contactfem.plots", "contactfem.cli", "contactfem.progress")
 #: The case reader takes the output formats' names (and what each needs beside it) from the registry.
-ALLOWED = {("contactfem.case", "contactfem.io.registry")}
+ALLOWED = {("contactfem.case.sections", "contactfem.io.registry")}
 
 
 def _module_name(path: Path, package: Path) -> str:
