@@ -21,12 +21,10 @@ from contactfem.case.model import (
     SolverSettings,
     Units,
 )
+from contactfem.case.names import BACKEND_CHOICES, DEFAULT_FORMATS, FORMAT_NAMES, FORMAT_NEEDS, METHOD_NAMES
 from contactfem.case.reader import Reader
 from contactfem.errors import CaseError
 from contactfem.expressions import Expression, ExpressionError
-from contactfem.io.registry import DEFAULT_FORMATS, FORMAT_NAMES, missing_needs
-from contactfem.linalg import BACKEND_CHOICES
-from contactfem.methods import METHOD_NAMES
 
 
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
@@ -269,6 +267,8 @@ def read_output(r: Reader, data: Any, source: Path) -> OutputSettings:
     if not isinstance(files, list) or not files:
         raise r.fail("output.files", files, f"expected a non-empty list from {', '.join(FORMAT_NAMES)}")
     chosen = tuple(dict.fromkeys(r.choice(f, f"output.files[{i}]", FORMAT_NAMES) for i, f in enumerate(files)))
-    for name, need in missing_needs(chosen):
-        raise r.fail("output.files", files, f"{name} is written beside {need} and reads it: list {need} too")
+    for name in chosen:
+        for need in FORMAT_NEEDS.get(name, ()):
+            if need not in chosen:
+                raise r.fail("output.files", files, f"{name} is written beside {need} and reads it: list {need} too")
     return OutputSettings(directory=Path(directory), files=chosen)
