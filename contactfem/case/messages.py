@@ -4,6 +4,18 @@ from __future__ import annotations
 
 from typing import Any
 
+from contactfem.errors import CaseError
+
+#: How a manufactured displacement whose fields cannot be derived is refused (a reason follows).
+CANNOT_DERIVE = "cannot derive the stress and body force"
+
+
+def refusal(filename: str, key: str, value: Any, expected: str) -> CaseError:
+    """The one-line refusal ``file: key = value: expected`` (``file: value: expected`` without a key)."""
+    shown = show_value(value)
+    where = f"{key} = {shown}" if key else shown
+    return CaseError(f"{filename}: {where}: {expected}")
+
 
 def key_path(prefix: str, key: str) -> str:
     return f"{prefix}.{key}" if prefix else key

@@ -4,13 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Callable, ClassVar
 
 from contactfem.case.loops import Loop
 from contactfem.expressions import Expression
-
-if TYPE_CHECKING:
-    from contactfem.exact import ExactSolution
 
 
 @dataclass(frozen=True)
@@ -128,15 +125,33 @@ class Obstacle:
 
 @dataclass(frozen=True)
 class ExactBlock:
-    """The ``exact:`` block: a manufactured displacement and what is derived from it.
+    """The ``exact:`` block: a manufactured displacement, as two checked expressions, and what
+    the fields derived from it depend on: the material (the plane law's Lamé parameters) and
+    the obstacle's unit ``normal`` (the contact pressure).
 
-    ``displacement`` holds the two checked expressions; ``solution`` is the
-    :class:`~contactfem.exact.ExactSolution` built from them once, at validation, with
-    the case's plane law and obstacle normal (excluded from comparison and hashing).
+    The fields themselves (strain, stress, body force f = −div σ, contact pressure: an
+    :class:`~contactfem.exact.ExactSolution`) are derived with sympy where they are used,
+    by :func:`contactfem.exact.exact_solution`, once per block: ``derived`` keeps them and is
+    left out of comparison and hashing.
     """
 
     displacement: tuple[Expression, Expression]
-    solution: "ExactSolution" = field(compare=False, repr=False)
+    material: Material
+    normal: tuple[float, float]
+    derived: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    #: Derives a block's fields; :mod:`contactfem.exact` installs it when it is imported, so
+    #: that :attr:`solution` works without the case layer importing what lies above it.
+    builder: ClassVar[Callable[["ExactBlock"], Any] | None] = None
+
+    @property
+    def solution(self) -> Any:
+        """The derived fields (an :class:`~contactfem.exact.ExactSolution`), for callers written
+        when the reader built them; call :func:`contactfem.exact.exact_solution` instead."""
+        if ExactBlock.builder is None:
+            raise RuntimeError("an exact block's fields are derived by contactfem.exact: import it, or call "
+                               "contactfem.exact.exact_solution(case)")
+        return ExactBlock.builder(self)
 
 
 @dataclass(frozen=True)
@@ -180,7 +195,7 @@ class Units:
 class Case:
     """A validated case. ``text`` is the file as read, ``digest`` the SHA-256 of it and of the data files it reads.
 
-    ``exact`` is the manufactured solution of an ``exact:`` block (None without one); the
+    ``exact`` is the ``exact:`` block, a manufactured displacement (None without one); the
     body force is then derived from it and ``body_force`` is None.
     """
 
@@ -217,8 +232,9 @@ class Case:
     def dirichlet_parts(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.parts if p.is_dirichlet)
 
-    def exact_solution(self) -> "ExactSolution | None":
-        """The exact: block's derived solution (for the norms), or None without one."""
+    def exact_solution(self) -> Any:
+        """The exact: block's derived fields, or None without one: as
+        :func:`contactfem.exact.exact_solution`, which callers should use instead."""
         return None if self.exact is None else self.exact.solution
 
     def with_solver(self, **changes: Any) -> "Case":

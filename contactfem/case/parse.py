@@ -9,10 +9,9 @@ from contactfem.case import limits
 from contactfem.case.files import case_digest, read_text_file
 from contactfem.case.geometry import read_geometry, read_mesh_settings
 from contactfem.case.messages import shortened
-from contactfem.case.model import Case
+from contactfem.case.model import Case, ExactBlock
 from contactfem.case.reader import Reader
 from contactfem.case.sections import (
-    exact_block,
     read_body_force,
     read_boundary,
     read_exact_displacement,
@@ -86,7 +85,7 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     body_force = read_body_force(r, top.get("body_force"), exact_displacement is not None)
     parts = read_boundary(r, top["boundary"], part_names, exact_displacement)
     obstacle = read_obstacle(r, top["obstacle"])
-    exact = None if exact_displacement is None else exact_block(r, exact_displacement, material, obstacle)
+    exact = None if exact_displacement is None else ExactBlock(exact_displacement, material, obstacle.normal)
     solver = read_solver(r, top.get("solver", {}))
     output = read_output(r, top.get("output", {}), source)
     units = read_units(r, top.get("units", {}))

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from contactfem.case import limits
-from contactfem.case.messages import key_path, range_text, shortened, show_value
+from contactfem.case.messages import key_path, range_text, refusal, shortened, show_value
 from contactfem.errors import CaseError
 from contactfem.expressions import Expression, ExpressionError, compile_expression
 
@@ -27,9 +27,7 @@ class Reader:
         self.data_bytes = 0
 
     def fail(self, key: str, value: Any, expected: str) -> CaseError:
-        shown = show_value(value)
-        where = f"{key} = {shown}" if key else shown
-        return CaseError(f"{self.filename}: {where}: {expected}")
+        return refusal(self.filename, key, value, expected)
 
     def mapping(self, data: Any, key: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
         if not isinstance(data, dict):

@@ -10,9 +10,9 @@ import numpy as np
 
 from contactfem.case import limits
 from contactfem.case.files import path_problem
+from contactfem.case.messages import CANNOT_DERIVE
 from contactfem.case.model import (
     BoundaryPart,
-    ExactBlock,
     LoadPath,
     Material,
     Obstacle,
@@ -24,7 +24,7 @@ from contactfem.case.model import (
 from contactfem.case.names import BACKEND_CHOICES, DEFAULT_FORMATS, FORMAT_NAMES, FORMAT_NEEDS, METHOD_NAMES
 from contactfem.case.reader import Reader
 from contactfem.errors import CaseError
-from contactfem.expressions import Expression, ExpressionError
+from contactfem.expressions import Expression, step_without_derivative
 
 
 PART_KINDS = ("clamped", "free", "contact", "symmetry")
@@ -70,23 +70,16 @@ def read_material(r: Reader, data: Any) -> Material:
 
 
 def read_exact_displacement(r: Reader, data: Any) -> tuple[Expression, Expression]:
+    """The two checked expressions of ``exact.displacement``. Its fields (stress, body force)
+    are derived where they are used (:func:`contactfem.exact.exact_solution`); a floor or
+    ceil of x or y, which has no derivative, is refused here already."""
     data = r.mapping(data, "exact", ("displacement",), required=("displacement",))
-    return r.vector_field(data["displacement"], "exact.displacement")  # type: ignore[return-value]
-
-
-def exact_block(r: Reader, displacement: tuple[Expression, Expression], material: Material,
-                 obstacle: Obstacle) -> ExactBlock:
-    """Derive the exact fields once, with the plane law; refuse what sympy cannot differentiate or evaluate."""
-    from contactfem.assembly import Elasticity
-    from contactfem.exact import ExactSolution
-
-    law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
-    try:
-        solution = ExactSolution.from_expressions(displacement, law.lam, law.mu, obstacle.normal)
-    except ExpressionError as error:
-        texts = [e.text for e in displacement]
-        raise r.fail("exact.displacement", texts, f"cannot derive the stress and body force: {error}") from None
-    return ExactBlock(displacement=displacement, solution=solution)
+    displacement = r.vector_field(data["displacement"], "exact.displacement")
+    for component in displacement:
+        reason = step_without_derivative(component)
+        if reason is not None:
+            raise r.fail("exact.displacement", [e.text for e in displacement], f"{CANNOT_DERIVE}: {reason}")
+    return displacement  # type: ignore[return-value]
 
 
 def read_body_force(r: Reader, value: Any, has_exact: bool) -> tuple[Expression, Expression] | None:

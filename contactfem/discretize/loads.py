@@ -19,7 +19,7 @@ from contactfem.assembly import (
     edge_load_vector,
 )
 from contactfem.case import SCALE_LIMIT, Case
-from contactfem.discretize.exact_checks import refuse_non_finite_exact
+from contactfem.discretize.exact_checks import exact_fields, refuse_non_finite_exact
 from contactfem.discretize.finite import check_finite, refuse_non_finite
 from contactfem.mesh import Mesh
 from contactfem.quadrature import EDGE_RULE_POINTS
@@ -105,7 +105,7 @@ def compile_loads(case: Case, mesh: Mesh) -> Loads:
 
 def _body_force(case: Case) -> VectorField | None:
     if case.exact is not None:
-        return case.exact.solution.body_force
+        return exact_fields(case).body_force
     if case.body_force is None:
         return None
     fx, fy = case.body_force
@@ -127,7 +127,7 @@ def _refuse_non_finite_body_force(case: Case, values: np.ndarray, where: np.ndar
 def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:
     """Every boundary edge whose traction is prescribed in some direction, part by part."""
     parts = {p.name: p for p in case.parts}
-    exact = case.exact.solution if case.exact is not None else None
+    exact = exact_fields(case)
     pieces = []
     for index, name in enumerate(mesh.part_names):
         edges = mesh.boundary_edges[mesh.edge_parts == index]
