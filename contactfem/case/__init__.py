@@ -58,6 +58,8 @@ from contactfem.case.limits import (
 from contactfem.case.loops import Arc, Loop
 from contactfem.case.messages import shortened
 from contactfem.case.model import (
+    DIRICHLET_KINDS,
+    SUPPORT_KINDS,
     BoundaryPart,
     Case,
     ExactBlock,
@@ -68,7 +70,9 @@ from contactfem.case.model import (
     MeshSettings,
     Obstacle,
     OutputSettings,
+    PartKind,
     Platen,
+    PlatenControl,
     PolygonGeometry,
     RectangleGeometry,
     SolverSettings,
@@ -81,12 +85,12 @@ from contactfem.case.sections import EXACT, PART_KINDS, PART_LOADS, PLATEN_CONTR
 from contactfem.case.tables import is_number
 
 __all__ = [
-    "ARC_END_TOLERANCE", "DIAGONALS", "EXACT", "MAX_CASE_BYTES", "MAX_DATA_FILE_BYTES", "MAX_DIVISIONS",
+    "ARC_END_TOLERANCE", "DIAGONALS", "DIRICHLET_KINDS", "EXACT", "MAX_CASE_BYTES", "MAX_DATA_FILE_BYTES", "MAX_DIVISIONS",
     "MAX_LAME_RATIO", "MAX_LOAD_STEPS", "MAX_POLYGON_VERTICES", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "NAME_MAX",
     "OUTLINE_EXPECTED", "OUTPUT_NAME_RESERVE", "OUTPUT_PATH_RESERVE", "PART_KINDS", "PART_LOADS", "PATH_MAX",
-    "PLATEN_CONTROLS", "PROFILE_SOURCES", "SCALE_LIMIT", "SIDES",
+    "PLATEN_CONTROLS", "PROFILE_SOURCES", "SCALE_LIMIT", "SIDES", "SUPPORT_KINDS",
     "Arc", "BoundaryPart", "Case", "ExactBlock", "Geometry", "LoadPath", "Loop", "Material", "MeshFileGeometry",
-    "MeshSettings", "Obstacle", "OutputSettings", "Platen", "PolygonGeometry", "RectangleGeometry",
+    "MeshSettings", "Obstacle", "OutputSettings", "PartKind", "Platen", "PlatenControl", "PolygonGeometry", "RectangleGeometry",
     "SolverSettings", "Units",
     "is_number", "load_case", "parse_case", "path_problem", "read_text_file", "shortened",
 ]

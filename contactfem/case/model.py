@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Callable, ClassVar
 
@@ -54,51 +55,91 @@ class Material:
     poisson: float
 
 
+class PartKind(StrEnum):
+    """What holds on a boundary part. A member is the word the case file uses for it (its
+    value), so that labels, messages and reports print it as written."""
+
+    CLAMPED = "clamped"
+    FREE = "free"
+    CONTACT = "contact"
+    SYMMETRY = "symmetry"
+    TRACTION = "traction"
+    PRESSURE = "pressure"
+    DISPLACEMENT = "displacement"
+    PLATEN = "platen"
+
+
+#: The kinds that prescribe the displacement.
+DIRICHLET_KINDS = frozenset({PartKind.CLAMPED, PartKind.DISPLACEMENT})
+#: The kinds that hold the body somewhere: a prescribed motion, a symmetry line, a platen.
+SUPPORT_KINDS = DIRICHLET_KINDS | {PartKind.SYMMETRY, PartKind.PLATEN}
+
+
+class PlatenControl(StrEnum):
+    """How a platen is driven: the force it presses with, or how far it advances into the body."""
+
+    FORCE = "force"
+    DISPLACEMENT = "displacement"
+
+
 @dataclass(frozen=True)
 class BoundaryPart:
     """A named boundary part and what holds on it.
 
-    ``kind`` is clamped | free | contact | symmetry | traction | pressure | displacement |
-    platen. ``values`` holds the two components of a traction or a displacement (None for
-    a displacement component left free), or the single pressure. ``exact`` marks
-    ``{traction: exact}`` (``values`` empty: σ(u_exact) n depends on the edge's normal)
-    and ``{displacement: exact}`` (``values`` are the exact block's two expressions).
-    ``platen`` is the drive of a platen part.
+    ``kind`` is a :class:`PartKind`: clamped | free | contact | symmetry | traction |
+    pressure | displacement | platen. ``values`` holds the two components of a traction or
+    a displacement (None for a displacement component left free), or the single pressure.
+    ``exact`` marks ``{traction: exact}`` (``values`` empty: σ(u_exact) n depends on the
+    edge's normal) and ``{displacement: exact}`` (``values`` are the exact block's two
+    expressions). ``platen`` is the drive of a platen part.
     """
 
     name: str
-    kind: str
+    kind: PartKind
     values: tuple[Expression | None, ...] = ()
     exact: bool = False
     platen: "Platen | None" = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", PartKind(self.kind))
 
     @property
     def label(self) -> str:
         """The kind as the case file says it, e.g. ``traction (exact)`` or ``platen (force 2000)``."""
         if self.platen is not None:
             return f"{self.kind} ({self.platen.control} {self.platen.value:g})"
-        return f"{self.kind} (exact)" if self.exact else self.kind
+        return f"{self.kind} (exact)" if self.exact else str(self.kind)
 
     @property
     def is_dirichlet(self) -> bool:
-        return self.kind in ("clamped", "displacement")
+        return self.kind in DIRICHLET_KINDS
 
     @property
     def is_support(self) -> bool:
         """Whether the part holds the body somewhere (a prescribed motion, a symmetry line, a platen)."""
-        return self.is_dirichlet or self.kind in ("symmetry", "platen")
+        return self.kind in SUPPORT_KINDS
+
+    @property
+    def is_force_driven(self) -> bool:
+        """Whether the part is a platen driven by force: it presses with a force of its own
+        rather than holding the body."""
+        return self.platen is not None and self.platen.control is PlatenControl.FORCE
 
 
 @dataclass(frozen=True)
 class Platen:
     """A rigid, frictionless platen on a straight boundary part: the part's normal
     displacement is one unknown δ (its advance into the body, along the inward normal),
-    its tangential motion free. ``control`` is ``force`` (δ unknown, the platen presses
-    with ``value`` per unit thickness; negative pulls) or ``displacement`` (δ = ``value``).
+    its tangential motion free. ``control`` is :attr:`PlatenControl.FORCE` (δ unknown, the
+    platen presses with ``value`` per unit thickness; negative pulls) or
+    :attr:`PlatenControl.DISPLACEMENT` (δ = ``value``).
     """
 
-    control: str
+    control: PlatenControl
     value: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "control", PlatenControl(self.control))
 
 
 @dataclass(frozen=True)
@@ -221,12 +262,12 @@ class Case:
     def part(self, name: str) -> BoundaryPart:
         return next(p for p in self.parts if p.name == name)
 
-    def parts_of_kind(self, *kinds: str) -> tuple[str, ...]:
+    def parts_of_kind(self, *kinds: PartKind) -> tuple[str, ...]:
         return tuple(p.name for p in self.parts if p.kind in kinds)
 
     @property
     def contact_parts(self) -> tuple[str, ...]:
-        return self.parts_of_kind("contact")
+        return self.parts_of_kind(PartKind.CONTACT)
 
     @property
     def dirichlet_parts(self) -> tuple[str, ...]:

@@ -17,7 +17,9 @@ from contactfem.case.model import (
     Material,
     Obstacle,
     OutputSettings,
+    PartKind,
     Platen,
+    PlatenControl,
     SolverSettings,
     Units,
 )
@@ -27,10 +29,12 @@ from contactfem.errors import CaseError
 from contactfem.expressions import Expression, step_without_derivative
 
 
-PART_KINDS = ("clamped", "free", "contact", "symmetry")
-PART_LOADS = ("traction", "pressure", "displacement", "platen")
+#: The conditions a part is given by their word alone (``left: clamped``).
+PART_KINDS = (PartKind.CLAMPED, PartKind.FREE, PartKind.CONTACT, PartKind.SYMMETRY)
+#: The conditions given as a mapping with a value (``top: {traction: [0, -1]}``).
+PART_LOADS = (PartKind.TRACTION, PartKind.PRESSURE, PartKind.DISPLACEMENT, PartKind.PLATEN)
 #: How a platen is driven: the force it presses with, or how far it advances into the body.
-PLATEN_CONTROLS = ("force", "displacement")
+PLATEN_CONTROLS = tuple(PlatenControl)
 EXACT = "exact"  # the value that takes a load or a displacement from the exact: block
 
 
@@ -114,31 +118,32 @@ def read_boundary(r: Reader, data: Any, part_names: tuple[str, ...] | None,
                 f"its parts are {', '.join(part_names)}"
             )
         if isinstance(spec, str):
-            parts.append(BoundaryPart(name, r.choice(spec, key, PART_KINDS)))
+            parts.append(BoundaryPart(name, PartKind(r.choice(spec, key, PART_KINDS))))
             continue
         if not isinstance(spec, dict) or len(spec) != 1:
             raise r.fail(
                 key, spec,
                 f"expected one of {', '.join(PART_KINDS)}, or a mapping with one of {', '.join(PART_LOADS)}",
             )
-        (kind, value), = spec.items()
-        if kind not in PART_LOADS:
-            raise CaseError(f"{r.filename}: {key}.{kind}: unknown key; expected one of {', '.join(PART_LOADS)}")
+        (word, value), = spec.items()
+        if word not in PART_LOADS:
+            raise CaseError(f"{r.filename}: {key}.{word}: unknown key; expected one of {', '.join(PART_LOADS)}")
+        kind = PartKind(word)
         if value == EXACT:
-            if kind == "pressure":
+            if kind is PartKind.PRESSURE:
                 raise r.fail(f"{key}.pressure", value, "'exact' is for traction and displacement; use {traction: exact}")
             if exact is None:
                 raise r.fail(f"{key}.{kind}", value, "'exact' needs an exact: block with the displacement")
-            parts.append(BoundaryPart(name, kind, exact if kind == "displacement" else (), exact=True))
+            parts.append(BoundaryPart(name, kind, exact if kind is PartKind.DISPLACEMENT else (), exact=True))
             continue
-        if kind == "platen":
-            parts.append(BoundaryPart(name, "platen", platen=_platen(r, value, f"{key}.platen")))
+        if kind is PartKind.PLATEN:
+            parts.append(BoundaryPart(name, kind, platen=_platen(r, value, f"{key}.platen")))
             continue
-        if kind == "pressure":
+        if kind is PartKind.PRESSURE:
             values: tuple[Expression | None, ...] = (r.expression(value, f"{key}.pressure"),)
         else:
-            values = r.vector_field(value, f"{key}.{kind}", allow_free=kind == "displacement")
-            if kind == "displacement" and all(v is None for v in values):
+            values = r.vector_field(value, f"{key}.{kind}", allow_free=kind is PartKind.DISPLACEMENT)
+            if kind is PartKind.DISPLACEMENT and all(v is None for v in values):
                 raise r.fail(f"{key}.displacement", value, "at least one component must be prescribed")
         parts.append(BoundaryPart(name, kind, values))
     if not any(p.is_support for p in parts):
@@ -146,7 +151,7 @@ def read_boundary(r: Reader, data: Any, part_names: tuple[str, ...] | None,
             f"{r.filename}: boundary: no clamped, displacement, symmetry or platen part; the body could move "
             "rigidly, so the problem is ill-posed (give at least one part: clamped)"
         )
-    if not any(p.kind == "contact" for p in parts):
+    if not any(p.kind is PartKind.CONTACT for p in parts):
         raise CaseError(f"{r.filename}: boundary: no contact part; mark the part that may touch the obstacle: contact")
     return tuple(parts)
 
@@ -157,7 +162,8 @@ def _platen(r: Reader, data: Any, key: str) -> Platen:
         raise r.fail(key, data, "expected {force: P} (the force the platen presses with, per unit thickness) "
                                 "or {displacement: d} (how far it advances into the body)")
     data = r.mapping(data, key, PLATEN_CONTROLS)
-    (control, value), = data.items()
+    (word, value), = data.items()
+    control = PlatenControl(word)
     limit = limits.SCALE_LIMIT
     amount = r.number(value, f"{key}.{control}", low=-limit, high=limit,
                       expected=f"expected a number in [-{limit:g}, {limit:g}]")
