@@ -196,12 +196,30 @@ class ExactBlock:
 
 
 @dataclass(frozen=True)
+class Accelerators:
+    """The solver's accelerations, each on unless ``solver.accelerators`` turns it off: the
+    solution is the same either way, only the work to reach it differs (a switch to measure
+    one against the others, or to rule one out).
+
+    ``sequencing``: start the active set from the same case solved on coarser meshes;
+    ``zone_fronts``: extrapolate a contact zone's creeping edges along ΓC
+    (``contactfem.kernel.ZoneFronts``); ``schur_updates``: solve later Newton steps through
+    a Schur complement over the nodes whose state changed, rather than refactorising.
+    """
+
+    sequencing: bool = True
+    zone_fronts: bool = True
+    schur_updates: bool = True
+
+
+@dataclass(frozen=True)
 class SolverSettings:
     method: str
     tolerance: float
     max_iterations: int | None  # None: auto (see contactfem.kernel.default_max_iterations)
     c: float | None
     backend: str
+    accelerators: Accelerators = Accelerators()
 
 
 @dataclass(frozen=True)

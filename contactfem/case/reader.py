@@ -77,6 +77,11 @@ class Reader:
             raise self.fail(key, value, f"expected an integer in [{low}, {high}]")
         return value
 
+    def boolean(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.fail(key, value, "expected true or false")
+        return value
+
     def choice(self, value: Any, key: str, choices: tuple[str, ...]) -> str:
         if not isinstance(value, str) or value not in choices:
             raise self.fail(key, value, f"expected one of {', '.join(choices)}")

@@ -3,6 +3,7 @@ platens), load path, obstacle, units, solver and output."""
 
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +13,7 @@ from contactfem.case import limits
 from contactfem.case.files import path_problem
 from contactfem.case.messages import CANNOT_DERIVE
 from contactfem.case.model import (
+    Accelerators,
     BoundaryPart,
     LoadPath,
     Material,
@@ -234,9 +236,13 @@ def read_units(r: Reader, data: Any) -> Units:
     return Units(**names)
 
 
+#: The solver's accelerations a case may switch off (``solver.accelerators``), each on by default.
+ACCELERATORS = tuple(accelerator.name for accelerator in fields(Accelerators))
+
+
 def read_solver(r: Reader, data: Any) -> SolverSettings:
     data = r.mapping(data if data is not None else {}, "solver",
-                     ("method", "tolerance", "max_iterations", "c", "backend"))
+                     ("method", "tolerance", "max_iterations", "c", "backend", "accelerators"))
     method = r.choice(data.get("method", "positive"), "solver.method", METHOD_NAMES)
     tolerance = r.number(data.get("tolerance", 1e-10), "solver.tolerance", low=1e-15, high=1e-2,
                          expected="must be in [1e-15, 1e-2]")
@@ -247,10 +253,19 @@ def read_solver(r: Reader, data: Any) -> SolverSettings:
             raise r.fail("solver.max_iterations", max_iterations, "expected an integer in [1, 10000] or auto")
     max_iterations = None if max_iterations == "auto" else max_iterations
     c = data.get("c", "auto")
-    c = None if c == "auto" else r.number(c, "solver.c", low=1 / limits.SCALE_LIMIT, high=limits.SCALE_LIMIT,
-                                          expected=f"must be in [{1 / limits.SCALE_LIMIT:g}, {limits.SCALE_LIMIT:g}] or auto")
+    scale = limits.SCALE_LIMIT
+    c = None if c == "auto" else r.number(c, "solver.c", low=1 / scale, high=scale,
+                                          expected=f"must be in [{1 / scale:g}, {scale:g}] or auto")
     backend = r.choice(data.get("backend", "auto"), "solver.backend", BACKEND_CHOICES)
-    return SolverSettings(method=method, tolerance=tolerance, max_iterations=max_iterations, c=c, backend=backend)
+    accelerators = _accelerators(r, data.get("accelerators"))
+    return SolverSettings(method=method, tolerance=tolerance, max_iterations=max_iterations, c=c, backend=backend,
+                          accelerators=accelerators)
+
+
+def _accelerators(r: Reader, data: Any) -> Accelerators:
+    """``solver.accelerators``: which of :data:`ACCELERATORS` to use, true or false each (all by default)."""
+    data = r.mapping(data if data is not None else {}, "solver.accelerators", ACCELERATORS)
+    return Accelerators(**{name: r.boolean(value, f"solver.accelerators.{name}") for name, value in data.items()})
 
 
 def read_output(r: Reader, data: Any, source: Path) -> OutputSettings:
