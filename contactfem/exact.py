@@ -19,6 +19,9 @@ and are refused.
 
 Numerical values come from :class:`Program`, a small evaluator that walks the sympy
 trees (shared subexpressions once) with numpy ufuncs: no ``lambdify``, no generated code.
+
+A case's ``exact:`` block holds only the checked expressions (the reader derives
+nothing); :func:`exact_solution` derives its fields where they are used, once per case.
 """
 
 from __future__ import annotations
@@ -30,9 +33,12 @@ import numpy as np
 import sympy
 from sympy.core.relational import Relational
 
-from contactfem.expressions import Expression, ExpressionError, sympy_symbols, to_sympy
+from contactfem.assembly import Elasticity
+from contactfem.case.messages import CANNOT_DERIVE, refusal, shortened
+from contactfem.case.model import Case, ExactBlock
+from contactfem.expressions import NO_DERIVATIVE, Expression, ExpressionError, sympy_symbols, to_sympy
 
-__all__ = ["ExactSolution", "Program", "evaluate"]
+__all__ = ["ExactSolution", "Program", "evaluate", "exact_solution"]
 
 #: The most nodes the four entries of ∇u may hold together (sympy's expression trees,
 #: shared subtrees counted at each use). Deriving σ and f = −div σ costs about the square
@@ -201,7 +207,7 @@ class Program:
         function = _FUNCTIONS.get(expr.func)
         if function is None:
             if isinstance(expr, sympy.Derivative):
-                raise ExpressionError(f"{expr.expr} cannot be differentiated (floor, ceil and % have no derivative)")
+                raise ExpressionError(f"{expr.expr} {NO_DERIVATIVE}")
             if isinstance(expr, Relational):  # other relational subclasses
                 raise ExpressionError(f"the relation {expr} is not supported")
             raise ExpressionError(f"{type(expr).__name__} ({expr}) cannot be evaluated")
@@ -355,3 +361,41 @@ class ExactSolution:
     def tangential_traction(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """σ_t = t·σ n (...), t = (−n_y, n_x); zero on ΓC for frictionless contact."""
         return self._contact_values(x, y)[2]
+
+
+# --------------------------------------------------------------------------- a case's exact block
+
+
+def exact_solution(case: Case) -> ExactSolution | None:
+    """The fields derived from ``case``'s ``exact:`` block, or None without one.
+
+    Derived on first use with the case's plane law and obstacle normal, and kept with the
+    block (``ExactBlock.derived``): every later call for the case returns the same object.
+
+    Raises
+    ------
+    CaseError
+        ``file: exact.displacement = [...]: cannot derive the stress and body force: ...``
+        when sympy cannot derive or evaluate the fields (see :class:`ExactSolution`).
+    """
+    if case.exact is None:
+        return None
+    return _derived(case.exact, shortened(case.source.name))
+
+
+def _derived(block: ExactBlock, filename: str = "<case>") -> ExactSolution:
+    solution = block.derived.get("solution")
+    if solution is None:
+        material = block.material
+        law = Elasticity.from_lame(material.lame_lambda, material.lame_mu, material.plane)
+        try:
+            solution = ExactSolution.from_expressions(block.displacement, law.lam, law.mu, block.normal)
+        except ExpressionError as error:
+            texts = [e.text for e in block.displacement]
+            raise refusal(filename, "exact.displacement", texts, f"{CANNOT_DERIVE}: {error}") from None
+        block.derived["solution"] = solution
+    return solution
+
+
+# ExactBlock.solution, for callers that read the fields from the block, derives them here.
+ExactBlock.builder = _derived

@@ -13,7 +13,8 @@ import numpy as np
 
 from contactfem.errors import ContactFemError
 
-__all__ = ["ExpressionError", "Expression", "compile_expression", "to_sympy", "sympy_symbols"]
+__all__ = ["ExpressionError", "Expression", "compile_expression", "step_without_derivative", "to_sympy",
+           "sympy_symbols"]
 
 #: Refused before evaluation: longer text, more expression nodes, deeper nesting.
 MAX_LENGTH = 1000
@@ -149,6 +150,33 @@ def compile_expression(value: int | float | str) -> Expression:
     variables: set[str] = set()
     fn = _build(tree, variables)
     return Expression(text, not variables, frozenset(variables), fn)
+
+
+#: The functions that are steps (constant between integers), by their sympy names.
+_STEPS = {"floor": "floor", "ceil": "ceiling"}
+#: Why a step (floor, ceil) or a remainder (%) of x or y stops the derivation of the exact fields.
+NO_DERIVATIVE = "cannot be differentiated (floor, ceil and % have no derivative)"
+
+
+def step_without_derivative(expression: Expression) -> str | None:
+    """Why ``expression`` cannot be differentiated, read from its text without sympy, or None.
+
+    A call of floor or ceil on x or y is a step: its derivative is no function, so a
+    manufactured displacement holding one gives no stress. The reason names the first
+    such call as sympy would (``floor(x) cannot be differentiated ...``, ``ceil`` as
+    ``ceiling``). A ``%`` is left to the derivation (:mod:`contactfem.exact`), which also
+    refuses a divisor that simplifies to zero.
+    """
+    if expression.is_constant:
+        return None
+    tree = _parse(expression.text)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _STEPS:
+            argument = node.args[0]
+            if any(isinstance(child, ast.Name) and child.id in _VARIABLES for child in ast.walk(argument)):
+                text = ast.get_source_segment(expression.text, argument) or ast.unparse(argument)
+                return f"{_STEPS[node.func.id]}({text}) {NO_DERIVATIVE}"
+    return None
 
 
 def _parse(text: str) -> ast.expr:

@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import platform
 import time
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Collection, Mapping
 
 import numpy as np
 
 from contactfem import __version__
-from contactfem.case import Case
+from contactfem.case import SUPPORT_KINDS, Case, PartKind
 from contactfem.discretize import DiscreteProblem
 from contactfem.discretize.contact import contact_patches
 from contactfem.mesh.core import coordinate_span
@@ -359,23 +359,23 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
 
     # Reactions belong to the support parts holding the node, the obstacle's push to the
     # contact parts: a node shared by two such parts counts for the first in the mesh's order.
-    kinds = {name: labels.get(name, "free").split(" ")[0] for name in mesh.part_names}
+    kinds = {name: labels.get(name, PartKind.FREE).split(" ")[0] for name in mesh.part_names}
 
-    def owners(selected: set[str]) -> np.ndarray:
+    def owners(selected: Collection[str]) -> np.ndarray:
         owner = np.full(mesh.n_points, -1)
         for index in reversed(range(len(mesh.part_names))):
             if kinds[mesh.part_names[index]] in selected:
                 owner[np.unique(mesh.boundary_edges[mesh.edge_parts == index])] = index
         return owner
 
-    support_owner = owners({"clamped", "displacement", "symmetry", "platen"})
-    contact_owner = owners({"contact"})
+    support_owner = owners(SUPPORT_KINDS)
+    contact_owner = owners({PartKind.CONTACT})
     entries: dict[str, dict] = {}
     for index, name in enumerate(mesh.part_names):
         pieces = [resultant(_natural_part_load(natural, natural.parts == index, mesh.n_points)),
                   resultant(reaction, np.flatnonzero(support_owner == index)),
                   resultant(push, np.flatnonzero(contact_owner == index))]
-        entries[name] = {"condition": labels.get(name, "free"),
+        entries[name] = {"condition": labels.get(name, PartKind.FREE),
                          "force": [sum(p["force"][k] for p in pieces) for k in range(2)],
                          "moment": sum(p["moment"] for p in pieces)}
     body = problem.load - natural.load_vector(mesh.n_points)

@@ -255,9 +255,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
 
 def case_accelerators(case: Case) -> Accelerators:
     """The kernel's accelerators as the case's ``solver.accelerators`` switches them."""
-    switches = getattr(case.solver, "accelerators", None)
-    if switches is None:
-        return Accelerators()
+    switches = case.solver.accelerators
     return Accelerators(sequencing=switches.sequencing, zone_fronts=switches.zone_fronts,
                         schur_updates=switches.schur_updates)
 

@@ -61,13 +61,13 @@ from contactfem.case import (
     MAX_CASE_BYTES,
     OUTPUT_NAME_RESERVE,
     OUTPUT_PATH_RESERVE,
-    _load_yaml,
-    _Reader,
     parse_case,
     path_problem,
     read_text_file,
     shortened,
 )
+from contactfem.case.reader import Reader
+from contactfem.case.yaml_loader import load_yaml
 from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, MeshError, SolverError
 from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
@@ -164,8 +164,8 @@ def load_sweep(path: str | Path) -> Sweep:
     """
     path = Path(path)
     text = read_text_file(path, what="sweep")
-    r = _Reader(shortened(path.name))
-    data = _load_yaml(text, r.filename)
+    r = Reader(shortened(path.name))
+    data = load_yaml(text, r.filename)
     if data is None:
         raise CaseError(f"{r.filename}: the sweep file is empty (or only comments); expected a mapping with "
                         "case and grid or points")
@@ -188,7 +188,7 @@ def load_sweep(path: str | Path) -> Sweep:
         base_case = parse_case(base_text, source=base)
     except CaseError as error:
         raise CaseError(f"{r.filename}: case: {error}") from None
-    base_data = _load_yaml(base_text, shortened(base.name))
+    base_data = load_yaml(base_text, shortened(base.name))
 
     if ("grid" in top) == ("points" in top):
         raise CaseError(f"{r.filename}: grid, points: {'both are' if 'grid' in top else 'neither is'} given; "
@@ -217,7 +217,7 @@ def load_sweep(path: str | Path) -> Sweep:
                  directory=Path(directory))
 
 
-def _grid(r: _Reader, grid: Any) -> list[dict[str, Any]]:
+def _grid(r: Reader, grid: Any) -> list[dict[str, Any]]:
     expected = "expected a mapping of dotted case keys (e.g. mesh.divisions) to non-empty lists of values"
     if not isinstance(grid, dict) or not grid:
         raise r.fail("grid", grid, expected)
@@ -237,7 +237,7 @@ def _grid(r: _Reader, grid: Any) -> list[dict[str, Any]]:
     return [dict(combination) for combination in itertools.product(*columns)]
 
 
-def _point_list(r: _Reader, points: Any) -> list[dict[str, Any]]:
+def _point_list(r: Reader, points: Any) -> list[dict[str, Any]]:
     if not isinstance(points, list) or not points:
         raise r.fail("points", points, "expected a non-empty list of mappings of dotted case keys to values")
     if len(points) > MAX_SWEEP_POINTS:
@@ -252,14 +252,14 @@ def _point_list(r: _Reader, points: Any) -> list[dict[str, Any]]:
     return [dict(point) for point in points]
 
 
-def _check_key(r: _Reader, key: Any, where: str) -> None:
+def _check_key(r: Reader, key: Any, where: str) -> None:
     if not isinstance(key, str) or len(key) > 200 or not key.isprintable() or not _KEY.fullmatch(key):
         shown = shortened(key if isinstance(key, str) else repr(key), 64)
         raise CaseError(f"{r.filename}: {where}.{shown}: expected a dotted case key such as mesh.divisions "
                         "or boundary.top.traction[1]")
 
 
-def _check_value(r: _Reader, value: Any, where: str) -> None:
+def _check_value(r: Reader, value: Any, where: str) -> None:
     """Values are what a case file holds and JSON can carry: numbers, strings, booleans, null,
     lists and mappings of them."""
     if isinstance(value, float) and not math.isfinite(value):

@@ -229,6 +229,48 @@ def test_exact_block_is_stored_and_parts_marked():
     assert case_from(exact_case("-1e-3*x", 0)).exact.solution is not case.exact.solution
 
 
+def test_the_reader_derives_nothing_and_the_fields_are_derived_once_where_used():
+    """Reading an exact: block checks its expressions and stops there: neither sympy nor the
+    numerical modules are loaded. The fields are derived on first use, once per case."""
+    import subprocess
+    import sys
+
+    from conftest import square_case_dict
+
+    from contactfem.exact import exact_solution
+
+    code = ("import sys; from contactfem.case import load_case; case = load_case(sys.argv[1]); "
+            "assert case.exact is not None; "
+            "print([m for m in ('sympy', 'scipy', 'contactfem.exact', 'contactfem.assembly') if m in sys.modules])")
+    loaded = subprocess.run([sys.executable, "-c", code, str(MANUFACTURED)], capture_output=True, text=True, check=True)
+    assert loaded.stdout.strip() == "[]"
+    case = load_case(MANUFACTURED)
+    assert case.exact.derived == {}
+    solution = exact_solution(case)
+    assert isinstance(solution, ExactSolution) and exact_solution(case) is solution is case.exact.solution
+    assert exact_solution(load_case(MANUFACTURED)) is not solution
+    assert exact_solution(case_from(square_case_dict())) is None
+
+
+@pytest.mark.parametrize("ux, reason", [
+    ("floor(x)", "floor(x) cannot be differentiated"),
+    ("1e-3*ceil(2*y)", "ceiling(2*y) cannot be differentiated"),
+])
+def test_a_step_of_x_or_y_is_refused_while_reading(ux, reason):
+    with pytest.raises(CaseError) as error:
+        case_from(exact_case(ux, 0))
+    assert str(error.value) == (f"test.yaml: exact.displacement = [{ux!r}, '0']: cannot derive the stress and body "
+                                f"force: {reason} (floor, ceil and % have no derivative)")
+
+
+def test_a_remainder_is_refused_where_the_fields_are_derived():
+    """A % may simplify (x % (y - y) is a modulo by zero): the derivation says which."""
+    case = case_from(exact_case("1e-3*(x % 2)", 0))
+    with pytest.raises(CaseError, match=r"^test.yaml: exact.displacement = \['1e-3\*\(x % 2\)', '0'\]: cannot derive "
+                       r"the stress and body force: Mod\(x, 2\) cannot be differentiated"):
+        prepare(case)
+
+
 @pytest.mark.parametrize("change, key, expected", [
     (lambda d: d.update(body_force=[0, -1]), "body_force", "derived from exact.displacement"),
     (lambda d: d["exact"].pop("displacement"), "exact.displacement", "missing"),

@@ -465,7 +465,7 @@ INLINE_LIMIT = 2000
 
 
 def test_too_many_polygon_vertices(tmp_path, monkeypatch):
-    monkeypatch.setattr("contactfem.case.MAX_POLYGON_VERTICES", INLINE_LIMIT)
+    monkeypatch.setattr("contactfem.case.limits.MAX_POLYGON_VERTICES", INLINE_LIMIT)
     n = INLINE_LIMIT + 1
     vertices = [[i, 0] for i in range(n)]
     started = time.perf_counter()
@@ -476,7 +476,7 @@ def test_too_many_polygon_vertices(tmp_path, monkeypatch):
 
 
 def test_too_many_holes(tmp_path, monkeypatch):
-    monkeypatch.setattr("contactfem.case.MAX_POLYGON_VERTICES", INLINE_LIMIT)
+    monkeypatch.setattr("contactfem.case.limits.MAX_POLYGON_VERTICES", INLINE_LIMIT)
     holes = [{"circle": {"center": [0.02 + 0.04 * (i % 25), 0.02 + 0.04 * (i // 25)], "radius": 0.01}}
              for i in range(INLINE_LIMIT // 4 + 1)]
     refuse_text(tmp_path, polygon_case(holes), "geometry.polygon.holes[", f"more than {INLINE_LIMIT}")

@@ -24,6 +24,7 @@ import pytest
 import yaml
 
 import contactfem.case as case_module
+import contactfem.case.limits as case_limits
 from contactfem.case import PolygonGeometry, parse_case
 from contactfem.discretize.meshing import build_mesh
 from contactfem.errors import CaseError
@@ -191,7 +192,7 @@ def test_outline_keys_and_paths(tmp_path):
 
 
 def test_outline_files_are_bounded_like_profiles(tmp_path, monkeypatch):
-    monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 100)
+    monkeypatch.setattr(case_limits, "MAX_DATA_FILE_BYTES", 100)
     refused(tmp_path, {"file": "outline.csv"}, {"outline.csv": GOOD * 10}, "larger than 100 bytes")
     # The bound is for all of a case's data files: an outline and a hole within it alone
     # but not together are refused at the hole, before it is read whole.
@@ -200,8 +201,8 @@ def test_outline_files_are_bounded_like_profiles(tmp_path, monkeypatch):
     assert len(outer) < 100 and len(hole) < 100 < len(outer) + len(hole)
     refused(tmp_path, {"file": "outer.csv", "holes": [{"file": "hole.csv"}]}, {"outer.csv": outer, "hole.csv": hole},
             "geometry.polygon.holes[0].file", f"the {100 - len(outer)} bytes left of the 100 bytes")
-    monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 1 << 20)
-    monkeypatch.setattr(case_module, "MAX_POLYGON_VERTICES", 10)
+    monkeypatch.setattr(case_limits, "MAX_DATA_FILE_BYTES", 1 << 20)
+    monkeypatch.setattr(case_limits, "MAX_POLYGON_VERTICES", 10)
     ring = "".join(f"{float(np.cos(a))!r},{float(np.sin(a))!r},{'r' if i == 0 else ''}\n"
                    for i, a in enumerate(np.linspace(0, 2 * np.pi, 11, endpoint=False)))
     refused(tmp_path, {"file": "outline.csv"}, {"outline.csv": ring}, "11 data lines; expected at most 10")

@@ -26,16 +26,18 @@ import yaml
 from conftest import make_runner
 
 import contactfem.case as case_module
+import contactfem.case.geometry as case_geometry
+import contactfem.case.limits as case_limits
 from contactfem.case import PolygonGeometry, parse_case
 from contactfem.cli import main
 from contactfem.discretize.meshing import build_mesh, estimate_triangles
 from contactfem.errors import CaseError
+from contactfem.case.crossings import _first_crossing_by_pairs
+from contactfem.case.predicates import segments_intersect as _segments_intersect
 from contactfem.mesh.polygon import (
     Loop,
-    _first_crossing_by_pairs,
     _graded_parameters,
     _lines_points,
-    _segments_intersect,
     first_crossing,
     polygon_problems,
     triangulate_domain,
@@ -214,9 +216,9 @@ def test_profile_file_paths_and_kinds(tmp_path):
 
 
 def test_profile_files_are_read_within_their_bounds(tmp_path, monkeypatch):
-    monkeypatch.setattr(case_module, "MAX_DATA_FILE_BYTES", 100)
+    monkeypatch.setattr(case_limits, "MAX_DATA_FILE_BYTES", 100)
     refused(tmp_path, {"file": "surface.csv", "depth": 1}, "larger than 100 bytes", csv="0,0\n" * 40)
-    monkeypatch.setattr(case_module, "MAX_POLYGON_VERTICES", 12)
+    monkeypatch.setattr(case_limits, "MAX_POLYGON_VERTICES", 12)
     refused(tmp_path, {"file": "surface.csv", "depth": 1}, "11 data lines; expected at most 10",
             csv="".join(f"{i},0\n" for i in range(11)))
 
@@ -353,7 +355,7 @@ def test_points_inside_a_polygon_by_sorted_slices_match_every_edge():
         points = rng.uniform(-1.2, 1.2, (60, 2))
         if trial % 2:
             polygon, points = np.round(polygon * 4) / 4, np.round(points * 4) / 4
-        np.testing.assert_array_equal(case_module._points_inside(polygon, points), every_edge(polygon, points))
+        np.testing.assert_array_equal(case_geometry._points_inside(polygon, points), every_edge(polygon, points))
 
 
 def profile_polygon(points: int) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from contactfem.case import Case
@@ -9,10 +11,23 @@ from contactfem.discretize.contact import FlatObstacle
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
 
+if TYPE_CHECKING:
+    from contactfem.exact import ExactSolution
+
 #: Where on each ΓC edge the exact solution's contact conditions are checked (0 and 1: its ends).
 EXACT_CHECK_POINTS = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
 #: Relative tolerance of those checks, against the scales of the exact displacement and stress.
 EXACT_CHECK_TOLERANCE = 1e-9
+
+
+def exact_fields(case: Case) -> "ExactSolution | None":
+    """The fields derived from the case's exact: block (:func:`contactfem.exact.exact_solution`),
+    or None without one; sympy is imported only for a case that has one."""
+    if case.exact is None:
+        return None
+    from contactfem.exact import exact_solution
+
+    return exact_solution(case)
 
 
 def check_exact_contact(case: Case, mesh: Mesh, edges: np.ndarray) -> None:
@@ -31,7 +46,7 @@ def check_exact_contact(case: Case, mesh: Mesh, edges: np.ndarray) -> None:
     CaseError
         ``file: exact.displacement: <condition> fails at (x, y) (value ..., tolerance ...)``.
     """
-    exact = case.exact.solution
+    exact = exact_fields(case)
     obstacle = FlatObstacle.from_case(case)
     a, b = mesh.points[edges[:, 0]], mesh.points[edges[:, 1]]
     where = np.concatenate([(1 - s) * a + s * b for s in EXACT_CHECK_POINTS])

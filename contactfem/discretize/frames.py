@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
+from contactfem.case import PlatenControl
 from contactfem.kernel import ContactSystem
 from contactfem.mesh.core import coordinate_span
 from contactfem.methods import ContactMethod
@@ -279,8 +280,8 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
     slaves = nodes[(masters >= 0) & (nodes != masters)]
     fixed = [2 * c[on_symmetry], 2 * others[~sym_platen], 2 * others[sym_platen] + 1, 2 * slaves]
     fixed_values = [np.zeros(sum(len(f) for f in fixed))]
-    driven = [p for p in problem.platens if p.control == "displacement"]
-    pushed = [p for p in problem.platens if p.control == "force"]
+    driven = [p for p in problem.platens if p.control is PlatenControl.DISPLACEMENT]
+    pushed = [p for p in problem.platens if p.control is PlatenControl.FORCE]
     fixed.append(np.array([2 * p.master for p in driven], dtype=np.int64))
     fixed_values.append(np.array([p.value for p in driven]))
     return _Frames(

@@ -18,8 +18,8 @@ from contactfem.assembly import (
     edge_geometry,
     edge_load_vector,
 )
-from contactfem.case import SCALE_LIMIT, Case
-from contactfem.discretize.exact_checks import refuse_non_finite_exact
+from contactfem.case import SCALE_LIMIT, Case, PartKind
+from contactfem.discretize.exact_checks import exact_fields, refuse_non_finite_exact
 from contactfem.discretize.finite import check_finite, refuse_non_finite
 from contactfem.mesh import Mesh
 from contactfem.quadrature import EDGE_RULE_POINTS
@@ -105,7 +105,7 @@ def compile_loads(case: Case, mesh: Mesh) -> Loads:
 
 def _body_force(case: Case) -> VectorField | None:
     if case.exact is not None:
-        return case.exact.solution.body_force
+        return exact_fields(case).body_force
     if case.body_force is None:
         return None
     fx, fy = case.body_force
@@ -127,39 +127,39 @@ def _refuse_non_finite_body_force(case: Case, values: np.ndarray, where: np.ndar
 def _natural_boundary(case: Case, mesh: Mesh) -> NaturalBoundary:
     """Every boundary edge whose traction is prescribed in some direction, part by part."""
     parts = {p.name: p for p in case.parts}
-    exact = case.exact.solution if case.exact is not None else None
+    exact = exact_fields(case)
     pieces = []
     for index, name in enumerate(mesh.part_names):
         edges = mesh.boundary_edges[mesh.edge_parts == index]
         part = parts.get(name)
-        kind = part.kind if part is not None else "free"  # a part the case does not list is free
-        if len(edges) == 0 or kind in ("clamped", "contact"):
+        kind = part.kind if part is not None else PartKind.FREE  # a part the case does not list is free
+        if len(edges) == 0 or kind in (PartKind.CLAMPED, PartKind.CONTACT):
             continue
         length, normal = edge_geometry(mesh.points, edges)
         where = [(1 - s) * mesh.points[edges[:, 0]] + s * mesh.points[edges[:, 1]] for s in EDGE_RULE_POINTS]
         traction = np.zeros((len(EDGE_RULE_POINTS), len(edges), 2))
         free = np.broadcast_to(np.eye(2), (len(edges), 2, 2)).copy()
-        if kind == "traction" and part.exact:
+        if kind is PartKind.TRACTION and part.exact:
             for q, points in enumerate(where):
                 traction[q] = exact.traction(points[:, 0], points[:, 1], normal)
             samples = np.concatenate(where)
             refuse_non_finite_exact(case, f"boundary.{name}.traction = 'exact' (sigma n)",
                                     traction.reshape(-1, 2), samples)
-        elif kind == "traction":
+        elif kind is PartKind.TRACTION:
             check_finite(case, f"boundary.{name}.traction", part.values, np.concatenate(where))
             for q, points in enumerate(where):
                 for component, field in enumerate(part.values):
                     traction[q, :, component] = field(points[:, 0], points[:, 1])
-        elif kind == "pressure":
+        elif kind is PartKind.PRESSURE:
             check_finite(case, f"boundary.{name}.pressure", part.values, np.concatenate(where))
             for q, points in enumerate(where):
                 traction[q] = -normal * np.broadcast_to(part.values[0](points[:, 0], points[:, 1]), length.shape)[:, None]
-        elif kind == "displacement":
+        elif kind is PartKind.DISPLACEMENT:
             held = np.array([value is not None for value in part.values])
             if held.all():
                 continue
             free = np.broadcast_to(np.diag((~held).astype(float)), (len(edges), 2, 2)).copy()
-        elif kind in ("symmetry", "platen"):
+        elif kind in (PartKind.SYMMETRY, PartKind.PLATEN):
             # The line (or the platen) holds the normal direction: only σν · t = 0 is a residual.
             tangent = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
             free = np.einsum("ka,kb->kab", tangent, tangent)

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from contactfem.assembly import Elasticity, stiffness_matrix
 from contactfem.case import Case
 from contactfem.discretize.contact import ContactBoundary, contact_boundary
-from contactfem.discretize.exact_checks import check_exact_contact
+from contactfem.discretize.exact_checks import check_exact_contact, exact_fields
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
 from contactfem.discretize.supports import PlatenConstraint, free_rigid_modes, supports
@@ -84,7 +84,7 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
     contact = contact_boundary(case, mesh, held)
     load = loads.load_vector(mesh)
     free_modes = free_rigid_modes(case, mesh, held, contact, load)
-    exact = case.exact.solution if case.exact is not None else None
+    exact = exact_fields(case)
     if exact is not None:
         check_exact_contact(case, mesh, contact.edges)
     return DiscreteProblem(

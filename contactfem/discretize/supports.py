@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from contactfem.assembly import edge_geometry
-from contactfem.case import Case
+from contactfem.case import Case, PartKind, PlatenControl
 from contactfem.discretize.finite import refuse_non_finite
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
@@ -34,7 +34,7 @@ class PlatenConstraint:
     name: str
     nodes: np.ndarray
     normal: np.ndarray
-    control: str
+    control: PlatenControl
     value: float
     on_symmetry: np.ndarray
     motion: np.ndarray
@@ -76,11 +76,11 @@ def supports(case: Case, mesh: Mesh) -> Supports:
         if not part.is_dirichlet:
             continue
         nodes = mesh.nodes_of(part.name)
-        components = part.values if part.kind == "displacement" else (None, None)
+        components = part.values if part.kind is PartKind.DISPLACEMENT else (None, None)
         for component in range(2):
-            if part.kind == "displacement" and components[component] is None:
+            if part.kind is PartKind.DISPLACEMENT and components[component] is None:
                 continue
-            if part.kind == "clamped":
+            if part.kind is PartKind.CLAMPED:
                 prescribed = np.zeros(len(nodes))
             else:
                 key = f"boundary.{part.name}.displacement[{component}]"
@@ -129,7 +129,7 @@ def supports(case: Case, mesh: Mesh) -> Supports:
     return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens)
 
 
-def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.ndarray, np.ndarray]:
+def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple[np.ndarray, np.ndarray]:
     """The outward unit normal of a straight part and its nodes; refuses a part that is not straight."""
     edges = mesh.edges_of(name)
     if len(edges) == 0:
@@ -143,7 +143,7 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: str) -> tuple[np.n
     if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
         raise CaseError(
             f"{case.source.name}: boundary.{name} = {kind}: the part is not straight; "
-            f"a {kind} {'support' if kind == 'symmetry' else 'part'} needs all its edges on one line"
+            f"a {kind} {'support' if kind is PartKind.SYMMETRY else 'part'} needs all its edges on one line"
         )
     return normal, np.unique(edges)
 
@@ -156,8 +156,8 @@ def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """
     nodes, normals = [], []
     for part in case.parts:
-        if part.kind == "symmetry":
-            normal, part_nodes = _straight_normal(case, mesh, part.name, "symmetry")
+        if part.kind is PartKind.SYMMETRY:
+            normal, part_nodes = _straight_normal(case, mesh, part.name, PartKind.SYMMETRY)
             nodes.append(part_nodes)
             normals.append(np.tile(normal, (len(part_nodes), 1)))
     if not nodes:
@@ -174,9 +174,9 @@ def _platens(case: Case, mesh: Mesh, prescribed: np.ndarray, symmetry_nodes: np.
     sym_index = np.full(mesh.n_points, -1)
     sym_index[symmetry_nodes] = np.arange(len(symmetry_nodes))
     for part in case.parts:
-        if part.kind != "platen":
+        if part.kind is not PartKind.PLATEN:
             continue
-        normal, nodes = _straight_normal(case, mesh, part.name, "platen")
+        normal, nodes = _straight_normal(case, mesh, part.name, PartKind.PLATEN)
         nodes = nodes[~prescribed[nodes].any(axis=1)]
         if len(nodes) == 0:
             raise CaseError(f"{case.source.name}: boundary.{part.name} = platen: every node of the part has a "
@@ -246,7 +246,7 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
     used[mesh.triangles.ravel()] = True
     # Each constraint holds u(p) · d = 0 for a point p and direction d: a prescribed
     # component (d = e_x or e_y) or a symmetry line (d = n_s).
-    fixed_platens = [p for p in held.platens if p.control == "displacement"]
+    fixed_platens = [p for p in held.platens if p.control is PlatenControl.DISPLACEMENT]
     directions = np.concatenate([np.eye(2)[dofs % 2], symmetry_normals,
                                  *(np.tile(p.normal, (len(p.nodes), 1)) for p in fixed_platens)])
     nodes = np.concatenate([dofs // 2, symmetry_nodes, *(p.nodes for p in fixed_platens)])
@@ -289,7 +289,7 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
 
     support_gram = gram_of(seen_through(nodes, directions), nodes)
     for platen in held.platens:
-        if platen.control == "force" and len(platen.nodes) > 1:
+        if platen.control is PlatenControl.FORCE and len(platen.nodes) > 1:
             # (u_i − u_master) · n = 0: what a rigid platen holds whatever its advance.
             others = platen.nodes[1:]
             normals = np.tile(platen.normal, (len(others), 1))
@@ -347,7 +347,7 @@ def platen_work(platens: tuple[PlatenConstraint, ...], motion: np.ndarray) -> fl
     """The work of the force-driven platens' forces along a nodal motion (2 n_points,):
     each platen advances by −u(master) · n and presses with its force."""
     return float(sum(p.value * -(motion[2 * p.master: 2 * p.master + 2] @ p.normal)
-                     for p in platens if p.control == "force"))
+                     for p in platens if p.control is PlatenControl.FORCE))
 
 
 def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, basis: np.ndarray,
@@ -375,7 +375,7 @@ def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, ba
             continue  # presses into the obstacle somewhere and lifts off elsewhere: contact holds it
         r = nodal @ ray
         work = float(load @ r) + platen_work(platens, r)
-        forces = np.linalg.norm(np.concatenate([load, [p.value for p in platens if p.control == "force"]]))
+        forces = np.linalg.norm(np.concatenate([load, [p.value for p in platens if p.control is PlatenControl.FORCE]]))
         scale = float(forces * np.linalg.norm(r))
         if work > LOAD_WORK_TOLERANCE * scale:
             continue
@@ -392,12 +392,12 @@ def _refuse_unpressed(case: Case, nodal: np.ndarray, normal_part: np.ndarray, ba
 
 def _support_names(case: Case) -> str:
     return ", ".join(p.name for p in case.parts
-                     if p.is_support and not (p.kind == "platen" and p.platen.control == "force")) or "none"
+                     if p.is_support and not p.is_force_driven) or "none"
 
 
 def _load_names(case: Case) -> str:
     names = [f"boundary.{p.name} {p.kind}" for p in case.parts
-             if p.kind in ("traction", "pressure") or (p.kind == "platen" and p.platen.control == "force")]
+             if p.kind in (PartKind.TRACTION, PartKind.PRESSURE) or p.is_force_driven]
     if case.body_force is not None:
         names.append("body_force")
     return ", ".join(names) or "none"

@@ -190,11 +190,6 @@ RESULT_FILES = (tuple(name for format in FORMATS.values() for name in format.fil
 RESULT_MARKERS = (REPORT_JSON, SOLUTION_H5)
 
 
-def missing_needs(formats: tuple[str, ...]) -> list[tuple[str, str]]:
-    """(format, needed) pairs of formats whose companion is not requested."""
-    return [(name, need) for name in formats for need in FORMATS[name].needs if need not in formats]
-
-
 def write_result(data: ResultData, directory: Path, formats: tuple[str, ...],
                  progress: Callable[[str], None] | None = None) -> tuple[list[Path], dict]:
     """Write ``formats`` of one result into ``directory`` (each file atomically), the report last.

@@ -7,9 +7,9 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from contactfem.case.crossings import first_crossing_among, self_crossing
 from contactfem.errors import MeshError
 from contactfem.mesh.core import Mesh
-from contactfem.mesh.polygon import first_crossing_among, self_crossing
 from contactfem.mesh.refine import (
     _decode,
     _single_codes,
