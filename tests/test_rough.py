@@ -30,16 +30,16 @@ from contactfem.case import PolygonGeometry, parse_case
 from contactfem.cli import main
 from contactfem.discretize.meshing import build_mesh, estimate_triangles
 from contactfem.errors import CaseError
+from contactfem.mesh.crossings import _first_crossing_by_pairs
 from contactfem.mesh.polygon import (
     Loop,
-    _first_crossing_by_pairs,
     _graded_parameters,
     _lines_points,
-    _segments_intersect,
     first_crossing,
     polygon_problems,
     triangulate_domain,
 )
+from contactfem.mesh.predicates import _segments_intersect
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
