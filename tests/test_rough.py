@@ -30,11 +30,10 @@ from contactfem.case import PolygonGeometry, parse_case
 from contactfem.cli import main
 from contactfem.discretize.meshing import build_mesh, estimate_triangles
 from contactfem.errors import CaseError
+from contactfem.mesh.boundary_points import _graded_parameters, _lines_points
 from contactfem.mesh.crossings import _first_crossing_by_pairs
 from contactfem.mesh.polygon import (
     Loop,
-    _graded_parameters,
-    _lines_points,
     first_crossing,
     polygon_problems,
     triangulate_domain,
