@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from bisect import bisect_right
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -111,6 +112,31 @@ def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
     numbered through the loops in order: edge g runs from vertex g to the next vertex of
     its loop), or None.
     """
+    return _ChainSweep(_monotone_chains(loops)).run()
+
+
+@dataclass(frozen=True, eq=False)
+class _Chains:
+    """The loops' edges cut into chains whose vertices increase in (x, y) rank.
+
+    Edge g runs from vertex g to vertex ``nxt[g]`` of ``points``. Chain c's vertices, in
+    increasing rank, are ``cv[vstart[c]:vstart[c + 1]]``, of ranks ``cr`` at the same
+    positions; ``key`` (chain * span + rank) increases over the whole array, and
+    ``edge_at[m]`` is the edge starting at chain vertex position m (-1 at a chain's last).
+    """
+
+    points: np.ndarray
+    nxt: np.ndarray
+    vstart: np.ndarray
+    cv: np.ndarray
+    cr: np.ndarray
+    key: np.ndarray
+    span: np.int64
+    edge_at: np.ndarray
+
+
+def _monotone_chains(loops: list[np.ndarray]) -> _Chains:
+    """The chains of :func:`_sweep`: maximal runs of a loop's edges that go the same way in rank."""
     sizes = np.array([len(loop) for loop in loops], dtype=np.int64)
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     points = np.concatenate(loops) if loops else np.zeros((0, 2))
@@ -157,17 +183,106 @@ def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
     edge_at = np.full(k + n_chains, -1, dtype=np.int64)
     edge_at[body] = edges
     edge_at = np.roll(edge_at, -1)
+    return _Chains(points=points, nxt=nxt, vstart=vstart, cv=cv, cr=cr, key=key, span=span, edge_at=edge_at)
 
-    found: list[tuple[int, int]] = []
-    windows: list[tuple[int, int, int, int]] = []
 
-    def test_windows() -> None:
+class _ChainSweep:
+    """The sweep of :func:`_sweep` over ``chains``: the chains crossing the sweep line from
+    bottom to top (``status``), the rank from which each pair of neighbours has been
+    neighbours (``since``), the stretches of neighbours still to test (``windows``) and the
+    edge pairs found to share a point (``found``)."""
+
+    def __init__(self, chains: _Chains) -> None:
+        self.chains = chains
+        self.found: list[tuple[int, int]] = []
+        self.windows: list[tuple[int, int, int, int]] = []
+        # The event loop reads single entries: Python lists are faster at that than arrays.
+        self.px, self.py = chains.points[:, 0].tolist(), chains.points[:, 1].tolist()
+        self.cv_list, self.cr_list = chains.cv.tolist(), chains.cr.tolist()
+        self.vstart_list = chains.vstart.tolist()
+        self.edge_at_list = chains.edge_at.tolist()
+        self.status: list[int] = []
+        self.since: dict[tuple[int, int], int] = {}
+
+    def run(self) -> tuple[int, int] | None:
+        """The smallest pair (g, h), g < h, of edges found to share a point, or None."""
+        chains = self.chains
+        chain_start = chains.cr[chains.vstart[:-1]]
+        chain_end = chains.cr[chains.vstart[1:] - 1]
+        starts: dict[int, list[int]] = {}
+        for c, r in enumerate(chain_start.tolist()):
+            starts.setdefault(r, []).append(c)
+        ends: dict[int, list[int]] = {}
+        for c, r in enumerate(chain_end.tolist()):
+            ends.setdefault(r, []).append(c)
+        for r in sorted({*starts, *ends}):
+            if r in ends:
+                a, b = ends[r]
+                if self.end(r, a, b):
+                    break
+            else:
+                a, b = starts[r]
+                if self.start(r, a, b):
+                    break
+            if len(self.windows) >= _WINDOWS_PER_BATCH:
+                self.test_windows()
+                if self.found:
+                    break
+        self.test_windows()
+        return min(self.found) if self.found else None
+
+    def end(self, r: int, a: int, b: int) -> bool:
+        """Chains ``a`` and ``b`` end at the vertex of rank ``r``: take them out of the status.
+        True when that vertex lies on another chain (a crossing, recorded)."""
+        status, edge_at_list, vstart_list = self.status, self.edge_at_list, self.vstart_list
+        v = self.cv_list[vstart_list[a + 1] - 1]
+        count, edge = self.locate(r, self.px[v], self.py[v], skip=(a, b))
+        if count < 0:
+            last = [edge_at_list[vstart_list[c + 1] - 2] for c in (a, b)]
+            self.found.append(min((min(edge, e), max(edge, e)) for e in last))
+            return True
+        if count >= len(status) or status[count] not in (a, b):
+            count = status.index(a)  # only after a crossing not yet tested
+        other = b if status[count] == a else a
+        self.remove(count, r)
+        self.remove(status.index(other), r)
+        return False
+
+    def start(self, r: int, a: int, b: int) -> bool:
+        """Chains ``a`` and ``b`` start at the vertex of rank ``r``: put them into the status,
+        the lower first. True when that vertex lies on another chain (a crossing, recorded)."""
+        status, since = self.status, self.since
+        px, py, cv_list, vstart_list = self.px, self.py, self.cv_list, self.vstart_list
+        v = cv_list[vstart_list[a]]
+        count, edge = self.locate(r, px[v], py[v])
+        if count < 0:
+            first_edges = [self.edge_at_list[vstart_list[c]] for c in (a, b)]
+            self.found.append(min((min(edge, e), max(edge, e)) for e in first_edges))
+            return True
+        wa, wb = cv_list[vstart_list[a] + 1], cv_list[vstart_list[b] + 1]
+        if _orient(px[v], py[v], px[wa], py[wa], px[wb], py[wb]) < 0:
+            a, b = b, a
+        below = status[count - 1] if count > 0 else None
+        above = status[count] if count < len(status) else None
+        if below is not None and above is not None:
+            self.close(below, above, r)
+        status[count:count] = [a, b]
+        for pair in ((below, a), (a, b), (b, above)):
+            if None not in pair:
+                since[pair] = r
+        return False
+
+    def test_windows(self) -> None:
+        """Test the edge pairs of the stretches closed so far, recording the smallest crossing pair."""
+        windows = self.windows
         if not windows:
             return
+        chains = self.chains
+        points, nxt = chains.points, chains.nxt
         low, high, since, until = (np.array(column, dtype=np.int64) for column in zip(*windows))
         windows.clear()
-        pairs_a, pairs_b = _window_pairs(low, high, since, until, vstart, cr, key, span)
-        g, h = edge_at[pairs_a], edge_at[pairs_b]
+        pairs_a, pairs_b = _window_pairs(low, high, since, until, chains.vstart, chains.cr, chains.key, chains.span)
+        g, h = chains.edge_at[pairs_a], chains.edge_at[pairs_b]
         adjacent = (nxt[g] == h) | (nxt[h] == g)
         g, h = g[~adjacent], h[~adjacent]
         if g.size:
@@ -175,25 +290,19 @@ def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
             if hit.any():
                 a, b = np.minimum(g[hit], h[hit]), np.maximum(g[hit], h[hit])
                 best = np.lexsort((b, a))[0]
-                found.append((int(a[best]), int(b[best])))
+                self.found.append((int(a[best]), int(b[best])))
 
-    px, py = points[:, 0].tolist(), points[:, 1].tolist()
-    cv_list, cr_list = cv.tolist(), cr.tolist()
-    vstart_list = vstart.tolist()
-    edge_at_list = edge_at.tolist()
-
-    def side(c: int, r: int, x: float, y: float) -> tuple[int, int]:
+    def side(self, c: int, r: int, x: float, y: float) -> tuple[int, int]:
         """Where (x, y), at rank r strictly inside chain c's range, lies: +1 above, -1 below,
         0 on it; and the edge of c spanning r."""
-        j = bisect_right(cr_list, r, vstart_list[c], vstart_list[c + 1])
+        vstart_list, cv_list, px, py = self.vstart_list, self.cv_list, self.px, self.py
+        j = bisect_right(self.cr_list, r, vstart_list[c], vstart_list[c + 1])
         a, b = cv_list[j - 1], cv_list[j]
-        return _orient(px[a], py[a], px[b], py[b], x, y), edge_at_list[j - 1]
+        return _orient(px[a], py[a], px[b], py[b], x, y), self.edge_at_list[j - 1]
 
-    status: list[int] = []
-    since: dict[tuple[int, int], int] = {}
-
-    def locate(r: int, x: float, y: float, skip: tuple[int, ...] = ()) -> tuple[int, int | None]:
+    def locate(self, r: int, x: float, y: float, skip: tuple[int, ...] = ()) -> tuple[int, int | None]:
         """How many chains lie below the point, or (-1, edge) if it lies on one."""
+        status, side = self.status, self.side
         lo, hi = 0, len(status)
         while lo < hi:
             mid = (lo + hi) // 2
@@ -209,68 +318,23 @@ def _sweep(loops: list[np.ndarray]) -> tuple[int, int] | None:
                 hi = mid
         return lo, None
 
-    def close(low: int, high: int, r: int) -> None:
-        windows.append((low, high, since.pop((low, high)), r))
+    def close(self, low: int, high: int, r: int) -> None:
+        """Chains ``low`` and ``high`` stop being neighbours at rank ``r``: their stretch is to be tested."""
+        self.windows.append((low, high, self.since.pop((low, high)), r))
 
-    def remove(index: int, r: int) -> None:
+    def remove(self, index: int, r: int) -> None:
+        """Take the chain at ``index`` out of the status at rank ``r``; its neighbours meet."""
+        status = self.status
         c = status[index]
         below = status[index - 1] if index > 0 else None
         above = status[index + 1] if index + 1 < len(status) else None
         if below is not None:
-            close(below, c, r)
+            self.close(below, c, r)
         if above is not None:
-            close(c, above, r)
+            self.close(c, above, r)
         del status[index]
         if below is not None and above is not None:
-            since[(below, above)] = r
-
-    chain_start = cr[vstart[:-1]]
-    chain_end = cr[vstart[1:] - 1]
-    starts: dict[int, list[int]] = {}
-    for c, r in enumerate(chain_start.tolist()):
-        starts.setdefault(r, []).append(c)
-    ends: dict[int, list[int]] = {}
-    for c, r in enumerate(chain_end.tolist()):
-        ends.setdefault(r, []).append(c)
-    for r in sorted({*starts, *ends}):
-        if r in ends:
-            a, b = ends[r]
-            v = cv_list[vstart_list[a + 1] - 1]
-            count, edge = locate(r, px[v], py[v], skip=(a, b))
-            if count < 0:
-                last = [edge_at_list[vstart_list[c + 1] - 2] for c in (a, b)]
-                found.append(min((min(edge, e), max(edge, e)) for e in last))
-                break
-            if count >= len(status) or status[count] not in (a, b):
-                count = status.index(a)  # only after a crossing not yet tested
-            other = b if status[count] == a else a
-            remove(count, r)
-            remove(status.index(other), r)
-        else:
-            a, b = starts[r]
-            v = cv_list[vstart_list[a]]
-            count, edge = locate(r, px[v], py[v])
-            if count < 0:
-                first_edges = [edge_at_list[vstart_list[c]] for c in (a, b)]
-                found.append(min((min(edge, e), max(edge, e)) for e in first_edges))
-                break
-            wa, wb = cv_list[vstart_list[a] + 1], cv_list[vstart_list[b] + 1]
-            if _orient(px[v], py[v], px[wa], py[wa], px[wb], py[wb]) < 0:
-                a, b = b, a
-            below = status[count - 1] if count > 0 else None
-            above = status[count] if count < len(status) else None
-            if below is not None and above is not None:
-                close(below, above, r)
-            status[count:count] = [a, b]
-            for pair in ((below, a), (a, b), (b, above)):
-                if None not in pair:
-                    since[pair] = r
-        if len(windows) >= _WINDOWS_PER_BATCH:
-            test_windows()
-            if found:
-                break
-    test_windows()
-    return min(found) if found else None
+            self.since[(below, above)] = r
 
 
 def _window_pairs(low: np.ndarray, high: np.ndarray, since: np.ndarray, until: np.ndarray, vstart: np.ndarray,
