@@ -1208,6 +1208,3 @@ def run() -> None:
     keep_freed_memory()
     main()
 
-
-if __name__ == "__main__":
-    run()
