@@ -13,14 +13,35 @@ from pathlib import Path
 import click
 
 from contactfem import __version__
-from contactfem.errors import (
-    CaseError,
-    ContactFemError,
-    ExistingResultError,
-    FactorCapacityError,
-    Interrupted,
-    MeshError,
+from contactfem.cli.common import (
+    _end_progress,
+    _files_of,
+    _load,
+    _progress,
+    _write_series,
+    _write_solution,
 )
+from contactfem.cli.exits import (  # noqa: F401 - the exit codes and _interruptible are imported from here
+    EXIT_BAD_INPUT,
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    _exit_code,
+    _fail,
+    _interruptible,
+    _OneLineErrors,
+    _printable,
+)
+from contactfem.cli.options import (
+    _CheckedPath,
+    _FiniteFloatRange,
+    case_argument,
+    json_option,
+    overwrite_option,
+    quiet_option,
+    refine_option,
+)
+from contactfem.errors import CaseError, ContactFemError
 from contactfem.heap import keep_freed_memory
 from contactfem.io.registry import (
     ADAPT_JSON,
@@ -36,222 +57,6 @@ from contactfem.io.registry import (
 )
 from contactfem.linalg import BACKEND_CHOICES, DISTRIBUTED_BACKENDS
 from contactfem.methods import METHOD_NAMES
-
-EXIT_FAILURE = 1
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports it
-EXIT_TERMINATED = 143  # 128 + SIGTERM
-
-
-def _exit_code(error: ContactFemError) -> int:
-    return EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ExistingResultError)) else EXIT_FAILURE
-
-
-def _fail(error: ContactFemError) -> None:
-    click.echo(f"error: {_printable(str(error))}", err=True)
-    sys.exit(_exit_code(error))
-
-
-def _printable(text: str) -> str:
-    """Escape control and separator characters a case file may carry into a message
-    (a key with a record separator would otherwise split the one-line error)."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
-def _interruptible(command):
-    """Turn Ctrl-C (SIGINT) and SIGTERM into one line on stderr and exit code 130 or 143,
-    and memory exhaustion into one line and exit 1, without a traceback; keep numpy's
-    RuntimeWarnings off stderr (errors stay one line).
-
-    Outputs are staged and switched in by one decided step (see io.atomic.claimed_directory),
-    so an interrupted run leaves the results of an earlier one as they were.
-    """
-    import functools
-
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        import warnings
-
-        from contactfem import interrupts
-
-        def interrupted(cause: BaseException):
-            if isinstance(cause, KeyboardInterrupt):
-                word, name, code = "interrupted", "SIGINT", EXIT_INTERRUPTED
-            else:
-                word, name, code = "terminated", "SIGTERM", EXIT_TERMINATED
-            if interrupts.switched():
-                outcome = "the results were switched in before it and are complete"
-            else:
-                outcome = "no result was switched in, earlier results are unchanged"
-            click.echo(f"error: {word} ({name}); {outcome}", err=True)
-            sys.exit(code)
-
-        try:
-            # Overflow and 0/0 in numpy are caught by the finiteness checks and refused
-            # with one line naming the key; numpy's own warnings would only add noise.
-            with interrupts.listening(), warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                result = command(*args, **kwargs)
-                # A signal whose exception a finalizer swallowed: the switch-over refused to
-                # decide after it, and the command ends as that signal all the same.
-                interrupts.stop_if_received()
-                return result
-        except (KeyboardInterrupt, Interrupted) as signalled:
-            interrupted(signalled)
-        except MemoryError as error:
-            if isinstance(error, FactorCapacityError):  # which limit, and what to do, in its words
-                click.echo(f"error: {error}; nothing was written", err=True)
-            else:
-                click.echo("error: out of memory; nothing was written; use a coarser mesh (fewer divisions, "
-                           "a larger mesh.size or fewer refinements)", err=True)
-            sys.exit(EXIT_FAILURE)
-        except ImportError as error:
-            # The writers and pictures load their libraries (h5py, matplotlib, Dask) only when
-            # they run, so one missing from the install, or one that cannot be mapped under an
-            # address-space limit, fails late: the stage that needed it says so.
-            text = str(error).strip()
-            reason = text.splitlines()[0] if text else type(error).__name__
-            outcome = ("the results were switched in before it and are complete" if interrupts.switched()
-                       else "no result was switched in, earlier results are unchanged")
-            click.echo(f"error: cannot load {error.name or 'a library'} ({reason}); {outcome}", err=True)
-            sys.exit(EXIT_FAILURE)
-        except Exception as error:
-            # A signal that lands inside the interpreter's own locking (a worker thread being
-            # started waits on a Condition) surfaces as another error, raised while its
-            # exception unwinds ("release unlocked lock"): it is still that signal.
-            cause = _interruption_behind(error)
-            if cause is None:
-                raise
-            interrupted(cause)
-
-    return wrapper
-
-
-def _interruption_behind(error: BaseException) -> BaseException | None:
-    """The KeyboardInterrupt or SIGTERM's :class:`Interrupted` that ``error`` was raised while
-    handling (its chain of causes and contexts), or None."""
-    seen: set[int] = set()
-    current: BaseException | None = error
-    while current is not None and id(current) not in seen:
-        if isinstance(current, (KeyboardInterrupt, Interrupted)):
-            return current
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return None
-
-
-def _refuse_non_finite(case, solution, report: dict) -> None:
-    """A solve whose fields or report hold NaN/inf is a failure, never an output."""
-    import numpy as np
-
-    from contactfem.errors import SolverError
-
-    contact = solution.contact
-    arrays = {"displacement": solution.displacement, "stress": solution.stress, "von_mises": solution.von_mises,
-              "multiplier": contact.multiplier, "nodal_force": contact.nodal_force}
-    bad = [name for name, values in arrays.items() if not np.isfinite(values).all()]
-    try:
-        to_json(report)
-    except ValueError:
-        bad.append("report")
-    if bad:
-        raise SolverError(f"{case.source.name}: the solution is not finite ({', '.join(bad)}): the "
-                          "data's scales overflow float64; rescale the units of lengths, moduli and loads")
-
-
-def _progress(quiet: bool):
-    """Stage messages on stderr unless --quiet: live lines (rich) on a terminal, plain lines
-    otherwise (a pipe, a log, CI, a notebook; see contactfem/progress.py). stdout is left to
-    the command's result (the summary, or the JSON of --json)."""
-    if quiet:
-        return None
-    from contactfem.progress import PlainProgress, StageProgress
-
-    reporter = StageProgress() if sys.stderr.isatty() else PlainProgress(sys.stderr)
-    context = click.get_current_context(silent=True)
-    if context is not None:
-        context.meta.setdefault("contactfem.progress", []).append(reporter)
-        context.call_on_close(reporter.close)
-    return reporter
-
-
-def _end_progress() -> None:
-    """Stop the live progress lines before a command prints its summary on stdout."""
-    context = click.get_current_context(silent=True)
-    for reporter in (context.meta.get("contactfem.progress", []) if context is not None else []):
-        reporter.close()
-
-
-class _CheckedPath(click.Path):
-    """A path checked as text first (no NUL, components and the whole within the file system's
-    limits, room kept for the staging names an output directory receives), so that the file
-    system is never asked about a path it would refuse with a traceback."""
-
-    def __init__(self, *, output: bool = False, **kwargs) -> None:
-        super().__init__(path_type=Path, **kwargs)
-        self.output = output
-
-    def convert(self, value, param, ctx):
-        from contactfem.case import (
-            OUTPUT_NAME_RESERVE,
-            OUTPUT_PATH_RESERVE,
-            path_problem,
-            shortened,
-        )
-
-        reserves = {"name_reserve": OUTPUT_NAME_RESERVE, "path_reserve": OUTPUT_PATH_RESERVE} if self.output else {}
-        problem = path_problem(value, **reserves) if isinstance(value, (str, bytes, Path)) else None
-        if problem is not None:
-            text = value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
-            self.fail(f"{_printable(shortened(text))}: the path {problem}", param, ctx)
-        return super().convert(value, param, ctx)
-
-
-class _FiniteFloatRange(click.FloatRange):
-    """A float range that also refuses nan and ±inf (click's own range lets them through)."""
-
-    def convert(self, value, param, ctx):
-        import math
-
-        number = super().convert(value, param, ctx)
-        if not math.isfinite(number):
-            self.fail(f"{number} is not a finite number", param, ctx)
-        return number
-
-
-case_argument = click.argument("case_file", metavar="CASE", type=_CheckedPath(dir_okay=False))
-refine_option = click.option("--refine", type=click.IntRange(0, 12), default=None,
-                             help="Uniform refinements of the case's mesh (each halves h).")
-quiet_option = click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")
-json_option = click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
-overwrite_option = click.option("--overwrite", is_flag=True,
-                                help="Replace the results already in the output directory (refused otherwise).")
-
-
-class _OneLineErrors(click.Group):
-    """Usage errors (an unknown option, a bad value, a missing argument) as one ``error:`` line and
-    exit 2, like every other bad input; Ctrl-C outside a command's own handling as exit 130."""
-
-    def main(self, *args, **kwargs):
-        kwargs["standalone_mode"] = False
-        try:
-            return super().main(*args, **kwargs)
-        except click.UsageError as error:
-            if type(error).__name__ == "NoArgsIsHelpError":  # bare `contactfem`: the help is the answer
-                click.echo(error.ctx.get_help() if error.ctx else error.format_message())
-                sys.exit(0)
-            where = error.ctx.command_path if error.ctx else "contactfem"
-            click.echo(f"error: {where}: {_printable(error.format_message())} (see --help)", err=True)
-            sys.exit(EXIT_BAD_INPUT)
-        except click.ClickException as error:
-            click.echo(f"error: {_printable(error.format_message())}", err=True)
-            sys.exit(error.exit_code)
-        except (click.Abort, KeyboardInterrupt):
-            click.echo("error: interrupted (SIGINT); no result was switched in, earlier results are unchanged",
-                       err=True)
-            sys.exit(EXIT_INTERRUPTED)
-        except click.exceptions.Exit as done:  # --help, --version
-            sys.exit(done.exit_code)
 
 
 @click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
@@ -423,49 +228,6 @@ def _refuse_uncertified(case, result, directory: Path) -> None:
     if result.kernel.status is Status.NOT_CERTIFIED:
         _fail(SolverError(f"{case.source.name}: method {result.method}: not certified, "
                           f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
-
-
-def _load(case_file: Path, backend: str | None = None, distributed: bool = False):
-    """The validated case, with --backend applied; a backend that is not installed is bad input,
-    and so is one that runs across MPI ranks for a command that does not (all but ``solve``)."""
-    from contactfem.case import load_case
-    from contactfem.errors import SolverError
-    from contactfem.linalg import resolve_backend
-
-    case = load_case(case_file)
-    if backend is not None:
-        case = case.with_solver(backend=backend)
-    key = "--backend" if backend is not None else "solver.backend"
-    try:
-        resolve_backend(case.solver.backend)
-    except SolverError as error:
-        raise CaseError(f"{case_file.name}: {key} = {case.solver.backend}: {error}") from None
-    if case.solver.backend in DISTRIBUTED_BACKENDS and not distributed:
-        raise CaseError(f"{case_file.name}: {key} = {case.solver.backend}: only `contactfem solve` runs across MPI "
-                        "ranks (mpiexec -n P contactfem solve CASE --backend petsc); this command solves in one "
-                        "process: use auto, cholmod, pardiso or superlu")
-    return case
-
-
-def _files_of(formats: tuple[str, ...]) -> list[str]:
-    from contactfem.io.registry import FORMATS
-
-    return [name for format in formats for name in FORMATS[format].files]
-
-
-def _write_solution(staging: Path, case, result, report: dict, progress, path_writer=None) -> dict:
-    """Write one result's files (the case's formats) into a staging directory, and finish the
-    files of the load path that ended in it (``path_writer``, which wrote its steps there).
-    Returns the report as written (its timings include the writing)."""
-    from contactfem.io.registry import PathData, result_data, write_result
-
-    _refuse_non_finite(case, result.solution, report)
-    path = None
-    if path_writer is not None:
-        path = PathData(writer=path_writer, curves=report["load_path"]["curves"])
-    _, written_report = write_result(result_data(case, result, report, path), staging, case.output.files,
-                                     progress=progress)
-    return written_report
 
 
 @main.command()
@@ -735,13 +497,6 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
         cells = (f"{energy:>14.4e}{row['effectivity']:>12.3f}" if energy else f"{'-':>14}{'-':>12}")
         click.echo(f"  {row['step']:>4}{row['unknowns']:>10}{row['eta']:>12.4e}{cells}{row['seconds']:>9.2f}")
     click.echo(f"  wrote {', '.join(str(p) for p in written)}")
-
-
-def _write_series(directory: Path, stem: str, entries: list) -> list[Path]:
-    """compare/converge: every solution as VTU files and one series PVD (io/series.py)."""
-    from contactfem.io.series import write_series
-
-    return write_series(directory, stem, entries)
 
 
 def _pictures(result_dir: Path, out_dir: Path, progress, **options) -> list[str]:
