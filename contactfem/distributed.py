@@ -41,9 +41,16 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from contactfem.assembly import Elasticity, shape_gradients
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh
+# Some names are re-exported: the assembly lived here.
+from contactfem.distributed_assembly import (  # noqa: F401
+    ELEMENT_CHUNK,
+    _DistributedSystem,
+    _Layout,
+    element_stiffness,
+    node_order,
+)
 from contactfem.errors import SolverError
 from contactfem.kernel import (
     EPS,
@@ -55,11 +62,9 @@ from contactfem.kernel import (
     Scales,
     Status,
     build_certificate,
-    roundoff_bound,
     solve_contact,
 )
 from contactfem.linalg import SINGULARITY_LIMIT, FactorCheck, probe_vector
-from contactfem.mesh.core import coordinate_span
 from contactfem.methods import get_method
 from contactfem.sequencing import starting_set
 
@@ -76,8 +81,6 @@ GAMG_RTOL = 1e-12
 GAMG_MAX_ITERATIONS = 5000
 #: CG's relative residual for the singularity probe (see :meth:`_DistributedSolver._probe`).
 PROBE_RTOL = 1e-6
-#: Triangles per block of the element loop: bounds the temporaries of assembly.
-ELEMENT_CHUNK = 65536
 
 _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
                  "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
@@ -143,67 +146,6 @@ class SolutionProduct:
             return self._internal.copy()
         raise SolverError("the stiffness of a distributed solve is held by no rank: only K u of its "
                           "solution is known on rank 0")
-
-
-def node_order(points: np.ndarray) -> np.ndarray:
-    """Nodes sorted along the longer side of the bounding box (ties by the other coordinate).
-
-    Contiguous blocks of this order are slabs across the body's shorter side, so each
-    rank's interface with its neighbours is one cut of O(√n) nodes, and the triangles a
-    rank assembles touch few rows owned elsewhere. Deterministic, so every rank finds it.
-    """
-    extent = coordinate_span(points)
-    major = 0 if extent[0] >= extent[1] else 1
-    return np.lexsort((points[:, 1 - major], points[:, major]))
-
-
-def element_stiffness(points: np.ndarray, triangles: np.ndarray, law: Elasticity) -> np.ndarray:
-    """The 6x6 element matrices (t, 6, 6) in interleaved unknowns (2i + c), as the serial
-    element-wise assembly writes them: |T| (λ g_i^a g_j^b + μ g_j^a g_i^b + μ δ_ab g_i·g_j)."""
-    g, area = shape_gradients(points, triangles)
-    gi_gj = np.einsum("tia,tja->tij", g, g)
-    ke = law.lam * g[:, :, :, None, None] * g[:, None, None, :, :]
-    ke += law.mu * g.transpose(0, 2, 1)[:, None, :, :, None] * g[:, :, None, None, :]
-    ke += law.mu * gi_gj[:, :, None, :, None] * np.eye(2)[None, None, :, None, :]
-    ke *= area[:, None, None, None, None]
-    return ke.reshape(len(triangles), 6, 6)
-
-
-@dataclass(eq=False)
-class _Layout:
-    """How unknowns are numbered and shared: mesh dof 2i + c is PETSc unknown 2 position[i] + c;
-    this rank owns PETSc unknowns [first, last)."""
-
-    order: np.ndarray
-    position: np.ndarray
-    first: int
-    last: int
-    node_bounds: np.ndarray
-
-    @classmethod
-    def build(cls, points: np.ndarray, ranks: int, rank: int) -> "_Layout":
-        n = len(points)
-        order = node_order(points)
-        position = np.empty(n, dtype=np.int64)
-        position[order] = np.arange(n)
-        bounds = (n * np.arange(ranks + 1, dtype=np.int64)) // ranks
-        return cls(order=order, position=position, first=2 * int(bounds[rank]), last=2 * int(bounds[rank + 1]),
-                   node_bounds=bounds)
-
-    def petsc(self, dofs: np.ndarray) -> np.ndarray:
-        """PETSc indices of mesh unknowns ``dofs``."""
-        dofs = np.asarray(dofs, dtype=np.int64)
-        return 2 * self.position[dofs // 2] + dofs % 2
-
-    def owned(self, vector: np.ndarray) -> np.ndarray:
-        """This rank's entries of a vector over all mesh unknowns (2n,), in PETSc order."""
-        return vector.reshape(-1, 2)[self.order[self.first // 2: self.last // 2]].ravel()
-
-    def to_mesh(self, petsc_vector: np.ndarray) -> np.ndarray:
-        """A whole vector in PETSc order (2n,) back in mesh unknowns."""
-        mesh = np.empty_like(petsc_vector)
-        mesh.reshape(-1, 2)[self.order] = petsc_vector.reshape(-1, 2)
-        return mesh
 
 
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
@@ -403,177 +345,6 @@ def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:
     from dataclasses import replace
 
     return replace(problem, stiffness=stiffness)
-
-
-@dataclass(eq=False)
-class _DistributedSystem:
-    """The kernel's system in rotated unknowns (as :class:`contactfem.discretize.ReducedSystem`),
-    with the stiffness as a PETSc MPIAIJ matrix and the rest as this rank's entries.
-
-    Arrays named ``*_local`` hold this rank's unknowns in PETSc order; contact arrays (m,)
-    are whole on every rank.
-    """
-
-    stiffness: object
-    absolute: object
-    load_local: np.ndarray
-    supported_local: np.ndarray
-    support_values_local: np.ndarray
-    normal_dofs: np.ndarray  # (m,) PETSc indices of the contact normal unknowns
-    normal_slots: np.ndarray  # (m,) the same in mesh numbering
-    supported_mesh: np.ndarray  # (2n,) bool, mesh numbering
-    gap: np.ndarray
-    multiplier_mass: object
-    contact_edges: np.ndarray  # (e, 2) ΓC edges as pairs of contact nodes (the kernel's order along ΓC)
-    gamma: float
-    layout: _Layout
-    frame_nodes: np.ndarray
-    frames: np.ndarray  # (k, 2, 2): node k's unknowns u = [a b] s
-    owned_triangles: int
-    n_dof: int
-    rigid_motions_local: np.ndarray  # (3, local) in rotated unknowns: GAMG's near-null space
-
-    @classmethod
-    def assemble(cls, PETSc, comm, problem: DiscreteProblem, method, layout: _Layout) -> "_DistributedSystem":
-        from contactfem.discretize.frames import _frames
-
-        mesh = problem.mesh
-        n_points = mesh.n_points
-        n_dof = 2 * n_points
-        supported = np.zeros(n_dof, dtype=bool)
-        supported[problem.dirichlet_dofs] = True
-        frames = _frames(problem, supported)
-        blocks = np.stack([frames.a, frames.b], axis=2)  # (k, 2, 2), columns a and b
-        frame_of = np.full(n_points, -1, dtype=np.int64)
-        frame_of[frames.nodes] = np.arange(len(frames.nodes))
-
-        first, last = layout.first, layout.last
-        n_local = last - first
-        index_type = PETSc.IntType
-        d_nnz, o_nnz = (count.astype(index_type) for count in _preallocation(mesh, layout))
-        stiffness = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
-                                          nnz=(d_nnz, o_nnz), comm=comm)
-        stiffness.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        # Triangles go to the owner of their first vertex: each is assembled once, and most of
-        # a rank's entries land in its own rows.
-        first_vertex = layout.position[mesh.triangles[:, 0]]
-        owned = np.flatnonzero((first_vertex >= first // 2) & (first_vertex < last // 2))
-        for start in range(0, len(owned), ELEMENT_CHUNK):
-            triangles = mesh.triangles[owned[start:start + ELEMENT_CHUNK]]
-            ke = element_stiffness(mesh.points, triangles, problem.law)
-            _rotate(ke, triangles, frame_of, blocks)
-            dofs = (2 * layout.position[triangles][:, :, None] + np.arange(2)).reshape(len(triangles), 6)
-            dofs = dofs.astype(index_type)
-            stiffness.setValuesRCV(dofs, dofs, ke.reshape(len(triangles), 36), addv=PETSc.InsertMode.ADD_VALUES)
-        stiffness.assemblyBegin()
-        stiffness.assemblyEnd()
-        stiffness.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        stiffness.setOption(PETSc.Mat.Option.SPD, True)
-        indptr, indices, values = stiffness.getValuesCSR()
-        absolute = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
-                                         csr=(indptr, indices, np.abs(values)), comm=comm)
-        from mpi4py import MPI
-
-        longest_row = comm.tompi4py().allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
-        del indptr, indices, values
-
-        # Q^T F in rotated unknowns, as ReducedSystem builds it (without platens: Q is block-diagonal).
-        load = problem.load.copy().reshape(-1, 2)
-        load[frames.nodes] = np.einsum("kca,kc->ka", blocks, load[frames.nodes])
-        load = load.ravel()
-        if len(frames.force_dofs):
-            np.add.at(load, frames.force_dofs, frames.forces)
-        fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
-        fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
-        supported_all = np.zeros(n_dof, dtype=bool)
-        supported_all[fixed_dofs] = True
-        values_all = np.zeros(n_dof)
-        values_all[fixed_dofs] = fixed_values
-        rigid = _rigid_motions(mesh.points, frames.nodes, blocks)
-        return cls(
-            stiffness=stiffness, absolute=absolute, load_local=layout.owned(load),
-            supported_local=layout.owned(supported_all), support_values_local=layout.owned(values_all),
-            normal_dofs=layout.petsc(frames.normal_slot), normal_slots=np.asarray(frames.normal_slot, dtype=np.int64),
-            supported_mesh=supported_all, gap=np.asarray(problem.contact.gap, dtype=float),
-            multiplier_mass=method.multiplier_mass(problem.contact.masses), contact_edges=problem.contact.node_edges(),
-            gamma=roundoff_bound(longest_row + 2),
-            layout=layout, frame_nodes=frames.nodes, frames=blocks, owned_triangles=int(len(owned)), n_dof=n_dof,
-            rigid_motions_local=np.stack([layout.owned(r) for r in rigid]),
-        )
-
-    def mesh_vector(self, slots: np.ndarray) -> np.ndarray:
-        """Mesh-frame vector (2n,) of a vector in rotated unknowns (mesh numbering): Q s. With
-        orthonormal frames Q is orthogonal, so this also maps K' s to K u."""
-        vector = slots.copy().reshape(-1, 2)
-        vector[self.frame_nodes] = np.einsum("kab,kb->ka", self.frames, vector[self.frame_nodes])
-        return vector.ravel()
-
-    def default_c(self) -> float:
-        """:func:`contactfem.kernel.default_c`: the mean normal diagonal entry of K."""
-        if len(self.normal_dofs) == 0:
-            return 1.0
-        diagonal = self.stiffness.getDiagonal()
-        values = _gather_entries(diagonal, self.normal_dofs)
-        diagonal.destroy()
-        return float(np.mean(values))
-
-
-def _preallocation(mesh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
-    """Entries per owned row inside and outside this rank's columns: a full 2x2 block for the
-    node itself and for each mesh edge, as the element matrices fill them."""
-    first_node, last_node = layout.first // 2, layout.last // 2
-    edges = layout.position[np.asarray(mesh.topology.edges, dtype=np.int64)]
-    n_local_nodes = last_node - first_node
-    inside = np.ones(n_local_nodes, dtype=np.int64)  # the node's own block
-    outside = np.zeros(n_local_nodes, dtype=np.int64)
-    for this, other in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
-        mine = (this >= first_node) & (this < last_node)
-        local = this[mine] - first_node
-        near = (other[mine] >= first_node) & (other[mine] < last_node)
-        inside += np.bincount(local[near], minlength=n_local_nodes)
-        outside += np.bincount(local[~near], minlength=n_local_nodes)
-    return np.repeat(2 * inside, 2), np.repeat(2 * outside, 2)
-
-
-def _rotate(ke: np.ndarray, triangles: np.ndarray, frame_of: np.ndarray, blocks: np.ndarray) -> None:
-    """Element matrices in the rotated unknowns, in place: K_e' = Q_eᵀ K_e Q_e on the few
-    triangles touching a framed node (contact, symmetry), Q_e block-diagonal of node frames."""
-    frame_index = frame_of[triangles]
-    touched = np.flatnonzero((frame_index >= 0).any(axis=1))
-    if len(touched) == 0:
-        return
-    q = np.broadcast_to(np.eye(2), (len(touched), 3, 2, 2)).copy()
-    index = frame_index[touched]
-    framed = index >= 0
-    q[framed] = blocks[index[framed]]
-    k = ke[touched].reshape(len(touched), 3, 2, 3, 2)
-    ke[touched] = np.einsum("tica,ticjd,tjdb->tiajb", q, k, q).reshape(len(touched), 6, 6)
-
-
-def _rigid_motions(points: np.ndarray, frame_nodes: np.ndarray, blocks: np.ndarray) -> list[np.ndarray]:
-    """The plane's rigid motions (x, y translations, rotation about the centroid) in rotated unknowns."""
-    centred = points - points.mean(axis=0)
-    motions = []
-    for field_ in (np.tile([1.0, 0.0], (len(points), 1)), np.tile([0.0, 1.0], (len(points), 1)),
-                   np.stack([-centred[:, 1], centred[:, 0]], axis=1)):
-        rotated = field_.copy()
-        rotated[frame_nodes] = np.einsum("kca,kc->ka", blocks, field_[frame_nodes])
-        motions.append(rotated.ravel())
-    return motions
-
-
-def _gather_entries(vector, indices: np.ndarray) -> np.ndarray:
-    """Entries ``indices`` (global PETSc indices) of a distributed vector, on every rank."""
-    from petsc4py import PETSc
-
-    target = PETSc.Vec().createSeq(len(indices), comm=PETSc.COMM_SELF)
-    where = PETSc.IS().createGeneral(np.asarray(indices, dtype=PETSc.IntType), comm=PETSc.COMM_SELF)
-    scatter = PETSc.Scatter().create(vector, where, target, None)
-    scatter.scatter(vector, target, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
-    values = target.getArray().copy()
-    for item in (scatter, where, target):
-        item.destroy()
-    return values
 
 
 class _DistributedSolver:

@@ -449,9 +449,7 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
     """
     plt = _pyplot()
     from matplotlib import colormaps
-    from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
-    from matplotlib.patches import Rectangle
 
     mesh, fields = data["mesh"], data["fields"]
     points = np.asarray(mesh["points"], dtype=float)
@@ -481,24 +479,8 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
         xlim, ylim = _fit(*_limits(drawn, points, data), (0.62 * height_px) / (main_width * width_px))
         pixels_per_unit = main_width * width_px / (xlim[1] - xlim[0])
         _draw_panel(body_ax, plt, data, drawn, shown_obstacle, norm, cmap, xlim, ylim, units, pixels_per_unit)
-        method = data["attrs"].get("method", "?")
-        multiplier = {"positive": "λh ≥ 0, method (4)", "standard": "θh, method (5)"}.get(method, method)
-        if scale is None:
-            how = (" (auto: no triangle turned over, f·|∇u| ≤ 1)" if turn_over < auto_scale(points, displacement)
-                   else " (auto: the largest displacement is 10% of the body's size)")
-        else:
-            how = ""
-        lines = [f"method {method} ({multiplier}); body drawn at x + f·u with f = {factor:.3g}{how}"]
-        if approach > 0 and factor > 1:
-            lines.append(f"the obstacle starts {approach:.3g} {units['length']} inside the body (an imposed "
-                         f"indentation): it is drawn moved by (f − 1) × that towards the body, dotted where it rests")
-        if limited.any():
-            lines.append(f"towards the obstacle, f·u is cut back where it would bring a point closer than "
-                         f"{KEEP_FRACTION:g}× its true distance: {int(limited.sum())} points; "
-                         "points drawn on the obstacle are in contact")
-        else:
-            lines.append("every point is drawn at x + f·u: none comes closer to the obstacle than "
-                         f"{KEEP_FRACTION:g}× its true distance; points on the obstacle are in contact")
+        auto_turned = scale is None and turn_over < auto_scale(points, displacement)
+        lines = _caption_lines(data, factor, scale, auto_turned, approach, limited, units)
         figure.text(0.01, 0.985, _title(data), fontsize=font * 1.25, fontweight="bold", va="top")
         figure.text(0.01, 0.945, "\n".join(lines), fontsize=font * 0.85, va="top", linespacing=1.4)
         body_ax.set_title("the whole body", fontsize=font)
@@ -506,46 +488,10 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
         panels = {"body": body_ax}
         zoom_factor = None
         if window is not None:
-            zoom_ax = figure.add_axes(_ZOOM_BOX)
-            aspect = (_ZOOM_BOX[3] * height_px) / (_ZOOM_BOX[2] * width_px)
-            zxlim, zylim = _fit(*_window_box(obstacle, window, aspect), aspect)
-            inside = ((points[:, 0] >= zxlim[0]) & (points[:, 0] <= zxlim[1]) & (points[:, 1] >= zylim[0])
-                      & (points[:, 1] <= zylim[1]))
-            # The zoom magnifies the normal displacement so that the gaps it frames can be
-            # seen (the largest normal displacement in it a tenth of its height), and the
-            # tangential one no more than the first panel does.
-            normal_moves = np.abs(displacement[inside] @ obstacle[1]) if inside.any() else np.zeros(1)
-            largest = float(normal_moves.max())
-            zoom_factor = AUTO_FRACTION * (zylim[1] - zylim[0]) / largest if largest > 0 else factor
-            if scale is None:  # nor turning a triangle of the window over
-                near = inside[triangles].any(axis=1)
-                zoom_factor = min(zoom_factor, turn_over_limit(points, triangles[near], displacement))
-            tangential_factor = min(factor, zoom_factor)
-            zoom_drawn, _ = drawn_positions(points, displacement, tangential_factor, obstacle,
-                                            normal_factor=zoom_factor, approach=approach)
-            _draw_panel(zoom_ax, plt, data, zoom_drawn, drawn_obstacle(obstacle, zoom_factor, approach), norm, cmap,
-                        zxlim, zylim, units, _ZOOM_BOX[2] * width_px / (zxlim[1] - zxlim[0]))
-            title = (f"f = {zoom_factor:.3g}" if np.isclose(tangential_factor, zoom_factor) else
-                     f"normal f = {zoom_factor:.3g}, tangential f = {tangential_factor:.3g}")
-            zoom_ax.set_title(f"zoom on {window['what']}\n{title}", fontsize=font)
-            body_ax.add_patch(Rectangle((zxlim[0], zylim[0]), zxlim[1] - zxlim[0], zylim[1] - zylim[0],
-                                        fill=False, edgecolor="black", linestyle=":", linewidth=1.0, zorder=5))
-            panels["zoom"] = zoom_ax
-        handles, labels = body_ax.get_legend_handles_labels()
-        figure.legend(handles, labels, loc="lower right", bbox_to_anchor=(0.99, 0.01), fontsize=font * 0.8,
-                      frameon=True, ncol=1 if window is not None else 2)
-        bar_ax = figure.add_axes((0.075, 0.06, min(main_width, 0.55), 0.022))
-        bar = figure.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=bar_ax, orientation="horizontal",
-                              format="%.3g")
-        bar.set_label(with_unit("von Mises stress", units["stress"]), fontsize=font * 0.9)
-        bar.ax.tick_params(labelsize=font * 0.75)
-
-        ensure_directory(Path(path).parent)
-        try:
-            with atomic_path(path) as temporary:
-                figure.savefig(temporary, format="png", dpi=_DPI)
-        except OSError as exc:
-            raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+            panels["zoom"], zoom_factor = _draw_zoom(figure, plt, body_ax, data, window, factor, scale, approach,
+                                                     norm, cmap, units, font, size)
+        _draw_legend_and_bar(figure, body_ax, norm, cmap, units, font, main_width, zoomed=window is not None)
+        _save_png(figure, path)
         transforms = {name: {"pixel_transform": _pixel_transform(ax, figure), "pixel_box": _pixel_box(ax, figure)}
                       for name, ax in panels.items()}
         transforms["body"]["obstacle"] = shown_obstacle
@@ -554,6 +500,95 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
     finally:
         plt.close(figure)
     return {"scale": factor, "zoom_scale": zoom_factor, "limited_points": int(limited.sum()), "panels": transforms}
+
+
+def _caption_lines(data: dict, factor: float, scale: float | None, auto_turned: bool, approach: float,
+                   limited: np.ndarray, units: dict) -> list[str]:
+    """The caption under the title: the method, the magnification and how it was chosen
+    (``auto_turned``: the auto factor was lowered so that no triangle turns over), the
+    moved obstacle and the points cut back."""
+    method = data["attrs"].get("method", "?")
+    multiplier = {"positive": "λh ≥ 0, method (4)", "standard": "θh, method (5)"}.get(method, method)
+    if scale is None:
+        how = (" (auto: no triangle turned over, f·|∇u| ≤ 1)" if auto_turned
+               else " (auto: the largest displacement is 10% of the body's size)")
+    else:
+        how = ""
+    lines = [f"method {method} ({multiplier}); body drawn at x + f·u with f = {factor:.3g}{how}"]
+    if approach > 0 and factor > 1:
+        lines.append(f"the obstacle starts {approach:.3g} {units['length']} inside the body (an imposed "
+                     f"indentation): it is drawn moved by (f − 1) × that towards the body, dotted where it rests")
+    if limited.any():
+        lines.append(f"towards the obstacle, f·u is cut back where it would bring a point closer than "
+                     f"{KEEP_FRACTION:g}× its true distance: {int(limited.sum())} points; "
+                     "points drawn on the obstacle are in contact")
+    else:
+        lines.append("every point is drawn at x + f·u: none comes closer to the obstacle than "
+                     f"{KEEP_FRACTION:g}× its true distance; points on the obstacle are in contact")
+    return lines
+
+
+def _draw_zoom(figure, plt, body_ax, data: dict, window: dict, factor: float, scale: float | None,
+               approach: float, norm, cmap, units: dict, font: float, size: tuple[int, int]) -> tuple[object, float]:
+    """The zoom panel on ``window``, its frame outlined in the first panel; returns its axes and
+    its (normal) magnification."""
+    from matplotlib.patches import Rectangle
+
+    width_px, height_px = size
+    points = np.asarray(data["mesh"]["points"], dtype=float)
+    triangles = np.asarray(data["mesh"]["triangles"], dtype=np.int64)
+    displacement = np.asarray(data["fields"]["displacement"], dtype=float)
+    obstacle = obstacle_of(data)
+    zoom_ax = figure.add_axes(_ZOOM_BOX)
+    aspect = (_ZOOM_BOX[3] * height_px) / (_ZOOM_BOX[2] * width_px)
+    zxlim, zylim = _fit(*_window_box(obstacle, window, aspect), aspect)
+    inside = ((points[:, 0] >= zxlim[0]) & (points[:, 0] <= zxlim[1]) & (points[:, 1] >= zylim[0])
+              & (points[:, 1] <= zylim[1]))
+    # The zoom magnifies the normal displacement so that the gaps it frames can be
+    # seen (the largest normal displacement in it a tenth of its height), and the
+    # tangential one no more than the first panel does.
+    normal_moves = np.abs(displacement[inside] @ obstacle[1]) if inside.any() else np.zeros(1)
+    largest = float(normal_moves.max())
+    zoom_factor = AUTO_FRACTION * (zylim[1] - zylim[0]) / largest if largest > 0 else factor
+    if scale is None:  # nor turning a triangle of the window over
+        near = inside[triangles].any(axis=1)
+        zoom_factor = min(zoom_factor, turn_over_limit(points, triangles[near], displacement))
+    tangential_factor = min(factor, zoom_factor)
+    zoom_drawn, _ = drawn_positions(points, displacement, tangential_factor, obstacle,
+                                    normal_factor=zoom_factor, approach=approach)
+    _draw_panel(zoom_ax, plt, data, zoom_drawn, drawn_obstacle(obstacle, zoom_factor, approach), norm, cmap,
+                zxlim, zylim, units, _ZOOM_BOX[2] * width_px / (zxlim[1] - zxlim[0]))
+    title = (f"f = {zoom_factor:.3g}" if np.isclose(tangential_factor, zoom_factor) else
+             f"normal f = {zoom_factor:.3g}, tangential f = {tangential_factor:.3g}")
+    zoom_ax.set_title(f"zoom on {window['what']}\n{title}", fontsize=font)
+    body_ax.add_patch(Rectangle((zxlim[0], zylim[0]), zxlim[1] - zxlim[0], zylim[1] - zylim[0],
+                                fill=False, edgecolor="black", linestyle=":", linewidth=1.0, zorder=5))
+    return zoom_ax, zoom_factor
+
+
+def _draw_legend_and_bar(figure, body_ax, norm, cmap, units: dict, font: float, main_width: float,
+                         zoomed: bool) -> None:
+    """The first panel's legend in the lower right corner and the von Mises colour bar under it."""
+    from matplotlib.cm import ScalarMappable
+
+    handles, labels = body_ax.get_legend_handles_labels()
+    figure.legend(handles, labels, loc="lower right", bbox_to_anchor=(0.99, 0.01), fontsize=font * 0.8,
+                  frameon=True, ncol=1 if zoomed else 2)
+    bar_ax = figure.add_axes((0.075, 0.06, min(main_width, 0.55), 0.022))
+    bar = figure.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=bar_ax, orientation="horizontal",
+                          format="%.3g")
+    bar.set_label(with_unit("von Mises stress", units["stress"]), fontsize=font * 0.9)
+    bar.ax.tick_params(labelsize=font * 0.75)
+
+
+def _save_png(figure, path: Path) -> None:
+    """Write ``figure`` as the PNG ``path`` (atomically); a failed write is an :class:`OutputError`."""
+    ensure_directory(Path(path).parent)
+    try:
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, format="png", dpi=_DPI)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
 def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,

@@ -34,10 +34,9 @@ from contactfem.discretize.meshing import build_mesh, estimate_triangles
 from contactfem.errors import CaseError
 from contactfem.case.crossings import _first_crossing_by_pairs
 from contactfem.case.predicates import segments_intersect as _segments_intersect
+from contactfem.mesh.boundary_points import _graded_parameters, _lines_points
 from contactfem.mesh.polygon import (
     Loop,
-    _graded_parameters,
-    _lines_points,
     first_crossing,
     polygon_problems,
     triangulate_domain,

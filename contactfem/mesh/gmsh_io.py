@@ -85,6 +85,28 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
         mesh (see :func:`~contactfem.mesh.quality.check_mesh`).
     """
     path = Path(path)
+    raw = _read_raw(path)
+    _check_cells(raw, path)
+    points, triangles, renumber = _planar_triangles(raw, path)
+    edges = boundary_edges(triangles)
+    edge_parts, part_names = _edge_parts(raw, edges, renumber, len(points))
+    mesh = Mesh(
+        points=points,
+        triangles=triangles,
+        boundary_edges=edges,
+        edge_parts=edge_parts,
+        part_names=part_names,
+    )
+    try:
+        check_mesh(mesh)
+        check_body(mesh)
+    except MeshError as exc:
+        raise MeshError(f"mesh {path}: {exc}") from None
+    return mesh
+
+
+def _read_raw(path: Path) -> meshio.Mesh:
+    """The file as meshio reads it; a missing, irregular or unparsable file is a :class:`MeshError`."""
     if not path.exists():
         raise MeshError(f"cannot read mesh {path}: no such file")
     if not path.is_file():
@@ -95,7 +117,7 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
         # meshio prints its warnings ("$MeshFormat not closed ...") on stderr: keep them
         # off, the refusal below or the checks after it say what is wrong in one line.
         with contextlib.redirect_stderr(io.StringIO()):
-            raw = meshio.gmsh.read(path)
+            return meshio.gmsh.read(path)
     except Exception as exc:  # noqa: BLE001 - meshio's parsers raise almost anything on bad input
         text = str(exc).strip()
         reason = text.splitlines()[0] if text else "not a Gmsh .msh file (no valid $MeshFormat header)"
@@ -106,6 +128,9 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
             reason = f"it refers to entity or tag {key.item() if hasattr(key, 'item') else key!r}, which it does not define"
         raise MeshError(f"cannot read mesh {path}: {reason} ({type(exc).__name__})") from exc
 
+
+def _check_cells(raw: meshio.Mesh, path: Path) -> None:
+    """Refuse cells other than points, lines and triangles, and a file without triangles."""
     found: dict[str, int] = {}
     for block in raw.cells:
         found[block.type] = found.get(block.type, 0) + len(block.data)
@@ -121,6 +146,17 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
             f"mesh {path} contains no triangles ({summary}); is the surface in a physical group?"
         )
 
+
+def _planar_triangles(raw: meshio.Mesh, path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The triangles' nodes (n, 2), renumbered in file order, and the triangles (t, 3)
+    counter-clockwise on them; and the new number of each file node (-1: no triangle uses it).
+
+    Raises
+    ------
+    MeshError
+        For points of the wrong shape, off the plane z = 0 or not finite, and for
+        triangles referring to missing nodes.
+    """
     points = np.asarray(raw.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise MeshError(f"mesh {path} has points of shape {points.shape}, expected (n, 2) or (n, 3)")
@@ -153,8 +189,13 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
     e2 = corners[:, 2] - corners[:, 0]
     flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
     triangles[flip] = triangles[flip][:, [0, 2, 1]]
+    return points, triangles, renumber
 
-    edges = boundary_edges(triangles)
+
+def _edge_parts(raw: meshio.Mesh, edges: np.ndarray, renumber: np.ndarray,
+                n: int) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Each boundary edge's part (e,) and the part names: the physical group of a named line
+    on it, else :data:`UNNAMED_PART`."""
     names = _physical_names(raw)
     lines, tags = _named_lines(raw)
     lines = renumber[lines] if lines.size else lines
@@ -163,7 +204,6 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
 
     # Match lines to boundary edges by undirected key; the first line wins if an edge
     # is in several groups (the stable sort keeps file order). Gmsh tags are positive.
-    n = len(points)
     edge_keys = _undirected_keys(edges, n)
     edge_tag = np.full(len(edges), -1, dtype=np.int64)
     if len(lines):
@@ -188,20 +228,7 @@ def read_gmsh(path: str | os.PathLike[str]) -> Mesh:
         if UNNAMED_PART not in distinct:
             distinct.append(UNNAMED_PART)
         edge_parts[~named] = distinct.index(UNNAMED_PART)
-
-    mesh = Mesh(
-        points=points,
-        triangles=triangles,
-        boundary_edges=edges,
-        edge_parts=edge_parts,
-        part_names=tuple(distinct),
-    )
-    try:
-        check_mesh(mesh)
-        check_body(mesh)
-    except MeshError as exc:
-        raise MeshError(f"mesh {path}: {exc}") from None
-    return mesh
+    return edge_parts, tuple(distinct)
 
 
 def write_gmsh(mesh: Mesh, path: str | os.PathLike[str]) -> Path:

@@ -1,0 +1,134 @@
+"""``contactfem check``: a case validated and meshed without solving, and what it models printed."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from contactfem.cli.common import _load
+from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.options import case_argument, json_option, refine_option
+from contactfem.errors import ContactFemError
+
+
+@click.command()
+@case_argument
+@refine_option
+@json_option
+@click.option("--quiet", "-q", is_flag=True, help="Print nothing; the exit code tells (0 valid, 2 not).")
+@_interruptible
+def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = False) -> None:
+    """Validate CASE and mesh it, without solving; print what it models.
+
+    \b
+    Example:
+      contactfem check cases/hole.yaml
+    """
+    from contactfem.report import obstacle_figures
+    from contactfem.solve import prepare
+
+    try:
+        case = _load(case_file)
+        problem = prepare(case, refine=refine)
+    except ContactFemError as error:
+        _fail(error)
+        return
+    mesh = problem.mesh
+    diameters = mesh.triangle_diameters()
+    summary = {
+        "case": str(case_file),
+        "title": case.title,
+        "geometry": _geometry_figures(case),
+        "material": {"E": case.material.young, "nu": case.material.poisson, "plane": case.material.plane},
+        "parts": {p.name: p.label for p in case.parts},
+        "mesh": {"nodes": mesh.n_points, "triangles": mesh.n_triangles,
+                 "h_min": float(diameters.min()), "h_max": float(diameters.max())},
+        "unknowns": problem.n_unknowns,
+        "contact_nodes": int(len(problem.contact.nodes)),
+        "obstacle": obstacle_figures(problem),
+        "method": case.solver.method,
+        "estimate": _estimate(case, problem),
+        "load_path": None if case.load_path is None else list(case.load_path.factors),
+    }
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, sort_keys=True))
+        return
+    if quiet:
+        return
+    click.echo(f"{case_file}: valid — {case.title}")
+    click.echo(f"  geometry   {_geometry_text(summary['geometry'])}")
+    click.echo(f"  material   E = {case.material.young:g}, nu = {case.material.poisson:g}, plane {case.material.plane}")
+    for part in case.parts:
+        click.echo(f"  boundary   {part.name}: {part.label}")
+    click.echo(f"  mesh       {mesh.n_points} nodes, {mesh.n_triangles} triangles, h in "
+               f"[{diameters.min():.3g}, {diameters.max():.3g}]")
+    click.echo(f"  unknowns   {problem.n_unknowns} displacement, {len(problem.contact.nodes)} contact nodes")
+    click.echo(f"  obstacle   {_obstacle_text(summary['obstacle'])}")
+    if case.load_path is not None:
+        factors = case.load_path.factors
+        click.echo(f"  load path  {len(factors)} steps, load factors {factors[0]:g} to {factors[-1]:g} "
+                   "(every load, prescribed displacement and platen drive times each factor)")
+    cost = summary["estimate"]
+    click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
+               f"{cost['backend']} (measured on 2 cores; ±50%), of {cost['limit']}")
+
+
+def _estimate(case, problem) -> dict:
+    from contactfem.estimate import estimate_cost, memory_limit
+    from contactfem.linalg import resolve_backend
+
+    backend = resolve_backend(case.solver.backend)
+    limit = memory_limit()
+    return {"backend": backend, **estimate_cost(problem.n_unknowns, backend),
+            "limit_bytes": limit.bytes, "limit": limit.source}
+
+
+def _geometry_figures(case) -> dict:
+    """What the case's body is: its kind, its loops' vertices and the data files read."""
+    from contactfem.case import PolygonGeometry, RectangleGeometry
+
+    geometry = case.geometry
+    figures: dict = {"files": [str(path) for path in case.data_files]}  # a mesh file among them
+    if isinstance(geometry, RectangleGeometry):
+        figures.update(kind="rectangle", lower=list(geometry.lower), upper=list(geometry.upper))
+    elif isinstance(geometry, PolygonGeometry):
+        loops = (geometry.outer, *geometry.holes)
+        figures.update(kind="polygon", vertices=int(sum(len(loop.vertices) for loop in loops)),
+                       holes=len(geometry.holes), arcs=int(sum(len(loop.arc_edges) for loop in loops)))
+    else:
+        figures.update(kind="mesh_file")
+    return figures
+
+
+def _geometry_text(figures: dict) -> str:
+    """The geometry of :func:`_geometry_figures` in words."""
+    if figures["kind"] == "rectangle":
+        (x0, y0), (x1, y1) = figures["lower"], figures["upper"]
+        text = f"rectangle [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}]"
+    elif figures["kind"] == "polygon":
+        holes, arcs = figures["holes"], figures["arcs"]
+        text = (f"polygon of {figures['vertices']} vertices" + (f", {holes} hole{'s' * (holes != 1)}" if holes else "")
+                + (f", {arcs} arc{'s' * (arcs != 1)}" if arcs else ""))
+    else:
+        return f"mesh file {figures['files'][0]}"
+    names = [Path(f).name for f in figures["files"]]
+    if len(names) > 3:  # a body with hundreds of holes from files: --json lists them all
+        names = [*names[:3], f"{len(names) - 3} more files"]
+    return text + (f" (read from {', '.join(names)})" if names else "")
+
+
+def _obstacle_text(obstacle: dict) -> str:
+    """The obstacle of report.obstacle_figures in words, with plain numbers."""
+    def point(p) -> str:
+        return f"({p[0]:g}, {p[1]:g})"
+
+    normal = f"normal {point(obstacle['normal'])}"
+    if obstacle["ends"] is None:
+        return f"the line through {point(obstacle['point'])}, {normal}"
+    low, high = obstacle["extent"]
+    facing = obstacle["facing_nodes"]
+    total = facing + obstacle["beyond_nodes"]
+    return (f"the segment from {point(obstacle['ends'][0])} to {point(obstacle['ends'][1])}, {normal}; "
+            f"{facing} of {total} contact nodes face it (positions [{low:g}, {high:g}] along the obstacle)")

@@ -1,0 +1,72 @@
+"""``contactfem plot``: the pictures of a result directory drawn as PNGs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from contactfem.cli.common import _end_progress, _progress
+from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.options import _CheckedPath, quiet_option
+from contactfem.errors import ContactFemError
+
+
+@click.command()
+@click.argument("result_dir", metavar="RESULT_DIR", type=_CheckedPath(file_okay=False))
+@click.option("--size", default="1200x900", show_default=True, metavar="WxH",
+              help="Size of each PNG in pixels.")
+@click.option("--scale", default="auto", show_default=True, metavar="auto|FACTOR",
+              help="Displacement magnification; auto makes the largest displacement 10% of the body's size.")
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
+              help="Where the PNGs go. Default: RESULT_DIR.")
+@quiet_option
+@click.option("--json", "as_json", is_flag=True, help="Print the written files and the factor as JSON.")
+@_interruptible
+def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: bool, as_json: bool) -> None:
+    """Draw the result in RESULT_DIR as PNGs: a solve's, a compare's or a converge's.
+
+    A solve (solution.h5): deformed.png, the body at x + f·u coloured by von Mises stress,
+    with axes, units, a scale bar, the obstacle, the contact zone in red and a zoom on it
+    (the magnification never draws the body across the obstacle: the caption says how);
+    contact_profile.png, the contact pressure and the gap g0 − u_n along the obstacle.
+    A compare (compare.json): compare.png. A converge (convergence.json): convergence_h.png
+    and convergence_time.png. Rendered off-screen: no display is needed.
+
+    \b
+    Examples:
+      contactfem plot results/square
+      contactfem plot results/square --size 1600x1000 --scale 20 --out figures
+      contactfem plot results/square-compare          # compare.png from compare.json
+      contactfem plot results/square-convergence      # the convergence PNGs
+    """
+    from contactfem.io.atomic import claimed_directory
+    from contactfem.render import (
+        check_directory,
+        draw_directory,
+        parse_scale,
+        parse_size,
+    )
+
+    try:
+        pixels = parse_size(size)
+        factor = parse_scale(scale)
+        names = check_directory(result_dir)  # nothing to draw, or unreadable: refused before anything is touched
+        progress = _progress(quiet)
+        directory = out_dir if out_dir is not None else result_dir
+        with claimed_directory(directory) as claim:
+            with claim.stage(replaces=names) as staging:
+                if progress is not None:
+                    progress("rendering pictures")
+                made = draw_directory(result_dir, staging, size=pixels, scale=factor)
+        made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
+    except ContactFemError as error:
+        _fail(error)
+        return
+    _end_progress()
+    if as_json:
+        click.echo(json.dumps(made, indent=2, sort_keys=True))
+    elif not quiet:
+        magnified = f", displacement x {made['scale']:.3g}" if made["scale"] is not None else ""
+        click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}{magnified})")

@@ -1,0 +1,186 @@
+"""``contactfem solve``: one case solved (across MPI ranks with the petsc backend) and its files written."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from contactfem.cli.common import _end_progress, _files_of, _load, _progress, _write_solution
+from contactfem.cli.exits import _exit_code, _fail, _interruptible
+from contactfem.cli.options import (
+    _CheckedPath,
+    case_argument,
+    json_option,
+    overwrite_option,
+    quiet_option,
+    refine_option,
+)
+from contactfem.cli.summary import _summary
+from contactfem.errors import CaseError, ContactFemError
+from contactfem.io.registry import REPORT_JSON, RESULT_FILES, RESULT_MARKERS, to_json
+from contactfem.linalg import BACKEND_CHOICES, DISTRIBUTED_BACKENDS
+from contactfem.methods import METHOD_NAMES
+
+
+@click.command()
+@case_argument
+@click.option("--method", type=click.Choice(METHOD_NAMES), default=None,
+              help="Contact method: positive = (4), standard = (5). Default: the case's.")
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
+              help="Output directory. Default: the case's output.directory.")
+@refine_option
+@click.option("--backend", type=click.Choice(BACKEND_CHOICES), default=None,
+              help="Sparse direct solver. Default: the case's (auto = fastest installed).")
+@quiet_option
+@json_option
+@overwrite_option
+@click.option("--plot", "make_plot", is_flag=True,
+              help="Also write deformed.png and contact_profile.png (as `contactfem plot`).")
+@click.option("--petsc-solver", type=click.Choice(("mumps", "gamg")), default="mumps", show_default=True,
+              help="With --backend petsc (under mpiexec): MUMPS, distributed direct, or CG with GAMG "
+                   "(the least memory per rank).")
+@_interruptible
+def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int | None,
+          backend: str | None, quiet: bool, as_json: bool, overwrite: bool, make_plot: bool = False,
+          petsc_solver: str = "mumps") -> None:
+    """Solve CASE and write solution.vtu/.pvd, solution.h5 and report.json.
+
+    \b
+    Examples:
+      contactfem solve cases/square.yaml
+      contactfem solve cases/square.yaml --method standard --json > report.json
+      contactfem solve cases/square.yaml --overwrite      # replace results/square
+      contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
+      mpiexec -n 4 contactfem solve cases/square.yaml --backend petsc   # across 4 MPI ranks
+    """
+    from contactfem.io.atomic import claimed_directory
+    from contactfem.io.path import PathWriter
+    from contactfem.io.registry import PATH_PNG
+    from contactfem.plots import plot_load_path
+    from contactfem.report import build_report, load_path_figures, path_step_figures
+    from contactfem.solve import solve_case, solve_load_path
+
+    progress = _progress(quiet)
+    try:
+        case = _load(case_file, backend, distributed=True)
+        if make_plot and "h5" not in case.output.files:
+            raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
+        directory = out_dir if out_dir is not None else case.output.directory
+        if case.solver.backend in DISTRIBUTED_BACKENDS:
+            _solve_distributed(case, method, refine, petsc_solver, directory, quiet, as_json, overwrite, make_plot,
+                               progress)
+            return
+        with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
+            with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+                writer = None
+                if case.load_path is not None:
+                    # Each step's files go into the staging area as it is solved: a path
+                    # holds one step in memory, and a failed one leaves nothing behind.
+                    writer = PathWriter(staging, case.load_path.factors, case.text)
+                    steps: list[dict] = []
+
+                    def write_step(index: int, factor: float, step) -> None:
+                        steps.append(path_step_figures(factor, step))
+                        writer.add(index, step.solution)
+
+                    try:
+                        path = solve_load_path(case, method=method, refine=refine, progress=progress,
+                                               accept_uncertified=True, on_step=write_step, keep_steps=False)
+                    except BaseException:
+                        writer.close()  # its half-written files go with the staging area
+                        raise
+                    result, extras = path.final, {"load_path": load_path_figures(path, steps)}
+                else:
+                    result = solve_case(case, method=method, refine=refine, progress=progress,
+                                        accept_uncertified=True)
+                    extras = {}
+                report = _write_solution(staging, case, result, build_report(case, result, extras), progress,
+                                         path_writer=writer)
+                names = _files_of(case.output.files)
+                if writer is not None:
+                    names.append(plot_load_path(staging / PATH_PNG, report["load_path"]["curves"],
+                                                case.units.to_dict(), title=case.title).name)
+                if make_plot:
+                    names += _pictures(staging, staging, progress)
+    except ContactFemError as error:
+        _fail(error)
+        return
+    _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
+
+
+def _report_solve(case, result, report: dict, written: list[Path], directory: Path, quiet: bool,
+                  as_json: bool) -> None:
+    """A finished solve on stdout (the summary, or the report with --json); exit 1 when uncertified."""
+    _end_progress()
+    if as_json:
+        click.echo(to_json(report), nl=False)
+    elif not quiet:
+        click.echo(_summary(report, written))
+    _refuse_uncertified(case, result, directory)
+
+
+def _solve_distributed(case, method: str | None, refine: int | None, petsc_solver: str, directory: Path,
+                       quiet: bool, as_json: bool, overwrite: bool, make_plot: bool, progress) -> None:
+    """``solve`` under mpiexec: every rank solves its share; rank 0 alone claims the output
+    directory, writes and prints. Its verdict on the directory is shared before the solve, so
+    that a refusal stops every rank (the others would otherwise wait in a collective step)."""
+    import contextlib
+
+    from contactfem.distributed import distributed_report, mpi_world, solve_distributed
+    from contactfem.io.atomic import claimed_directory
+
+    if case.load_path is not None:
+        raise CaseError(f"{case.source.name}: load_path: the petsc backend solves one load; "
+                        "run the path with a serial backend (auto, cholmod, pardiso or superlu)")
+    world = mpi_world()
+    root = world.Get_rank() == 0
+    with contextlib.ExitStack() as stack:
+        refusal = None
+        if root:
+            try:
+                claim = stack.enter_context(claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite))
+            except ContactFemError as error:
+                refusal = error
+        code = world.bcast(_exit_code(refusal) if refusal is not None else 0, root=0)
+        if code:
+            if root:
+                _fail(refusal)
+            sys.exit(code)
+        try:
+            outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver,
+                                        progress=progress if root else None, accept_uncertified=True)
+        except ContactFemError as error:  # raised on every rank alike: decisions use shared data
+            if root:
+                _fail(error)
+            sys.exit(_exit_code(error))
+        if not root:
+            return
+        result = outcome.result
+        with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+            report = _write_solution(staging, case, result, distributed_report(case, outcome), progress)
+            names = _files_of(case.output.files)
+            if make_plot:
+                names += _pictures(staging, staging, progress)
+    _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
+
+
+def _refuse_uncertified(case, result, directory: Path) -> None:
+    """Exit 1 for a result the kernel could not certify: its files are written (report.json
+    says status not_certified, with each check) but it is not an answer."""
+    from contactfem.errors import SolverError
+    from contactfem.kernel import Status
+
+    if result.kernel.status is Status.NOT_CERTIFIED:
+        _fail(SolverError(f"{case.source.name}: method {result.method}: not certified, "
+                          f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
+
+
+def _pictures(result_dir: Path, out_dir: Path, progress, **options) -> list[str]:
+    """The pictures of the result in ``result_dir`` (read from its solution.h5) into ``out_dir``."""
+    from contactfem.render import make_pictures
+
+    if progress is not None:
+        progress("writing pictures")
+    return [Path(p).name for p in make_pictures(result_dir, out_dir, **options)["files"]]

@@ -1,0 +1,115 @@
+"""``contactfem sweep``: many variants of a case solved as independent points, in parallel on Dask."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from contactfem.cli.exits import _fail, _interruptible, _printable
+from contactfem.cli.options import _CheckedPath, overwrite_option, quiet_option
+from contactfem.cli.sweep_report import _plot_sweep, _sweep_summary
+from contactfem.errors import CaseError, ContactFemError
+from contactfem.io.registry import to_json
+
+
+@click.command()
+@click.argument("sweep_file", metavar="SWEEP", type=_CheckedPath(dir_okay=False))
+@click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
+              help="Output directory. Default: the sweep file's output.directory (results/<sweep file name>).")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786. Default: a local cluster.")
+@click.option("--workers", type=click.IntRange(1, 4096), default=None,
+              help="Worker processes of the local cluster. Default: one per core, at most one per point.")
+@quiet_option
+@click.option("--json", "as_json", is_flag=True, help="Print sweep.json on stdout.")
+@overwrite_option
+@_interruptible
+def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers: int | None, quiet: bool,
+          as_json: bool, overwrite: bool) -> None:
+    """Solve many variants of a case, as independent points in parallel on Dask.
+
+    SWEEP names a base case and the values of any of its keys by dotted path, as a grid
+    (cartesian product) or a list of points (README: "Sweeps"). Each point is a full
+    solve; its figures are stored in OUT/points/ as soon as it finishes, so a rerun solves
+    only what is missing. Writes sweep.csv, sweep.json and sweep.png (error against
+    seconds, Pareto front marked). Runs on a local Dask cluster (one single-threaded
+    worker per core), on --scheduler's cluster, or without Dask one point after another.
+    Exit 1 when a point failed (the others are in the table all the same).
+
+    \b
+    Examples:
+      contactfem sweep cases/sweeps/square.yaml
+      contactfem sweep cases/sweeps/square.yaml --workers 1 --out results/sweep-1
+      contactfem sweep study.yaml --scheduler tcp://10.0.0.5:8786 --overwrite
+    """
+    from contextlib import nullcontext
+
+    from contactfem import sweep as sweeps
+    from contactfem.errors import SolverError
+    from contactfem.io.atomic import (
+        TEMP_PREFIX,
+        atomic_write_text,
+        claimed_directory,
+        ensure_directory,
+    )
+
+    def say(line: str) -> None:
+        if not quiet:
+            click.echo(_printable(line), err=True)
+
+    def finished(row: dict, done: int, total: int) -> None:
+        if row["reused"]:
+            return
+        seconds = row["seconds"].get("total")
+        timing = f", {seconds:.2f} s" if seconds is not None else ""
+        size = f", {row['unknowns']} unknowns" if row["unknowns"] is not None else ""
+        reason = f": {row['message']}" if row["status"] != "ok" and row["message"] else ""
+        say(f"[{done}/{total}] point {row['index']} {row['label']}: {row['status']}{timing}{size}{reason}")
+
+    try:
+        if scheduler is not None and workers is not None:
+            raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
+                            "(the cluster's own workers run the points)")
+        plan = sweeps.load_sweep(sweep_file)
+        directory = Path(out_dir if out_dir is not None else plan.directory)
+        with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
+            points = directory / sweeps.POINTS_DIR
+            done = sweeps.finished_points(points, plan)
+            pending = plan.pending(done)
+            if done:
+                reused = sum(p.digest in done for p in plan.points)
+                say(f"{reused} of {len(plan.points)} points are already solved in {points}; not solving them again")
+            engine_context = (sweeps.open_engine(scheduler, workers, len(pending)) if pending
+                              else nullcontext(sweeps.SerialEngine()))
+            with engine_context as engine:
+                if engine.note:
+                    say(f"note: {engine.note}")
+                if pending and engine.kind == "dask":
+                    where = f"the cluster at {scheduler}" if scheduler else "a local cluster"
+                    say(f"solving {len(pending)} points on {engine.workers} Dask workers of {where}")
+                ensure_directory(points)
+                for leftover in points.glob(f"{TEMP_PREFIX}*"):  # a killed run's unfinished write
+                    leftover.unlink(missing_ok=True)
+                table = sweeps.run_sweep(
+                    plan, engine, finished=done, progress=finished,
+                    store=lambda record: atomic_write_text(points / sweeps.point_file(record["digest"]),
+                                                           sweeps.point_json(record)))
+            with claim.stage(replaces=sweeps.SWEEP_FILES, last=sweeps.SWEEP_JSON) as staging:
+                atomic_write_text(staging / sweeps.SWEEP_CSV, sweeps.table_csv(table))
+                _plot_sweep(staging / sweeps.SWEEP_PNG, table)
+                atomic_write_text(staging / sweeps.SWEEP_JSON, to_json(table))
+    except ContactFemError as error:
+        _fail(error)
+        return
+    if as_json:
+        click.echo(to_json(table), nl=False)
+    elif not quiet:
+        click.echo(_sweep_summary(table, directory))
+    failed = sweeps.failed_rows(table)
+    if failed:
+        statuses = ", ".join(f"{sum(r['status'] == s for r in failed)} {s}" for s in sweeps.STATUSES
+                             if any(r["status"] == s for r in failed))
+        _fail(SolverError(f"{plan.source.name}: {len(failed)} of {len(table['points'])} points did not solve "
+                          f"({statuses}); first, point {failed[0]['index']}: {failed[0]['message']}; "
+                          f"{directory / sweeps.SWEEP_CSV} lists every point"))
