@@ -101,7 +101,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         "obstacle": obstacle_figures(problem),
         "contact_force": {
             "normal": float(contact.nodal_force.sum()),
-            "vector": (-problem.contact.normal * contact.nodal_force.sum()).tolist(),
+            "vector": (-(problem.contact.normals * contact.nodal_force[:, None]).sum(axis=0)).tolist(),
         },
         "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces, force_unit),
         "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
@@ -188,10 +188,12 @@ def obstacle_figures(problem: DiscreteProblem) -> dict:
     """The obstacle as solved: its surface, a finite one's ends, and which nodes of ΓC face it."""
     contact = problem.contact
     obstacle = contact.obstacle
+    description = obstacle.describe()
     return {
-        "point": obstacle.point.tolist(),
-        "normal": obstacle.normal.tolist(),
-        "ends": None if obstacle.ends is None else obstacle.ends.tolist(),
+        "kind": description["kind"],
+        "point": description["point"],
+        "normal": description["normal"],
+        "ends": description.get("ends"),
         "extent": None if obstacle.extent is None else list(obstacle.extent),
         "facing_nodes": int(len(contact.nodes)),
         "beyond_nodes": int(len(contact.beyond)),
@@ -252,8 +254,8 @@ def contact_and_reactions(problem: DiscreteProblem, displacement: np.ndarray,
     u = displacement.ravel()
     contact = problem.contact
     push = np.zeros_like(u)
-    push[2 * contact.nodes] = -contact.normal[0] * nodal_force
-    push[2 * contact.nodes + 1] = -contact.normal[1] * nodal_force
+    push[2 * contact.nodes] = -contact.normals[:, 0] * nodal_force
+    push[2 * contact.nodes + 1] = -contact.normals[:, 1] * nodal_force
     symmetry = np.concatenate([problem.symmetry_nodes, *(p.nodes for p in problem.platens)])
     held = np.unique(np.concatenate([problem.dirichlet_dofs, 2 * symmetry, 2 * symmetry + 1]))
     reactions = np.zeros_like(u)

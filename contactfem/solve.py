@@ -730,7 +730,7 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
         edges=contact.edges,
         multiplier=kernel.multiplier,
         nodal_force=kernel.nodal_force,
-        normal_displacement=displacement[contact.nodes] @ contact.normal,
+        normal_displacement=np.einsum("ij,ij->i", displacement[contact.nodes], contact.normals),
         gap=contact.gap,
         active=kernel.active,
         abscissa=contact.abscissa,

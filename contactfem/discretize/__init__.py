@@ -8,7 +8,8 @@ cannot be solved), and ``problem`` (the assembled whole). Refusals that need the
 be seen are raised here as :class:`~contactfem.errors.CaseError` naming the key.
 """
 
-from contactfem.discretize.contact import ContactBoundary, FlatObstacle
+from contactfem.discretize.contact import ContactBoundary
+from contactfem.discretize.obstacles import HalfPlane, Obstacle, Segment, obstacle_of
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, NaturalBoundary
 from contactfem.discretize.meshing import (
@@ -20,7 +21,10 @@ from contactfem.discretize.problem import DiscreteProblem, build_problem
 __all__ = [
     "ContactBoundary",
     "DiscreteProblem",
-    "FlatObstacle",
+    "HalfPlane",
+    "Obstacle",
+    "Segment",
+    "obstacle_of",
     "Loads",
     "NaturalBoundary",
     "ReducedSystem",

@@ -1,4 +1,4 @@
-"""The contact boundary ΓC: the flat obstacle's geometry, the contact nodes, their gaps and boundary masses."""
+"""The contact boundary ΓC: the contact nodes, their gaps, normals and boundary masses against the obstacle."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import scipy.sparse as sp
 
 from contactfem.assembly import boundary_mass, edge_geometry
 from contactfem.case import Case, PolygonGeometry, RectangleGeometry
+from contactfem.discretize.obstacles import Obstacle, obstacle_of
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import arc_sweep, loop_signed_area
@@ -20,65 +21,14 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True, eq=False)
-class FlatObstacle:
-    """The rigid half-plane {p : (p − point)·normal ≥ 0}, or the finite segment of its surface
-    between two ends.
-
-    ``point`` (2,), ``normal`` (2,) the unit normal pointing from the body into the
-    obstacle, ``tangent`` (2,) = (−n_y, n_x): the direction abscissae are measured along;
-    ``ends`` (2, 2) the segment's end points, None for an infinite obstacle.
-    """
-
-    point: np.ndarray
-    normal: np.ndarray
-    ends: np.ndarray | None = None
-
-    @classmethod
-    def from_case(cls, case: Case) -> "FlatObstacle":
-        ends = None if case.obstacle.ends is None else np.asarray(case.obstacle.ends, dtype=float)
-        return cls(point=np.asarray(case.obstacle.point, dtype=float),
-                   normal=np.asarray(case.obstacle.normal, dtype=float), ends=ends)
-
-    @property
-    def extent(self) -> tuple[float, float] | None:
-        """The segment's abscissa range (low, high), None for an infinite obstacle."""
-        if self.ends is None:
-            return None
-        low, high = sorted(self.abscissa(self.ends))
-        return float(low), float(high)
-
-    def faces(self, points: np.ndarray) -> np.ndarray:
-        """Whether each of ``points`` (k, 2) lies in front of the obstacle (k,): its projection
-        along the normal falls on the segment (ends included, to round-off), always for an
-        infinite obstacle."""
-        extent = self.extent
-        if extent is None:
-            return np.ones(len(points), dtype=bool)
-        s = self.abscissa(points)
-        slack = 1e-9 * max(extent[1] - extent[0], float(np.abs(extent).max()))
-        return (s >= extent[0] - slack) & (s <= extent[1] + slack)
-
-    @property
-    def tangent(self) -> np.ndarray:
-        return np.array([-self.normal[1], self.normal[0]])
-
-    def gap(self, points: np.ndarray) -> np.ndarray:
-        """Initial gap g0 (k,) of ``points`` (k, 2) along the normal: positive when apart."""
-        return (self.point - points) @ self.normal
-
-    def abscissa(self, points: np.ndarray) -> np.ndarray:
-        """Position (k,) of ``points`` (k, 2) along the obstacle's tangent."""
-        return points @ self.tangent
-
-
-@dataclass(frozen=True, eq=False)
 class ContactBoundary:
     """The contact nodes and what the methods need of them.
 
-    ``nodes`` (m,) sorted by ``abscissa`` (coordinate along the obstacle's tangent),
-    ``edges`` (k, 2) the ΓC edges, ``gap`` (m,), ``masses`` the two boundary masses,
-    ``obstacle`` the flat obstacle they face. ``beyond`` (j,) are the nodes of ΓC that a
-    finite obstacle does not reach (their projection falls beyond its ends): they carry
+    ``nodes`` (m,) sorted by ``abscissa`` (position along the obstacle's surface),
+    ``edges`` (k, 2) the ΓC edges, ``gap`` (m,), ``normals`` (m, 2) the obstacle's unit
+    normal at each node's closest point, ``masses`` the two boundary masses, ``obstacle``
+    what they face (:class:`contactfem.discretize.obstacles.Obstacle`). ``beyond`` (j,) are
+    the nodes of ΓC that the obstacle does not face (beyond a segment's ends): they carry
     no constraint.
     """
 
@@ -86,17 +36,23 @@ class ContactBoundary:
     edges: np.ndarray
     gap: np.ndarray
     abscissa: np.ndarray
-    obstacle: FlatObstacle
+    obstacle: Obstacle
     masses: ContactBoundaryMasses
     beyond: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    normals: np.ndarray | None = None
 
     @property
     def normal(self) -> np.ndarray:
+        """The one normal of a flat obstacle (the rotated frames and the rigid-mode checks
+        take one direction)."""
+        if not getattr(self.obstacle, "flat", False):
+            raise NotImplementedError(f"a {self.obstacle.kind} obstacle has no single normal")
         return self.obstacle.normal
 
     @property
     def tangent(self) -> np.ndarray:
-        return self.obstacle.tangent
+        normal = self.normal
+        return np.array([-normal[1], normal[0]])
 
     def node_edges(self) -> np.ndarray:
         """The ΓC edges as pairs of positions in ``nodes`` (k', 2): those whose two ends
@@ -152,7 +108,7 @@ def contact_patches(abscissa: np.ndarray, active: np.ndarray,
 
 def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundary:
     """ΓC of ``mesh``: refuses a contact part facing away from the obstacle, naming it."""
-    obstacle = FlatObstacle.from_case(case)
+    obstacle = obstacle_of(case.obstacle)
     normal = obstacle.normal
     edges = mesh.edges_of(list(case.contact_parts))
     for name in case.contact_parts:
@@ -172,7 +128,7 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
     roller_keeps_normal = np.where(prescribed[:, 0], abs(normal[1]), abs(normal[0])) > 1 - 1e-12
     supported = prescribed.all(axis=1) | (prescribed.any(axis=1) & ~roller_keeps_normal)
     # On a symmetry line the node keeps contact only if the obstacle's normal runs along the line.
-    along_line = np.abs(symmetry_normals @ obstacle.tangent) > 1 - 1e-12
+    along_line = np.abs(symmetry_normals @ np.array([-normal[1], normal[0]])) > 1 - 1e-12
     supported[symmetry_nodes[~along_line]] = True
     # A platen holds its nodes' motion along its normal: like a roller, a node keeps
     # contact only if the obstacle's normal runs along the platen, and not on a symmetry line too.
@@ -183,7 +139,7 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
     candidates = gamma_nodes[~supported[gamma_nodes]]
     facing = obstacle.faces(mesh.points[candidates])
     nodes, beyond = candidates[facing], candidates[~facing]
-    if obstacle.ends is not None and len(nodes) == 0:
+    if obstacle.extent is not None and len(nodes) == 0:
         span = obstacle.abscissa(mesh.points[gamma_nodes])
         low, high = obstacle.extent
         raise CaseError(
@@ -198,9 +154,11 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
     full_mass = boundary_mass(mesh.points, edges, mesh.n_points)
     lumped = np.asarray(full_mass.sum(axis=1)).ravel()[nodes]
     consistent = full_mass[nodes][:, nodes].tocsr()
+    points = mesh.points[nodes]
     return ContactBoundary(
-        nodes=nodes, edges=edges, gap=obstacle.gap(mesh.points[nodes]), abscissa=abscissa, obstacle=obstacle,
+        nodes=nodes, edges=edges, gap=obstacle.gap(points), abscissa=abscissa, obstacle=obstacle,
         masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent), beyond=beyond,
+        normals=obstacle.normals(points),
     )
 
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from contactfem.case import Case
-from contactfem.discretize.contact import FlatObstacle
+from contactfem.discretize.obstacles import obstacle_of
 from contactfem.errors import CaseError
 from contactfem.mesh import Mesh
 
@@ -47,7 +47,7 @@ def check_exact_contact(case: Case, mesh: Mesh, edges: np.ndarray) -> None:
         ``file: exact.displacement: <condition> fails at (x, y) (value ..., tolerance ...)``.
     """
     exact = exact_fields(case)
-    obstacle = FlatObstacle.from_case(case)
+    obstacle = obstacle_of(case.obstacle)
     a, b = mesh.points[edges[:, 0]], mesh.points[edges[:, 1]]
     where = np.concatenate([(1 - s) * a + s * b for s in EXACT_CHECK_POINTS])
     x, y = where.T

@@ -148,9 +148,9 @@ def _contact_samples(case: Case) -> tuple[np.ndarray, np.ndarray]:
     samples = np.concatenate(samples)
     ends = _segment_ends_on_body(case, samples)
     if case.obstacle.ends is not None:
-        from contactfem.discretize.contact import FlatObstacle
+        from contactfem.discretize.obstacles import obstacle_of
 
-        facing = FlatObstacle.from_case(case).faces(samples)
+        facing = obstacle_of(case.obstacle).faces(samples)
         samples = samples[facing] if facing.any() else samples
     return samples, ends
 
@@ -165,9 +165,9 @@ def _segment_ends_on_body(case: Case, samples: np.ndarray) -> np.ndarray:
     within ΓC's extent along it (a punch narrower than the body), (e, 2); empty otherwise."""
     if case.obstacle.ends is None:
         return np.zeros((0, 2))
-    from contactfem.discretize.contact import FlatObstacle
+    from contactfem.discretize.obstacles import obstacle_of
 
-    obstacle = FlatObstacle.from_case(case)
+    obstacle = obstacle_of(case.obstacle)
     along = obstacle.abscissa(samples)
     found = []
     for end in obstacle.abscissa(obstacle.ends):
