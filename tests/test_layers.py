@@ -205,3 +205,52 @@ def test_the_cycle_finder_finds_a_cycle_and_only_a_cycle(tmp_path, source, expec
     (package / "b.py").write_text("def f():\n    from contactfem.a import g\n")
     (package / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import contactfem.a\n")
     assert cycles(import_graph(package)) == expected
+
+
+#: What the kernel's modules may import of the package: each other, the linear solvers, the
+#: errors and the reporting clock.
+KERNEL_MAY_IMPORT = ("contactfem.kernel", "contactfem.linalg", "contactfem.errors", "contactfem.timings")
+#: The modules that may reach CHOLMOD's library through ctypes, with its hard-coded layout.
+CTYPES_ROUTE = ("contactfem.linalg.cholmod_direct", "contactfem.linalg.cholmod_ctypes")
+
+
+def test_the_kernel_imports_only_itself_the_solvers_errors_and_the_reporting_clock():
+    graph = import_graph()
+    beyond = [(m, t) for m in graph if _within(m, ("contactfem.kernel",)) for t in graph[m]
+              if not _within(t, KERNEL_MAY_IMPORT)]
+    assert beyond == []
+
+
+def test_the_newton_loop_reaches_the_linear_algebra_only_through_its_solver():
+    """The loop reads as an algorithm: the factorisations are the Schur solver's business."""
+    graph = import_graph()
+    assert not any(_within(t, ("contactfem.linalg",)) for t in graph["contactfem.kernel.newton"])
+    assert "contactfem.kernel.schur" in graph["contactfem.kernel.newton"]
+
+
+def test_the_linear_solvers_import_only_themselves_and_the_errors():
+    graph = import_graph()
+    beyond = [(m, t) for m in graph if _within(m, ("contactfem.linalg",)) for t in graph[m]
+              if not _within(t, ("contactfem.linalg", "contactfem.errors"))]
+    assert beyond == []
+
+
+def test_the_ctypes_route_is_reached_only_through_cvxopts_backend():
+    """The direct CHOLMOD route, with its struct offsets, stays behind one switch: only the
+    cvxopt backend (which checks contactfem.linalg.direct_cholmod_enabled) imports it."""
+    graph = import_graph()
+    reaching = sorted(m for m in graph for t in graph[m] if _within(t, CTYPES_ROUTE) and not _within(m, CTYPES_ROUTE))
+    assert reaching == ["contactfem.linalg.cholmod_cvxopt"]
+
+
+def test_the_discretisation_asks_the_obstacle_through_its_protocol():
+    """No module beyond the obstacles' own builds a concrete obstacle: they call obstacle_of."""
+    concrete = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name == "obstacles.py":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("HalfPlane", "Segment"):
+                concrete.append(f"{path.name}:{node.lineno}")
+    assert concrete == []
