@@ -43,6 +43,7 @@ import numpy as np
 
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh
+from contactfem.discretize.meshing import MeshRequest
 # Some names are re-exported: the assembly lived here.
 from contactfem.distributed_assembly import (  # noqa: F401
     ELEMENT_CHUNK,
@@ -291,11 +292,11 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
     from contactfem.result import ContactFields
     from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
 
-    def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
-        return _problem_without_stiffness(coarse_case, build_mesh(coarse_case, refine=refine), refine)
+    def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
+        return _problem_without_stiffness(case, build_mesh(case, refine=refine, request=request), refine, request)
 
-    def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
-        level = _solve_level(PETSc, MPI, comm, coarse_case, coarse_problem, SEQUENCING_METHOD, solver,
+    def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:
+        level = _solve_level(PETSc, MPI, comm, case, coarse_problem, SEQUENCING_METHOD, solver,
                              lambda message: None, True, {})
         try:
             contact, kernel = coarse_problem.contact, level.kernel
@@ -308,7 +309,7 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
         finally:
             level.linear.destroy()
 
-    return predict_from_coarser(case, problem, lambda: c, say, prepare_coarse, solve_coarse)
+    return predict_from_coarser(problem, lambda: c, say, prepare_coarse, solve_coarse)
 
 
 def distributed_report(case: Case, outcome: DistributedResult, extras: dict | None = None) -> dict:
@@ -325,13 +326,13 @@ def _peak_rss() -> int:
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
-def _problem_without_stiffness(case: Case, mesh, refinements: int) -> DiscreteProblem:
+def _problem_without_stiffness(case: Case, mesh, refinements: int, request: MeshRequest | None = None) -> DiscreteProblem:
     """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
     is None until rank 0 gets a :class:`SolutionProduct`); refuses what this backend does
     not handle yet."""
     from contactfem.discretize import build_problem
 
-    problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False)
+    problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
     if problem.platens:
         raise SolverError(f"{case.source.name}: the petsc backend does not handle platens yet "
                           f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")

@@ -1,4 +1,4 @@
-"""Mesh sequencing, as pure steps: the same case on a coarser mesh, whether solving it first pays, and the active set it predicts.
+"""Mesh sequencing, as pure steps: a coarser mesh request, whether solving the case on it first pays, and the active set it predicts.
 
 The coarse solution (h four times larger, but never fewer than four cells across a
 rectangle's thin side: a body in bending must bend like its fine mesh) is read along ΓC as functions of the abscissa
@@ -6,7 +6,7 @@ on the obstacle: its pressure λ and its normal displacement u_n. At each fine c
 node the indicator of the active set iteration, λ ω + c (u_n − g), is evaluated with those
 interpolated values and the fine gap; the nodes where it is positive start active. Only
 nodes near the ends of contact patches can be mispredicted, so the fine iteration starts
-a node or so per patch end from its answer. The recursion (solve the coarse case, itself
+a node or so per patch end from its answer. The recursion (solve the coarse level, itself
 predicted from a coarser one) lives in :mod:`contactfem.solve`.
 
 A polygon whose boundary is finer than the coarse mesh (a rough profile of thousands of
@@ -32,9 +32,9 @@ import scipy.sparse as sp
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from contactfem.assembly import Elasticity
-from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.case import MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
-from contactfem.discretize.meshing import estimate_triangles
+from contactfem.discretize.meshing import MeshRequest, estimate_triangles
 from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
 from contactfem.linalg import factorize
@@ -144,9 +144,11 @@ def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int, meshed: bool = T
     return cost < EXPECTED_SAVING_SOLVES
 
 
-def coarser(case: Case, refinements: int, factor: int | None = None) -> tuple[Case, int] | None:
-    """The same case on a mesh ``factor`` times coarser (or twice, if that is all the
-    mesh allows), with its refinement count; None if it cannot be coarsened. By default
+def coarser(request: MeshRequest, refinements: int, factor: int | None = None) -> tuple[MeshRequest, int] | None:
+    """The mesh ``request`` (a discrete problem's ``mesh_request``) ``factor`` times coarser
+    (or twice, if that is all the mesh allows), with its refinement count; None if it cannot
+    be coarsened. The request is not rewritten: the coarser level is the same request meshed from
+    this request. By default
     :data:`COARSENING`, and for an unrefined polygon whose coarse level would keep more than
     :data:`COARSE_SHARE` of its estimated triangles, twice or four times that, as long as
     each doubling halves the estimate about (see :data:`FURTHER_COARSENING_SHARE`).
@@ -158,14 +160,14 @@ def coarser(case: Case, refinements: int, factor: int | None = None) -> tuple[Ca
     :func:`decimated_loop`); a loop whose decimation would not be simple keeps its vertices.
     """
     if factor is not None:
-        return _coarser_by(case, refinements, factor)
+        return _coarser_by(request, refinements, factor)
     factor = COARSENING
-    coarse = _coarser_by(case, refinements, factor)
-    if coarse is None or refinements or not isinstance(case.geometry, PolygonGeometry):
+    coarse = _coarser_by(request, refinements, factor)
+    if coarse is None or refinements or not isinstance(request.geometry, PolygonGeometry):
         return coarse
-    fine, estimate = estimate_triangles(case, refinements), estimate_triangles(*coarse)
+    fine, estimate = estimate_triangles(request, refinements), estimate_triangles(*coarse)
     while factor < COARSENING**2 and estimate > COARSE_SHARE * fine:
-        further = _coarser_by(case, refinements, 2 * factor)
+        further = _coarser_by(request, refinements, 2 * factor)
         further_estimate = None if further is None else estimate_triangles(*further)
         if further_estimate is None or further_estimate > FURTHER_COARSENING_SHARE * estimate:
             break
@@ -173,40 +175,40 @@ def coarser(case: Case, refinements: int, factor: int | None = None) -> tuple[Ca
     return coarse
 
 
-def _coarser_by(case: Case, refinements: int, factor: int) -> tuple[Case, int] | None:
+def _coarser_by(request: MeshRequest, refinements: int, factor: int) -> tuple[MeshRequest, int] | None:
     """:func:`coarser` by the given ``factor``."""
-    if isinstance(case.geometry, RectangleGeometry):
-        return _coarser_rectangle(case, refinements, factor)
+    if isinstance(request.geometry, RectangleGeometry):
+        return _coarser_rectangle(request, refinements, factor)
     if refinements >= 1:
-        return case, max(refinements - (factor.bit_length() - 1), 0)
-    settings = case.mesh
-    if isinstance(case.geometry, PolygonGeometry):
+        return request, max(refinements - (factor.bit_length() - 1), 0)
+    settings = request.mesh
+    if isinstance(request.geometry, PolygonGeometry):
         contact_size = None if settings.contact_size is None else factor * settings.contact_size
         mesh = replace(settings, size=factor * settings.size, contact_size=contact_size)
-        coarse_edge = {name: mesh.size for name in _part_names(case.geometry)}
+        coarse_edge = {name: mesh.size for name in _part_names(request.geometry)}
         if contact_size is not None:
-            coarse_edge.update({name: contact_size for name in case.contact_parts})
-        outer = decimated_loop(case.geometry.outer, factor, coarse_edge)
-        holes = tuple(decimated_loop(hole, factor, coarse_edge) for hole in case.geometry.holes)
+            coarse_edge.update({name: contact_size for name in request.contact_parts})
+        outer = decimated_loop(request.geometry.outer, factor, coarse_edge)
+        holes = tuple(decimated_loop(hole, factor, coarse_edge) for hole in request.geometry.holes)
         if outer is not None and _signed_area(outer.vertices) <= 0.0:
             outer = None  # the case's outer loop is counter-clockwise; so must its decimation be
         geometry = PolygonGeometry(
-            outer if outer is not None else case.geometry.outer,
-            tuple(new if new is not None else old for new, old in zip(holes, case.geometry.holes)),
+            outer if outer is not None else request.geometry.outer,
+            tuple(new if new is not None else old for new, old in zip(holes, request.geometry.holes)),
         )
-        return replace(case, geometry=geometry, mesh=mesh), 0
-    assert isinstance(case.geometry, MeshFileGeometry)
+        return replace(request, geometry=geometry, mesh=mesh), 0
+    assert isinstance(request.geometry, MeshFileGeometry)
     return None
 
 
-def _coarser_rectangle(case: Case, refinements: int, factor: int) -> tuple[Case, int] | None:
+def _coarser_rectangle(request: MeshRequest, refinements: int, factor: int) -> tuple[MeshRequest, int] | None:
     """A rectangle's coarser level. Its cells across each side (the divisions refined
     ``refinements`` times) are divided by ``factor``, or by 2, or kept: the largest step
     that leaves :data:`MIN_CELLS_ACROSS` cells, or as many as the fine mesh has if fewer.
     None unless the cells are at least halved. Where both sides take the same step, a
     refined mesh's coarser level is its divisions refined fewer times (by the step, or all
     its refinements if fewer), as for any geometry."""
-    nx, ny = case.mesh.divisions
+    nx, ny = request.mesh.divisions
     across = (nx << refinements, ny << refinements)
 
     def step(cells: int) -> int:
@@ -220,9 +222,9 @@ def _coarser_rectangle(case: Case, refinements: int, factor: int) -> tuple[Case,
         return None
     if steps[0] == steps[1] and refinements >= 1:
         # Each refinement undone halves the cells: as many as the step allows, or there are.
-        return case, refinements - min(steps[0].bit_length() - 1, refinements)
+        return request, refinements - min(steps[0].bit_length() - 1, refinements)
     coarse = (across[0] // steps[0], across[1] // steps[1])
-    return replace(case, mesh=replace(case.mesh, divisions=coarse)), 0
+    return replace(request, mesh=replace(request.mesh, divisions=coarse)), 0
 
 
 def decimated_loop(loop: Loop, factor: int, coarse_edge: dict[str, float]) -> Loop | None:

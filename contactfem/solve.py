@@ -19,7 +19,7 @@ import numpy as np
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
-from contactfem.discretize.meshing import estimate_triangles
+from contactfem.discretize.meshing import MeshRequest, estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.errors import CaseError, ContactFemError, SolverError
 from contactfem.kernel import (
@@ -105,19 +105,21 @@ def prepare(
     refine: int | None = None,
     progress: Progress | None = None,
     timings: dict[str, float] | None = None,
+    request: MeshRequest | None = None,
 ) -> DiscreteProblem:
-    """Mesh and assemble ``case``; ``timings`` receives the seconds of ``mesh`` and ``assemble``."""
+    """Mesh and assemble ``case`` (on a coarser level's mesh ``request``, when given);
+    ``timings`` receives the seconds of ``mesh`` and ``assemble``."""
     say = progress or (lambda message: None)
     timings = {} if timings is None else timings
-    refinements = case.mesh.refine if refine is None else refine
+    refinements = (case.mesh if request is None else request.mesh).refine if refine is None else refine
     clock = time.perf_counter()
     say("meshing")
-    mesh = build_mesh(case, refine=refine)
+    mesh = build_mesh(case, refine=refine, request=request)
     timings["mesh"] = time.perf_counter() - clock
     say(f"  {mesh.n_points} nodes, {mesh.n_triangles} triangles ({timings['mesh']:.2f} s)")
     clock = time.perf_counter()
     say("assembling")
-    problem = build_problem(case, mesh, refinements=refinements)
+    problem = build_problem(case, mesh, refinements=refinements, request=request)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes ({timings['assemble']:.2f} s)")
     return problem
@@ -192,7 +194,7 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
     sequenced = accelerators.sequencing
     coarse_first = (sequenced and worth_sequencing(problem.n_unknowns)
                     and prediction_first(problem.contact.gap, tolerance)
-                    and "solve" not in kept and _worth_meshing(case, problem, kept))
+                    and "solve" not in kept and _worth_meshing(problem, kept))
     with ThreadPoolExecutor(max_workers=1) if coarse_first else _InPlace() as pool:
         # This level's kernel system, its solver and that solver's ordering and symbolic
         # analysis are made while the coarser levels mesh and solve (the analysis runs
@@ -260,13 +262,13 @@ def case_accelerators(case: Case) -> Accelerators:
                         schur_updates=switches.schur_updates)
 
 
-def _worth_meshing(case: Case, problem: DiscreteProblem, kept: dict) -> bool:
+def _worth_meshing(problem: DiscreteProblem, kept: dict) -> bool:
     """Whether ``problem``'s coarser level is expected to pay for its meshing
     (:func:`contactfem.sequencing.coarse_level_pays` on its estimated unknowns); the level's
     case is kept in ``kept`` for :func:`coarser_level`."""
     if "coarser" not in kept:
-        kept["coarser"] = coarser(case, problem.refinements)
-    return kept["coarser"] is not None and _meshing_pays(problem, case, *kept["coarser"])
+        kept["coarser"] = coarser(problem.mesh_request, problem.refinements)
+    return kept["coarser"] is not None and _meshing_pays(problem, *kept["coarser"])
 
 
 class _InPlace:
@@ -448,14 +450,13 @@ def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: floa
     ``c``), or None where a single solve would not sequence either: a small problem, no
     coarser mesh, a level that does not pay for itself, one the mesher refuses."""
     started = time.perf_counter()
-    level = coarser_level(case, problem, lambda coarse_case, refine: prepare(coarse_case, refine=refine))
-    if level is None:
+    coarse_problem = coarser_level(problem, lambda request, refine: prepare(case, refine=refine, request=request))
+    if coarse_problem is None:
         return None
-    coarse_case, coarse_problem = level
     reduced = coarse_problem.contact_system(get_method(SEQUENCING_METHOD))
     coarse_c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
-    below = _coarse_path(coarse_case, coarse_problem, coarse_c, tolerance, max_iterations)
-    path = PathSolver(reduced.system, backend=_serial_backend(coarse_case), c=coarse_c, tolerance=tolerance,
+    below = _coarse_path(case, coarse_problem, coarse_c, tolerance, max_iterations)
+    path = PathSolver(reduced.system, backend=_serial_backend(case), c=coarse_c, tolerance=tolerance,
                       max_iterations=max_iterations, starts=None if below is None else PredictedStarts(below.predict))
     return CoarsePath(problem, coarse_problem, reduced, path, c, below, time.perf_counter() - started)
 
@@ -519,20 +520,20 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
     """
     kept = {} if coarse_levels is None else coarse_levels
 
-    def solve_coarse(coarse_case: Case, coarse_problem: DiscreteProblem) -> CoarseSolve:
+    def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:
         if "solve" in kept:
             return dataclasses.replace(kept["solve"], reused=True)
         # Only the contact fields and the displacement are read: no stresses.
-        coarse, kernel, sequencing = _contact_solve(coarse_case, coarse_problem, get_method(SEQUENCING_METHOD),
-                                                    _serial_backend(coarse_case), lambda message: None)
+        coarse, kernel, sequencing = _contact_solve(case, coarse_problem, get_method(SEQUENCING_METHOD),
+                                                    _serial_backend(case), lambda message: None)
         displacement = coarse.displacement(kernel.displacement)
         kept["solve"] = CoarseSolve(_contact_fields(coarse_problem, displacement, kernel), kernel, sequencing,
                                     coarse_problem.mesh, displacement)
         return kept["solve"]
 
-    def prepare_coarse(coarse_case: Case, refine: int) -> DiscreteProblem:
+    def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
         if "problem" not in kept:
-            kept["problem"] = prepare(coarse_case, refine=refine)
+            kept["problem"] = prepare(case, refine=refine, request=request)
         return kept["problem"]
 
     def correct(coarse: CoarseSolve, active: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -540,7 +541,7 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
         return correct_in_layer(reduced, coarse, active, c, case.solver.tolerance, case.solver.max_iterations,
                                 _serial_backend(case))
 
-    return predict_from_coarser(case, problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced,
+    return predict_from_coarser(problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced,
                                 kept.get("coarser"))
 
 
@@ -604,58 +605,57 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     }
 
 
-def coarser_level(case: Case, problem: DiscreteProblem, prepare_coarse: Callable[[Case, int], DiscreteProblem],
-                  forced: bool = False, coarse: tuple[Case, int] | None = None) -> tuple[Case, DiscreteProblem] | None:
-    """The coarser level that predicts ``problem``'s active set (its case, and its problem
-    from ``prepare_coarse``), or None when the problem is small, no coarser mesh exists,
-    the mesher or the contact checks refuse the decimated boundary, or the level is not
-    expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`, decided
-    before it is meshed from an estimate of its unknowns, and again from them once it is).
-    ``forced``: whatever the size and the cost model
-    (a cold start that stalled), as long as the coarser mesh is smaller. ``coarse``: the
-    coarser case and its refinements, when already made."""
+def coarser_level(problem: DiscreteProblem, prepare_coarse: Callable[[MeshRequest, int], DiscreteProblem],
+                  forced: bool = False, coarse: tuple[MeshRequest, int] | None = None) -> DiscreteProblem | None:
+    """The coarser level that predicts ``problem``'s active set (its problem, from
+    ``prepare_coarse`` on the coarser mesh request that :func:`contactfem.sequencing.coarser`
+    derives from ``problem.mesh_request``), or None when the problem is small, no coarser
+    mesh exists, the mesher or the contact checks refuse the decimated boundary, or the level
+    is not expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`,
+    decided before it is meshed from an estimate of its unknowns, and again from them once
+    it is). ``forced``: whatever the size and the cost model (a cold start that stalled), as
+    long as the coarser mesh is smaller. ``coarse``: the coarser request and its
+    refinements, when already made."""
     if not forced and not worth_sequencing(problem.n_unknowns):
         return None
-    coarse = coarser(case, problem.refinements) if coarse is None else coarse
+    coarse = coarser(problem.mesh_request, problem.refinements) if coarse is None else coarse
     if coarse is None:
         return None
-    coarse_case, coarse_refine = coarse
-    if not forced and not _meshing_pays(problem, case, coarse_case, coarse_refine):
+    request, coarse_refine = coarse
+    if not forced and not _meshing_pays(problem, request, coarse_refine):
         return None  # not worth meshing: a tread's teeth keep 38% of the unknowns at every level
     try:
-        coarse_problem = prepare_coarse(coarse_case, coarse_refine)
+        coarse_problem = prepare_coarse(request, coarse_refine)
     except ContactFemError:
         return None
     if not (coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns)
             or forced and coarse_problem.n_unknowns < problem.n_unknowns):
         return None
-    return coarse_case, coarse_problem
+    return coarse_problem
 
 
-def _meshing_pays(problem: DiscreteProblem, case: Case, coarse_case: Case, coarse_refine: int) -> bool:
-    """Whether the coarser level ``coarse_case`` is worth meshing: the cost model, meshing
+def _meshing_pays(problem: DiscreteProblem, request: MeshRequest, coarse_refine: int) -> bool:
+    """Whether the coarser level ``request`` is worth meshing: the cost model, meshing
     included, on its :func:`_estimated_unknowns`."""
-    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, case, coarse_case, coarse_refine),
-                             meshed=False)
+    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, request, coarse_refine), meshed=False)
 
 
-def _estimated_unknowns(problem: DiscreteProblem, case: Case, coarse_case: Case, coarse_refine: int) -> int:
+def _estimated_unknowns(problem: DiscreteProblem, request: MeshRequest, coarse_refine: int) -> int:
     """The coarser level's unknowns before it is meshed: ``problem``'s in the ratio of the two
-    meshes' estimated triangles (:func:`contactfem.discretize.meshing.estimate_triangles`,
-    within 10% of the measured ratio on the shipped polygons, the rough profiles and the
-    strips, 16% under it on a tread's teeth); a sixteenth where nothing is estimated."""
-    fine = estimate_triangles(case, problem.refinements)
-    coarse = estimate_triangles(coarse_case, coarse_refine)
+    meshes' estimated triangles (:func:`contactfem.discretize.meshing.estimate_triangles`);
+    a sixteenth where nothing is estimated."""
+    fine = estimate_triangles(problem.mesh_request, problem.refinements)
+    coarse = estimate_triangles(request, coarse_refine)
     if fine <= 0 or coarse <= 0:
         return problem.n_unknowns // 16
     return int(problem.n_unknowns * min(coarse / fine, 1.0))
 
 
-def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], float], say: Progress,
-                         prepare_coarse: Callable[[Case, int], DiscreteProblem],
-                         solve_coarse: Callable[[Case, DiscreteProblem], CoarseSolve],
+def predict_from_coarser(problem: DiscreteProblem, c: Callable[[], float], say: Progress,
+                         prepare_coarse: Callable[[MeshRequest, int], DiscreteProblem],
+                         solve_coarse: Callable[[DiscreteProblem], CoarseSolve],
                          correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
-                         forced: bool = False, coarse: tuple[Case, int] | None = None,
+                         forced: bool = False, coarse: tuple[MeshRequest, int] | None = None,
                          ) -> tuple[np.ndarray | None, dict]:
     """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
     process, or across MPI ranks), and optionally to ``correct`` its prediction on the
@@ -664,15 +664,14 @@ def predict_from_coarser(case: Case, problem: DiscreteProblem, c: Callable[[], f
 
     (None, {}) when there is no :func:`coarser_level` (``forced``: see there) or solving it
     fails: a prediction is only a starting point, and without one the kernel starts cold.
-    ``coarse``: the coarser case and its refinements, when already made (:func:`coarser`).
+    ``coarse``: the coarser mesh request and its refinements, when already made (:func:`coarser`).
     """
     started = time.perf_counter()
-    level = coarser_level(case, problem, prepare_coarse, forced, coarse)
-    if level is None:
+    coarse_problem = coarser_level(problem, prepare_coarse, forced, coarse)
+    if coarse_problem is None:
         return None, {}
-    coarse_case, coarse_problem = level
     try:
-        coarse_result = solve_coarse(coarse_case, coarse_problem)
+        coarse_result = solve_coarse(coarse_problem)
     except SolverError:
         return None, {}
     coarse_kernel = coarse_result.kernel

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from conftest import case_from, square_case_dict
 
+from contactfem.discretize.meshing import MeshRequest
 from contactfem.case import PolygonGeometry
 from contactfem.mesh.polygon import Loop, polygon_problems
 from contactfem.sequencing import (
@@ -73,7 +74,7 @@ def test_a_rough_base_is_decimated_with_its_mesh_and_stays_a_valid_polygon():
     """400 base segments, coarse edge length 4x the segments': every fourth vertex is kept
     (100 segments), the three other edges unchanged, counter-clockwise, named as before."""
     case = rough_polygon_case(400)
-    coarse, refine = coarser(case, 0, factor=4)
+    coarse, refine = coarser(MeshRequest.of(case), 0, factor=4)
     assert refine == 0 and coarse.mesh.size == pytest.approx(4 * case.mesh.size)
     loop = coarse.geometry.outer
     assert loop.edge_names.count("base") == 100
@@ -106,23 +107,23 @@ def test_a_mesh_graded_onto_its_boundary_is_coarsened_until_it_keeps_a_sixteenth
     # The test's block, its interior meshed at 28 base segments: 0.18, 0.082 and 0.040 of
     # the triangles at 4, 8 and 16; the shipped one at 4 segments: 0.25, 0.12 and 0.061.
     for case, factor in ((rough_polygon_case(1600), 8), (load_case(cases / "rough.yaml"), 16)):
-        coarse, refine = coarser(case, 0)
+        coarse, refine = coarser(MeshRequest.of(case), 0)
         assert refine == 0 and coarse.mesh.size == pytest.approx(factor * case.mesh.size)
         segments = case.geometry.outer.edge_names.count("base")
         assert coarse.geometry.outer.edge_names.count("base") == -(-segments // factor)
         fine = estimate_triangles(case, 0)
         assert estimate_triangles(coarse, 0) <= COARSE_SHARE * fine
-        half, _ = coarser(case, 0, factor=factor // 2)
+        half, _ = coarser(MeshRequest.of(case), 0, factor=factor // 2)
         assert estimate_triangles(half, 0) > COARSE_SHARE * fine
     for kept in (teeth_case(80), load_case(cases / "hole.yaml")):
-        coarse, _ = coarser(kept, 0)
+        coarse, _ = coarser(MeshRequest.of(kept), 0)
         assert coarse.mesh.size == pytest.approx(4 * kept.mesh.size)
 
 
 def test_edges_already_as_long_as_the_coarse_mesh_are_kept():
     """The shipped polygons (and a 4-edge block) are only meshed coarser, never decimated."""
     case = rough_polygon_case(8, size=0.01)
-    coarse, _ = coarser(case, 0)
+    coarse, _ = coarser(MeshRequest.of(case), 0)
     np.testing.assert_array_equal(coarse.geometry.outer.vertices, case.geometry.outer.vertices)
     assert decimated_loop(case.geometry.outer, 4, {"base": 0.01}) is None
 
@@ -160,8 +161,8 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     case = teeth_case(80)
     problem = solve_module.prepare(case)
     assert problem.n_unknowns > SEQUENCING_THRESHOLD
-    coarse_case, refine = coarser(case, problem.refinements)
-    estimated = solve_module._estimated_unknowns(problem, case, coarse_case, refine)
+    request, refine = coarser(problem.mesh_request, problem.refinements)
+    estimated = solve_module._estimated_unknowns(problem, request, refine)
     assert 0.25 < estimated / problem.n_unknowns < 0.45
     meshed, workers = [], []
     original = solve_module.prepare
@@ -203,7 +204,7 @@ def test_a_sequenced_rough_solve_has_the_answer_of_a_cold_start(monkeypatch, bes
 
 def test_a_square_is_still_coarsened_by_four():
     case = case_from(square_case_dict(64))
-    coarse, _ = coarser(case, 0)
+    coarse, _ = coarser(MeshRequest.of(case), 0)
     assert coarse.mesh.divisions == (16, 16)
 
 
@@ -221,7 +222,7 @@ def test_a_square_is_still_coarsened_by_four():
 ])
 def test_a_rectangle_keeps_its_cells_across_a_thin_side(divisions, refine, coarse):
     case = case_from({**square_case_dict(), "mesh": {"divisions": list(divisions)}})
-    result = coarser(case, refine)
+    result = coarser(MeshRequest.of(case), refine)
     assert (None if result is None else (result[0].mesh.divisions, result[1])) == coarse
 
 
@@ -294,8 +295,8 @@ def test_the_layer_corrects_a_fragmented_prediction_at_asperity_scale(monkeypatc
     problem = prepare(case)
     reduced = problem.contact_system(get_method("positive"))
     c = default_c(reduced.system)
-    coarse_case, refine = coarser(case, 0)
-    coarse = solve_case(coarse_case, problem=prepare(coarse_case, refine=refine))
+    request, refine = coarser(MeshRequest.of(case), 0)
+    coarse = solve_case(case, problem=prepare(case, refine=refine, request=request))
     level = CoarseSolve(coarse.solution.contact, coarse.kernel, coarse.sequencing, coarse.problem.mesh,
                         coarse.solution.displacement)
     predicted = sequencing.predict_active_set(problem.contact, level.contact, c)
@@ -736,8 +737,8 @@ def _predictions(case, refine: int = 0):
 
     problem = prepare(case, refine=refine)
     reduced = problem.contact_system(get_method("positive"))
-    coarse_case, coarse_refine = coarser(case, refine)
-    coarse = solve_case(coarse_case, problem=prepare(coarse_case, refine=coarse_refine))
+    request, coarse_refine = coarser(MeshRequest.of(case), refine)
+    coarse = solve_case(case, problem=prepare(case, refine=coarse_refine, request=request))
     return problem, reduced, default_c(reduced.system), coarse.solution.contact
 
 

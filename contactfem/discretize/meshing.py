@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from contactfem.case import Case, MeshFileGeometry, PolygonGeometry, RectangleGeometry
+from contactfem.case import Case, MeshFileGeometry, MeshSettings, Obstacle, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError, MeshError
 from contactfem.estimate import MemoryLimit, largest_mesh_points, memory_limit
 from contactfem.mesh import (
@@ -19,38 +21,64 @@ from contactfem.mesh.core import coordinate_span
 from contactfem.mesh.polygon import loop_signed_area
 
 
-def build_mesh(case: Case, refine: int | None = None) -> Mesh:
-    """Mesh the case's geometry, refine it ``refine`` times (default: the case's), and check it."""
+@dataclass(frozen=True, eq=False)
+class MeshRequest:
+    """What a mesh is made from: a geometry, its mesh settings, the contact parts the sizes
+    grade towards and the obstacle whose ends refine them further.
+
+    The case's own (:meth:`of`), or a coarser level's that mesh sequencing derives from it
+    (:func:`contactfem.sequencing.coarser`): the case itself is never rewritten, only the
+    request. Its fields are named as the case's, so that what reads a case's geometry and
+    mesh settings (:func:`estimate_triangles`) reads a request's alike.
+    """
+
+    geometry: RectangleGeometry | PolygonGeometry | MeshFileGeometry
+    mesh: MeshSettings
+    contact_parts: tuple[str, ...]
+    obstacle: Obstacle
+
+    @classmethod
+    def of(cls, case: Case) -> "MeshRequest":
+        return cls(geometry=case.geometry, mesh=case.mesh, contact_parts=tuple(case.contact_parts),
+                   obstacle=case.obstacle)
+
+
+_GEOMETRY_KEYS = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
+
+
+def build_mesh(case: Case, refine: int | None = None, request: MeshRequest | None = None) -> Mesh:
+    """Mesh the case's geometry (or a coarser level's ``request``), refine it ``refine``
+    times (default: the request's), and check it. Messages name the case's file and keys."""
+    shape = MeshRequest.of(case) if request is None else request
     limit = memory_limit()  # read once: the cgroup files and rlimits behind it cost 0.2 ms
-    _refuse_oversized(case, refine, limit)
+    _refuse_oversized(case, shape, refine, limit)
     try:
-        mesh = _mesh_geometry(case, limit)
+        mesh = _mesh_geometry(case, shape, limit)
     except MeshError as error:
-        key = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
-        raise MeshError(f"{case.source.name}: geometry.{key[type(case.geometry)]}: {error}") from None
+        raise MeshError(f"{case.source.name}: geometry.{_GEOMETRY_KEYS[type(shape.geometry)]}: {error}") from None
     missing = [p.name for p in case.parts if p.name not in mesh.part_names]
     if missing:
         raise CaseError(
-            f"{case.source.name}: boundary.{missing[0]}: {_mesh_origin(case)} has no boundary part "
+            f"{case.source.name}: boundary.{missing[0]}: {_mesh_origin(shape)} has no boundary part "
             f"named {missing[0]!r}; it has {', '.join(mesh.part_names)}"
         )
-    times = case.mesh.refine if refine is None else refine
+    times = shape.mesh.refine if refine is None else refine
     # Only now is the mesh's real size known (a mesh file, or a polygon with small features
     # meshed finer than its size asked): the same model checks it before refinements allocate.
-    _refuse_oversized(case, refine, limit, base=mesh.n_triangles)
+    _refuse_oversized(case, shape, refine, limit, base=mesh.n_triangles)
     if times:
         mesh = refine_uniform(mesh, times)
     try:
         check_mesh(mesh)
     except MeshError as error:  # e.g. slivers of a rectangle of aspect 1e9: name the key
-        kind = {RectangleGeometry: "rectangle", PolygonGeometry: "polygon", MeshFileGeometry: "mesh_file"}
-        raise MeshError(f"{case.source.name}: geometry.{kind[type(case.geometry)]}: {error}") from None
+        raise MeshError(f"{case.source.name}: geometry.{_GEOMETRY_KEYS[type(shape.geometry)]}: {error}") from None
     return mesh
 
 
-def estimate_triangles(case: Case, refine: int | None = None) -> int:
-    """Triangles the case will be meshed into, estimated before meshing (0 for mesh files)."""
-    geometry, settings = case.geometry, case.mesh
+def estimate_triangles(shape: Case | MeshRequest, refine: int | None = None) -> int:
+    """Triangles a case (or a :class:`MeshRequest`) will be meshed into, estimated before
+    meshing (0 for mesh files)."""
+    geometry, settings = shape.geometry, shape.mesh
     times = settings.refine if refine is None else refine
     if isinstance(geometry, RectangleGeometry):
         nx, ny = settings.divisions
@@ -80,7 +108,7 @@ def estimate_triangles(case: Case, refine: int | None = None) -> int:
     return int(base * 4**times)
 
 
-def _contact_grading(case: Case):
+def _contact_grading(shape: MeshRequest):
     """The size field h(x) = min(size, contact_size + grading · distance(x, ΓC)).
 
     The distance is to points sampled on the contact edges of the geometry at a quarter
@@ -88,8 +116,8 @@ def _contact_grading(case: Case):
     """
     from scipy.spatial import cKDTree
 
-    settings = case.mesh
-    samples, ends = _contact_samples(case)
+    settings = shape.mesh
+    samples, ends = _contact_samples(shape)
     # Sliding-midpoint splits: the samples lie along curves, and the queries, most of them
     # near ΓC on a graded mesh, ran 1.4x faster than in the default median-split tree.
     tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
@@ -117,14 +145,14 @@ def _contact_grading(case: Case):
     return size
 
 
-def _contact_samples(case: Case) -> tuple[np.ndarray, np.ndarray]:
+def _contact_samples(shape: MeshRequest) -> tuple[np.ndarray, np.ndarray]:
     """Points on ΓC's edges, a quarter of ``mesh.contact_size`` apart (only those in front
     of a finite obstacle, which alone can touch it), and the points of ΓC facing the ends
     of a finite obstacle (:func:`_segment_ends_on_body`)."""
-    settings = case.mesh
+    settings = shape.mesh
     samples = []
-    contact = set(case.contact_parts)
-    for loop in (case.geometry.outer, *case.geometry.holes):
+    contact = set(shape.contact_parts)
+    for loop in (shape.geometry.outer, *shape.geometry.holes):
         k = len(loop.vertices)
         on_contact = loop.on_parts(contact)
         straight = on_contact & loop.straight_edges
@@ -146,11 +174,11 @@ def _contact_samples(case: Case) -> tuple[np.ndarray, np.ndarray]:
             angle = a0 + sweep * np.linspace(0.0, 1.0, n)
             samples.append(center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
     samples = np.concatenate(samples)
-    ends = _segment_ends_on_body(case, samples)
-    if case.obstacle.ends is not None:
+    ends = _segment_ends_on_body(shape, samples)
+    if shape.obstacle.ends is not None:
         from contactfem.discretize.obstacles import obstacle_of
 
-        facing = obstacle_of(case.obstacle).faces(samples)
+        facing = obstacle_of(shape.obstacle).faces(samples)
         samples = samples[facing] if facing.any() else samples
     return samples, ends
 
@@ -160,14 +188,14 @@ def _contact_samples(case: Case) -> tuple[np.ndarray, np.ndarray]:
 END_REFINEMENT = 4
 
 
-def _segment_ends_on_body(case: Case, samples: np.ndarray) -> np.ndarray:
+def _segment_ends_on_body(shape: MeshRequest, samples: np.ndarray) -> np.ndarray:
     """The points of ΓC (from ``samples`` (k, 2)) facing the ends of a finite obstacle that lie
     within ΓC's extent along it (a punch narrower than the body), (e, 2); empty otherwise."""
-    if case.obstacle.ends is None:
+    if shape.obstacle.ends is None:
         return np.zeros((0, 2))
     from contactfem.discretize.obstacles import obstacle_of
 
-    obstacle = obstacle_of(case.obstacle)
+    obstacle = obstacle_of(shape.obstacle)
     along = obstacle.abscissa(samples)
     found = []
     for end in obstacle.abscissa(obstacle.ends):
@@ -176,9 +204,9 @@ def _segment_ends_on_body(case: Case, samples: np.ndarray) -> np.ndarray:
     return np.array(found).reshape(-1, 2)
 
 
-def _mesh_origin(case: Case) -> str:
-    if isinstance(case.geometry, MeshFileGeometry):
-        return f"the mesh file {case.geometry.path.name}"
+def _mesh_origin(shape: MeshRequest) -> str:
+    if isinstance(shape.geometry, MeshFileGeometry):
+        return f"the mesh file {shape.geometry.path.name}"
     return "the mesh"
 
 
@@ -192,7 +220,8 @@ def _backend(case: Case) -> str:
         raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: {error}") from None
 
 
-def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: int | None = None) -> None:
+def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit: MemoryLimit,
+                      base: int | None = None) -> None:
     """Refuse before meshing (``base`` None) or, for a mesh file of ``base`` triangles, before
     refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
     ``contactfem check`` prints) says the memory this process may use, ``limit``, cannot hold
@@ -200,9 +229,9 @@ def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: 
     from contactfem.estimate import backend_refusal, estimate_cost, unknowns_of_triangles
 
     if base is None:
-        triangles = estimate_triangles(case, refine)
+        triangles = estimate_triangles(shape, refine)
     else:
-        triangles = base * 4 ** (case.mesh.refine if refine is None else refine)
+        triangles = base * 4 ** (shape.mesh.refine if refine is None else refine)
     backend = _backend(case)
     unknowns = unknowns_of_triangles(triangles)
     needed = estimate_cost(unknowns, backend)["bytes"]
@@ -218,9 +247,9 @@ def _refuse_oversized(case: Case, refine: int | None, limit: MemoryLimit, base: 
                         f"refinements): {refusal}")
 
 
-def _mesh_geometry(case: Case, limit: MemoryLimit) -> Mesh:
-    geometry = case.geometry
-    settings = case.mesh
+def _mesh_geometry(case: Case, shape: MeshRequest, limit: MemoryLimit) -> Mesh:
+    geometry = shape.geometry
+    settings = shape.mesh
     if isinstance(geometry, RectangleGeometry):
         mesh = structured_rectangle(
             geometry.lower, geometry.upper, *settings.divisions,
@@ -229,7 +258,7 @@ def _mesh_geometry(case: Case, limit: MemoryLimit) -> Mesh:
     elif isinstance(geometry, PolygonGeometry):
         mesh = triangulate_domain(
             geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
-            size=_contact_grading(case) if settings.contact_size is not None else None,
+            size=_contact_grading(shape) if settings.contact_size is not None else None,
             max_points=largest_mesh_points(_backend(case), limit.bytes),
         )
     else:

@@ -14,6 +14,7 @@ from contactfem.discretize.contact import ContactBoundary, contact_boundary
 from contactfem.discretize.exact_checks import check_exact_contact, exact_fields
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
+from contactfem.discretize.meshing import MeshRequest
 from contactfem.discretize.supports import PlatenConstraint, free_rigid_modes, supports
 from contactfem.mesh import Mesh
 from contactfem.methods import ContactMethod
@@ -50,6 +51,9 @@ class DiscreteProblem:
     free_modes: np.ndarray | None = None
     # Rigid frictionless platens: their nodes' normal motion is one unknown each.
     platens: tuple[PlatenConstraint, ...] = ()
+    # What the mesh was made from (the case's geometry and sizes, or a coarser level's):
+    # mesh sequencing derives the next coarser level from it.
+    mesh_request: MeshRequest | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -70,7 +74,8 @@ class DiscreteProblem:
         return ReducedSystem.build(self, method)
 
 
-def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffness: bool = True) -> DiscreteProblem:
+def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffness: bool = True,
+                  request: MeshRequest | None = None) -> DiscreteProblem:
     """Assemble stiffness and loads, impose the supports and find the contact nodes.
 
     Without ``assemble_stiffness`` the problem's ``stiffness`` is None: a caller that
@@ -92,5 +97,5 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
         dirichlet_dofs=held.dirichlet_dofs, dirichlet_values=held.dirichlet_values, contact=contact, loads=loads,
         exact=exact, refinements=refinements, symmetry_nodes=held.symmetry_nodes,
         symmetry_normals=held.symmetry_normals, free_modes=free_modes if free_modes.shape[1] else None,
-        platens=held.platens,
+        platens=held.platens, mesh_request=MeshRequest.of(case) if request is None else request,
     )
