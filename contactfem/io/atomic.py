@@ -1,16 +1,59 @@
-"""Atomic file replacement, so that a crash or an error never leaves a half-written output file."""
+"""Atomic file replacement, and the claim through which every writing command puts its files
+into an output directory.
+
+One file: :func:`atomic_path` writes a temporary next to the file and renames it over the
+file, so a crash or an error never leaves a half-written output file.
+
+A result (several files): a command claims its output directory with
+:func:`claimed_directory` and writes into :meth:`ClaimedDirectory.stage`. What follows is
+what that mechanism does and guarantees.
+
+The claim
+    The output directory ``OUT`` is opened once and held by file descriptor for the whole
+    run; every later operation on it is relative to that descriptor (``dir_fd=``), and the
+    path is checked to name the same directory (device and inode) before anything is
+    switched in: a directory renamed away or replaced (by a symbolic link, by another
+    directory) during the run is refused, never written through. The lock is the file
+    ``OUT/.contactfem.lock``, opened with ``O_NOFOLLOW`` relative to the held directory (a
+    symbolic link there is refused) and locked with ``flock``; the kernel releases that lock
+    when its process dies, so a lock file left by a killed run does not block the next one.
+    The holder removes the lock file on every way out (success, error, KeyboardInterrupt,
+    SIGTERM as :mod:`contactfem.interrupts` turns it into an exception).
+
+Staging
+    The command writes plain files into ``OUT/.tmp-<pid>-<token>.staging/`` (a fresh
+    directory holding the marker file ``.contactfem-staging``). If the block raises, that
+    directory is removed and nothing in ``OUT`` changes.
+
+The switch-over
+    Once the block completes, ``.switch.json`` in the staging directory records the
+    decision; the staged files are then moved into ``OUT`` one by one (the last file named
+    by ``stage(last=...)`` last) and the files this run replaces are removed. A run killed
+    during the moves is completed by the next contactfem command that claims the directory.
+
+Leftovers and names read from disk
+    A claim removes only what the mechanism provably made: staging directories by their
+    full names (pid and random token) and the marker inside them, temporary files of
+    :func:`atomic_path` by their full name whose process is gone. A journal is executed only if every name in it is a plain name (no separator, no
+    ``..``, not absolute) that a contactfem writer produces (:data:`OUTPUT_NAMES`);
+    otherwise it is ignored. Nothing is ever deleted or written outside ``OUT``.
+"""
 
 from __future__ import annotations
 
+import errno
 import fnmatch
 import json
 import os
+import re
 import secrets
 import shutil
 import signal
+import stat
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 from contactfem import interrupts
@@ -18,6 +61,9 @@ from contactfem.errors import ExistingResultError, OutputError
 
 __all__ = [
     "LOCK_FILE",
+    "OUTPUT_NAMES",
+    "STAGING_MARKER",
+    "SWITCH_FILE",
     "TEMP_PREFIX",
     "ClaimedDirectory",
     "claimed_directory",
@@ -25,10 +71,43 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "ensure_directory",
+    "is_output_name",
+    "remove_leftover_temporaries",
 ]
 
 #: Every temporary file starts with this, so leftovers of a killed process are easy to spot.
 TEMP_PREFIX = ".tmp-"
+
+#: A temporary made here: ``.tmp-<pid>-<8 hex digits>.<the final name>``.
+_TEMPORARY = re.compile(r"\.tmp-([0-9]{1,10})-([0-9a-f]{8})\.(.+)", re.DOTALL)
+#: A staging directory: ``.tmp-<pid>-<8 hex digits>.staging``.
+_STAGING = re.compile(r"\.tmp-([0-9]{1,10})-([0-9a-f]{8})\.staging")
+#: A run's token: ``<pid>-<8 hex digits>``.
+_TOKEN = re.compile(r"[0-9]{1,10}-[0-9a-f]{8}")
+
+#: The names contactfem's writers give their files (glob patterns for series whose length
+#: varies). Only such names are moved in or deleted on the word of a journal read from disk.
+OUTPUT_NAMES = (
+    "report.json", "contact.csv",
+    "solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "solution.xdmf", "solution-xdmf.h5",
+    "path.pvd", "path.h5", "path.csv", "path.png", "path-*.vtu",
+    "deformed.png", "contact_profile.png",
+    "compare.json", "compare.png", "compare.pvd", "compare-*.vtu",
+    "convergence.json", "convergence.csv", "convergence_h.png", "convergence_time.png",
+    "convergence-*.pvd", "convergence-*.vtu",
+    "adapt.json",
+    "sweep.json", "sweep.csv", "sweep.png",
+)
+#: The characters of a written name (the parts a pattern leaves open are labels and numbers).
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*")
+
+
+def is_output_name(name: object) -> bool:
+    """Whether ``name`` is a plain file name that contactfem's writers produce
+    (:data:`OUTPUT_NAMES`): no separator, no ``..``, not absolute, not hidden."""
+    if not isinstance(name, str) or len(name) > 255 or not _PLAIN_NAME.fullmatch(name):
+        return False
+    return any(fnmatch.fnmatchcase(name, pattern) for pattern in OUTPUT_NAMES)
 
 
 def _reason(exc: OSError) -> str:
@@ -215,6 +294,48 @@ def atomic_write_text(final: Path | str, text: str, encoding: str = "utf-8") -> 
     return atomic_write_bytes(final, text.encode(encoding))
 
 
+def _pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (when unsure: yes, so that nothing of it is removed)."""
+    if pid <= 0:
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OverflowError:
+        return False  # beyond any pid the system hands out
+    except OSError:  # PermissionError: it exists, another user's
+        return True
+    return True
+
+
+def remove_leftover_temporaries(directory: Path | str) -> list[str]:
+    """Remove from ``directory`` the temporary files :func:`atomic_path` made there for a
+    process that is gone (``.tmp-<pid>-<token>.<name>``, not directories); nothing else,
+    whatever its name. Returns the names removed."""
+    removed = []
+    try:
+        fd = os.open(directory, _DIRECTORY_FLAGS)
+    except OSError:
+        return removed
+    try:
+        for name in os.listdir(fd):
+            found = _TEMPORARY.fullmatch(name)
+            if found is None or _pid_alive(int(found[1])):
+                continue
+            info = _lstat_at(fd, name)
+            if info is None or stat.S_ISDIR(info.st_mode):
+                continue
+            try:
+                os.unlink(name, dir_fd=fd)
+                removed.append(name)
+            except OSError:
+                pass
+    finally:
+        os.close(fd)
+    return removed
+
+
 #: The signals held back while a staged result is switched in.
 _DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -245,12 +366,352 @@ def _signals_deferred() -> Iterator[None]:
 
 
 #: The lock every writing command holds on its output directory from before its work
-#: starts until its files are in place.
+#: starts until its files are in place; removed by its holder when the command ends.
 LOCK_FILE = ".contactfem.lock"
-#: Written into a staging directory once all its files are complete: from then on the
-#: switch-over is decided, and a run killed during it is completed by the next command
-#: that claims the directory.
+#: Written into a staging directory once all its files are complete, when they are moved in
+#: one by one (see the module's docstring): from then on the switch-over is decided, and a
+#: run killed during it is completed by the next command that claims the directory.
 SWITCH_FILE = ".switch.json"
+#: The file inside every staging directory that marks it as made by this mechanism; it holds
+#: the directory's ``<pid>-<token>``.
+STAGING_MARKER = ".contactfem-staging"
+#: The largest journal read back (a journal lists file names only).
+_JOURNAL_LIMIT = 1 << 20
+
+_DIRECTORY_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0)
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+
+
+def _reached(step: str) -> None:
+    """Called as each step of a switch-over is done (the tests stop a run here)."""
+
+
+def _lstat_at(directory_fd: int, name: str) -> os.stat_result | None:
+    try:
+        return os.stat(name, dir_fd=directory_fd, follow_symlinks=False)
+    except FileNotFoundError:
+        return None
+
+
+def _same(a: os.stat_result | None, b: os.stat_result | None) -> bool:
+    return a is not None and b is not None and (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+
+def _open_directory_at(directory_fd: int, name: str) -> int:
+    """The directory ``name`` in ``directory_fd``, never through a symbolic link."""
+    return os.open(name, _DIRECTORY_FLAGS | _NOFOLLOW, dir_fd=directory_fd)
+
+
+def _close(fd: int | None) -> None:
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+
+
+def _write_file_at(directory_fd: int, name: str, data: bytes) -> None:
+    """Create ``name`` (it must not exist) in ``directory_fd`` with ``data``, synced."""
+    fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW | getattr(os, "O_CLOEXEC", 0), 0o666,
+                 dir_fd=directory_fd)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _read_file_at(directory_fd: int, name: str, limit: int = _JOURNAL_LIMIT) -> bytes | None:
+    """The content of the regular file ``name`` (not through a link), or None."""
+    try:
+        fd = os.open(name, os.O_RDONLY | _NOFOLLOW | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0),
+                     dir_fd=directory_fd)
+    except OSError:
+        return None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_size > limit:
+            return None
+        chunks, size = [], 0
+        while size <= limit:
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return b"".join(chunks)
+            chunks.append(chunk)
+            size += len(chunk)
+        return None
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+
+
+def _remove_tree(directory_fd: int, name: str) -> None:
+    """Remove ``name`` in ``directory_fd`` and all it holds, following no symbolic link."""
+    info = _lstat_at(directory_fd, name)
+    if info is None:
+        return
+    if stat.S_ISDIR(info.st_mode):
+        shutil.rmtree(name, dir_fd=directory_fd)
+    else:
+        os.unlink(name, dir_fd=directory_fd)
+
+
+def _remove_directory_held(parent_fd: int, name: str, held_fd: int) -> None:
+    """Remove the directory ``name`` of ``parent_fd`` and all it holds, if it is still the
+    directory held by ``held_fd`` (never whatever was put in its place)."""
+    if _same(_lstat_at(parent_fd, name), os.fstat(held_fd)):
+        try:
+            shutil.rmtree(name, dir_fd=parent_fd)
+        except OSError:
+            pass
+
+
+def _fsync_fd(fd: int) -> None:
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+
+
+# ----------------------------------------------------------------------------- journals
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """The files a switch-over moves in (the last one last) and the files it removes."""
+
+    files: tuple[str, ...]
+    replaces: tuple[str, ...]
+    token: str | None = None
+
+    def dump(self) -> bytes:
+        return json.dumps({"token": self.token, "files": list(self.files),
+                           "replaces": list(self.replaces)}).encode("utf-8")
+
+
+def _read_journal(directory_fd: int, name: str) -> _Plan | None:
+    """The plan in the journal ``name``, or None if it is not one this mechanism wrote: not
+    JSON, a name that is not a plain output name (:func:`is_output_name`), a token that is
+    not ``<pid>-<8 hex digits>``. A journal read from disk is never trusted further than
+    that; the caller checks that its token is the one it expects."""
+    data = _read_file_at(directory_fd, name)
+    if data is None:
+        return None
+    try:
+        content = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError):
+        return None
+    if not isinstance(content, dict):
+        return None
+    files, replaces, token = content.get("files"), content.get("replaces"), content.get("token")
+    if not isinstance(files, list) or not isinstance(replaces, list):
+        return None
+    if token is not None and not (isinstance(token, str) and _TOKEN.fullmatch(token)):
+        return None
+    names = files + replaces
+    if not all(is_output_name(n) for n in names) or len(set(names)) != len(names):
+        return None
+    return _Plan(tuple(files), tuple(replaces), token)
+
+
+def _marked(staging_fd: int, token: str) -> bool:
+    return _read_file_at(staging_fd, STAGING_MARKER, 64) == token.encode("ascii")
+
+
+def _only_regular_files(directory_fd: int) -> bool:
+    for name in os.listdir(directory_fd):
+        info = _lstat_at(directory_fd, name)
+        if info is not None and not stat.S_ISREG(info.st_mode):
+            return False
+    return True
+
+
+def _move_in(directory_fd: int, staging_fd: int, plan: _Plan) -> None:
+    """Move the plan's files from the staging directory into the output directory, then
+    remove the files it replaces (idempotent: a file already moved is skipped)."""
+    for name in plan.files:
+        info = _lstat_at(staging_fd, name)
+        if info is None:
+            continue
+        if not stat.S_ISREG(info.st_mode):
+            raise OSError(errno.EINVAL, f"{name} in the staging area is not a regular file")
+        os.replace(name, name, src_dir_fd=staging_fd, dst_dir_fd=directory_fd)
+        _reached(f"moved {name}")
+    for name in plan.replaces:
+        info = _lstat_at(directory_fd, name)
+        if info is not None and not stat.S_ISDIR(info.st_mode):
+            os.unlink(name, dir_fd=directory_fd)
+    _fsync_fd(directory_fd)
+
+
+# ----------------------------------------------------------------------------- the claim
+
+
+class _Handle:
+    """The output directory held open: its descriptor and the lock's."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        self.fd: int | None = None
+        self.lock_fd: int | None = None
+
+    def open(self) -> None:
+        """Open the directory as its path names it now."""
+        try:
+            self.fd = os.open(self.directory, _DIRECTORY_FLAGS)
+        except NotADirectoryError:
+            raise OutputError(f"cannot write {self.directory}: not a directory") from None
+        except OSError as exc:
+            raise _wrap(self.directory, exc) from exc
+
+    def still_here(self) -> bool:
+        """Whether the directory's path still names the held directory."""
+        try:
+            return _same(os.stat(self.directory), os.fstat(self.fd))
+        except OSError:
+            return False
+
+    def check_still_here(self) -> None:
+        if not self.still_here():
+            raise OutputError(f"cannot write {self.directory}: the directory was moved or replaced during the run; "
+                              "nothing was switched in")
+
+    def close(self) -> None:
+        _close(self.lock_fd)
+        _close(self.fd)
+        self.lock_fd = self.fd = None
+
+
+class _Busy(OutputError):
+    """Another run holds the directory's lock."""
+
+
+def _lock(handle: _Handle) -> None:
+    """Take the lock of the open directory (see :func:`claimed_directory`)."""
+    import fcntl
+
+    directory = handle.directory
+    flags = os.O_RDWR | os.O_CREAT | _NOFOLLOW | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(LOCK_FILE, flags, 0o666, dir_fd=handle.fd)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise OutputError(f"cannot write {directory}: {LOCK_FILE} is a symbolic link, which contactfem "
+                              "does not follow; remove it") from None
+        if exc.errno == errno.EISDIR:
+            raise OutputError(f"cannot write {directory}: {LOCK_FILE} is not a regular file; remove it") from None
+        raise
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OutputError(f"cannot write {directory}: {LOCK_FILE} is not a regular file; remove it")
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise _Busy(f"cannot write {directory}: another contactfem run is writing into it; "
+                        "wait for it to finish or choose another output directory") from None
+    except BaseException:
+        os.close(fd)
+        raise
+    handle.lock_fd = fd
+
+
+def _claim(directory: Path) -> _Handle:
+    """Open ``directory`` and take its lock; retried while a run that just finished removes
+    its lock file under us."""
+    for _ in range(20):
+        handle = _Handle(directory)
+        try:
+            handle.open()
+            try:
+                _lock(handle)
+            except FileNotFoundError:  # the directory went away under us
+                handle.close()
+                continue
+            except OSError as exc:
+                raise _wrap(directory, exc) from exc
+            if _same(_lstat_at(handle.fd, LOCK_FILE), os.fstat(handle.lock_fd)) and handle.still_here():
+                try:
+                    os.ftruncate(handle.lock_fd, 0)
+                    os.write(handle.lock_fd, f"{os.getpid()}\n".encode("ascii"))
+                except OSError:
+                    pass  # the pid is for people only
+                return handle
+        except BaseException:
+            handle.close()
+            raise
+        handle.close()
+    raise OutputError(f"cannot write {directory}: its lock changed hands too often; try again")
+
+
+def _release(handle: _Handle, remove_directory: bool) -> bool:
+    """Remove the lock file (if it is still ours) and release the lock. Returns whether the
+    directory was left empty, with ``remove_directory`` (the caller then removes it)."""
+    empty = False
+    try:
+        if handle.fd is not None and handle.lock_fd is not None:
+            if _same(_lstat_at(handle.fd, LOCK_FILE), os.fstat(handle.lock_fd)):
+                empty = remove_directory and os.listdir(handle.fd) == [LOCK_FILE]
+                os.unlink(LOCK_FILE, dir_fd=handle.fd)
+    except OSError:
+        empty = False
+    finally:
+        handle.close()  # closing the lock's descriptor releases the lock
+    return empty
+
+
+def _recover(handle: _Handle) -> None:
+    """Finish or discard what killed runs left (the lock is held, so every staging area
+    here belongs to a run that is gone). Only what this mechanism provably made is
+    removed, and a journal is executed only after its names are checked."""
+    names = os.listdir(handle.fd)
+    for name in names:
+        info = _lstat_at(handle.fd, name)
+        if info is None:
+            continue
+        staging = _STAGING.fullmatch(name)
+        if staging is not None and stat.S_ISDIR(info.st_mode):
+            _recover_staging(handle, name, f"{staging[1]}-{staging[2]}")
+            continue
+        temporary = _TEMPORARY.fullmatch(name)
+        if temporary is not None and not stat.S_ISDIR(info.st_mode) and not _pid_alive(int(temporary[1])):
+            try:
+                os.unlink(name, dir_fd=handle.fd)
+            except OSError:
+                pass
+
+
+def _recover_staging(handle: _Handle, name: str, token: str) -> None:
+    """A staging directory of a run that is gone: a decided switch-over (its journal checked)
+    is completed; the directory is removed if it is provably one this mechanism made (its
+    marker, or, as earlier versions left them, nothing but regular files in it) and its
+    process is gone. Anything else is left alone."""
+    try:
+        staging_fd = _open_directory_at(handle.fd, name)
+    except OSError:
+        return
+    try:
+        decided = False
+        if _lstat_at(staging_fd, SWITCH_FILE) is not None:
+            plan = _read_journal(staging_fd, SWITCH_FILE)
+            decided = plan is not None and plan.token in (None, token) and all(
+                (info := _lstat_at(staging_fd, n)) is None or stat.S_ISREG(info.st_mode) for n in plan.files)
+            if decided:
+                try:
+                    _move_in(handle.fd, staging_fd, plan)
+                except OSError as exc:
+                    raise _wrap(handle.directory, exc) from exc
+        gone = decided or not _pid_alive(int(token.split("-")[0]))
+        if gone and (_marked(staging_fd, token) or _only_regular_files(staging_fd)):
+            _remove_directory_held(handle.fd, name, staging_fd)
+    finally:
+        os.close(staging_fd)
+
+
+def _is_pattern(name: str) -> bool:
+    return any(character in name for character in "*?[")
 
 
 class ClaimedDirectory:
@@ -258,94 +719,119 @@ class ClaimedDirectory:
 
     def __init__(self, directory: Path) -> None:
         self.directory = directory
+        self._handle: _Handle | None = None
+
+    def _held(self) -> _Handle:
+        if self._handle is None:  # made directly, not by claimed_directory: held, not locked
+            handle = _Handle(Path(self.directory))
+            handle.open()
+            self._handle = handle
+        return self._handle
 
     @contextmanager
     def stage(self, replaces: tuple[str, ...] = (), last: str | None = None) -> Iterator[Path]:
         """Yield a fresh staging directory inside the output directory; on success its files
         replace the directory's in one decided step.
 
-        The block writes plain files into the staging directory. When it completes, a
-        switch file listing them is written and synced: that single atomic rename decides
-        the switch-over. The files are then moved into place with :func:`os.replace`
-        (``last`` moved last), the files named in ``replaces`` (names, or glob patterns
-        such as ``path-*.vtu``) that this run did not write are deleted, and the staging directory is removed, with SIGINT and SIGTERM held back.
-        If the block raises, the staging directory is removed and nothing in the output
-        directory changes. If the process dies after the decision, the next claim completes
-        the switch-over; if before, it removes the staging directory.
+        The block writes plain files into the staging directory. When it completes, the
+        files named in ``replaces`` (names, or glob patterns such as ``path-*.vtu``) that
+        this run did not write are to go, and the directory is switched over by moving the
+        files in (``last`` moved last) after a journal has decided it (see the module's
+        docstring), with SIGINT and SIGTERM held back. If the block raises, the
+        staging directory is removed and nothing in the output directory changes.
         """
-        staging = _fresh_name(self.directory, "staging")
+        handle = self._held()
+        token = f"{os.getpid()}-{secrets.token_hex(4)}"
+        name = f"{TEMP_PREFIX}{token}.staging"
+        staging = Path(self.directory) / name
+        staging_fd = None
         try:
-            staging.mkdir()
+            os.mkdir(name, 0o777, dir_fd=handle.fd)
+            staging_fd = _open_directory_at(handle.fd, name)
+            _write_file_at(staging_fd, STAGING_MARKER, token.encode("ascii"))
         except OSError as exc:
+            _close(staging_fd)
+            try:
+                _remove_tree(handle.fd, name)
+            except OSError:
+                pass
             raise _wrap(staging, exc) from exc
-        decided = False
+        switched = False
         try:
             yield staging
-            names = sorted(p.name for p in staging.iterdir() if not p.name.startswith(TEMP_PREFIX))
-            if any((staging / name).is_dir() for name in names):
-                raise OutputError(f"cannot write {self.directory}: a writer left a directory in the staging area")
-            if last in names:
-                names.remove(last)
-                names.append(last)
-            # A pattern (a series whose length varies from run to run) names every file
-            # of the output directory it matches.
-            existing = [p.name for p in self.directory.iterdir()] if any(_is_pattern(r) for r in replaces) else []
-            expanded = [name for pattern in replaces
-                        for name in (fnmatch.filter(existing, pattern) if _is_pattern(pattern) else [pattern])]
-            plan = {"files": names, "replaces": [name for name in expanded if name not in names]}
+            plan = self._plan(staging_fd, replaces, last, token)
             # A stop signal whose exception was swallowed on the way (in a finalizer) still
             # stops the run here, before anything is decided.
             interrupts.stop_if_received()
             with _signals_deferred():
-                atomic_write_text(staging / SWITCH_FILE, json.dumps(plan))
-                _fsync_directory(staging)
-                decided = True
-                _switch(staging, self.directory)
+                handle.check_still_here()
+                try:
+                    _write_file_at(staging_fd, SWITCH_FILE, plan.dump())
+                    os.fsync(staging_fd)
+                except OSError as exc:
+                    raise _wrap(staging, exc) from exc
+                switched = True
+                _reached("decided")
+                try:
+                    _move_in(handle.fd, staging_fd, plan)
+                except OSError as exc:
+                    raise _wrap(Path(self.directory), exc) from exc
                 interrupts.note_switched()
+                _reached("moved in")
+                self._remove_staging(name)
         finally:
-            if not decided:
-                shutil.rmtree(staging, ignore_errors=True)
+            _close(staging_fd)
+            if not switched:
+                with _signals_deferred():
+                    self._remove_staging(name)
 
+    def _remove_staging(self, name: str) -> None:
+        try:
+            _remove_tree(self._handle.fd, name)
+        except OSError:
+            pass
 
-def _is_pattern(name: str) -> bool:
-    return any(character in name for character in "*?[")
-
-
-def _fresh_name(directory: Path, label: str) -> Path:
-    return directory / f"{TEMP_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.{label}"
-
-
-def _switch(staging: Path, directory: Path) -> None:
-    """Carry out a decided switch-over (idempotent: a file already moved is skipped)."""
-    plan = json.loads((staging / SWITCH_FILE).read_text(encoding="utf-8"))
-    try:
-        for name in plan["files"]:
-            if (staging / name).exists():
-                os.replace(staging / name, directory / name)
-        for name in plan["replaces"]:
-            _remove_quietly(directory / name)
-    except OSError as exc:
-        raise _wrap(directory, exc) from exc
-    _fsync_directory(directory)
-    shutil.rmtree(staging, ignore_errors=True)
-
-
-def _recover(directory: Path) -> None:
-    """Finish or discard what killed runs left in ``directory`` (its lock is held, so every
-    staging area and temporary file here belongs to a run that is gone)."""
-    for leftover in directory.glob(f"{TEMP_PREFIX}*"):
-        if leftover.is_dir() and (leftover / SWITCH_FILE).is_file():
-            try:
-                json.loads((leftover / SWITCH_FILE).read_text(encoding="utf-8"))
-            except (OSError, ValueError):
-                shutil.rmtree(leftover, ignore_errors=True)  # the decision itself was never written whole
+    def _plan(self, staging_fd: int, replaces: tuple[str, ...], last: str | None, token: str) -> _Plan:
+        directory = Path(self.directory)
+        handle = self._handle
+        names = []
+        for name in sorted(os.listdir(staging_fd)):
+            if name in (STAGING_MARKER, SWITCH_FILE) or name.startswith(TEMP_PREFIX):
                 continue
-            _switch(leftover, directory)
-        elif leftover.is_dir():
-            shutil.rmtree(leftover, ignore_errors=True)
-        else:
-            _remove_quietly(leftover)
-
+            info = _lstat_at(staging_fd, name)
+            if info is None:
+                continue
+            if stat.S_ISDIR(info.st_mode):
+                raise OutputError(f"cannot write {directory}: a writer left a directory in the staging area")
+            if not stat.S_ISREG(info.st_mode):
+                raise OutputError(f"cannot write {directory}: a writer left {name!r} in the staging area, "
+                                  "not a regular file")
+            if not is_output_name(name):
+                raise OutputError(f"cannot write {directory}: {name!r} is not the name of a file contactfem writes")
+            names.append(name)
+        if last in names:
+            names.remove(last)
+            names.append(last)
+        for name in names:
+            info = _lstat_at(handle.fd, name)
+            if info is not None and stat.S_ISDIR(info.st_mode):
+                raise OutputError(f"cannot write {directory / name}: a directory of that name is in the way")
+        # A pattern (a series whose length varies from run to run) names every file of the
+        # output directory it matches that a writer could have made; a plain name must be one.
+        existing = os.listdir(handle.fd) if any(_is_pattern(r) for r in replaces) else []
+        gone = []
+        for pattern in replaces:
+            if _is_pattern(pattern):
+                matches = [n for n in fnmatch.filter(existing, pattern) if is_output_name(n)]
+            elif is_output_name(pattern):
+                matches = [pattern]
+            else:
+                raise OutputError(f"cannot write {directory}: {pattern!r} is not the name of a file contactfem writes")
+            for name in matches:
+                info = _lstat_at(handle.fd, name)
+                if name not in names and name not in gone and info is not None and not stat.S_ISDIR(info.st_mode):
+                    gone.append(name)
+        return _Plan(tuple(names), tuple(gone), token)
 
 @contextmanager
 def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
@@ -355,60 +841,52 @@ def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
     Taken before any work starts, so that a run that could not write its results fails at
     once: a directory that cannot be created or written, a directory another contactfem
     run is writing into, or one that holds a finished result (any of ``markers``) when
-    ``overwrite`` is false. Leftovers of killed runs are completed or removed first.
+    ``overwrite`` is false. Leftovers of killed runs are completed or removed first. The
+    directory is held by file descriptor, and its lock file is removed when the block ends,
+    however it ends (see the module's docstring).
 
     Raises
     ------
     ExistingResultError
         ``markers`` are present and ``overwrite`` is false.
     OutputError
-        The directory cannot be created or written, or another run holds it.
+        The directory cannot be created or written, or another run holds it, or its lock
+        file is a symbolic link.
     """
-    import fcntl
-
     directory = Path(directory)
     created = _missing_ancestors(directory)
     directory = ensure_directory(directory)
-    if not directory.is_dir():
-        raise OutputError(f"cannot write {directory}: not a directory")
-    lock = directory / LOCK_FILE
     try:
-        fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o666)
-    except OSError as exc:
+        handle = _claim(directory)
+    except _Busy:
+        raise  # the directory is another run's now, whoever made it
+    except OutputError:
         _remove_created(created)
-        raise _wrap(directory, exc) from exc
-    switched = locked = False
+        raise
+    completed = False
     try:
+        probe = f"{TEMP_PREFIX}{os.getpid()}-{secrets.token_hex(4)}.probe"
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            locked = True
-        except BlockingIOError:
-            raise OutputError(f"cannot write {directory}: another contactfem run is writing into it; "
-                              "wait for it to finish or choose another output directory") from None
+            _write_file_at(handle.fd, probe, b"")
+            os.unlink(probe, dir_fd=handle.fd)
         except OSError as exc:
             raise _wrap(directory, exc) from exc
-        probe = _fresh_name(directory, "probe")
-        try:
-            probe.touch(exist_ok=False)
-            probe.unlink()
-        except OSError as exc:
-            raise _wrap(directory, exc) from exc
-        _recover(directory)
+        _recover(handle)
         if not overwrite:
-            found = [name for name in markers if (directory / name).exists()]
+            found = [name for name in markers if _lstat_at(handle.fd, name) is not None]
             if found:
                 raise ExistingResultError(f"{directory}: already holds contactfem results ({', '.join(found)}); "
                                           "pass --overwrite to replace them")
         claim = ClaimedDirectory(directory)
+        claim._handle = handle
         yield claim
-        switched = True
+        completed = True
     finally:
-        if locked and not switched and created and not any(p.name != LOCK_FILE for p in directory.iterdir()):
-            # A run refused or failed before writing anything leaves no directory behind (only
-            # the lock's holder may remove it: another run may be working in it).
-            _remove_quietly(lock)
-            _remove_created(created)
-        os.close(fd)  # closing the descriptor releases the lock
+        # A run refused or failed before writing anything leaves no directory behind (only
+        # the lock's holder may remove it: another run may be working in it).
+        with _signals_deferred():
+            if _release(handle, remove_directory=bool(created) and not completed):
+                _remove_created(created)
 
 
 def _missing_ancestors(directory: Path) -> list[Path]:
