@@ -25,31 +25,67 @@ Staging
     directory holding the marker file ``.contactfem-staging``). If the block raises, that
     directory is removed and nothing in ``OUT`` changes.
 
-The switch-over
-    Once the block completes, ``.switch.json`` in the staging directory records the
-    decision; the staged files are then moved into ``OUT`` one by one (the last file named
-    by ``stage(last=...)`` last) and the files this run replaces are removed. A run killed
-    during the moves is completed by the next contactfem command that claims the directory.
+The switch-over: one atomic step where the file system allows it
+    The new result must appear in ``OUT`` itself (``OUT/report.json`` ...), so the one step
+    that can switch many files at once is to exchange the directory itself. A hidden
+    sibling ``PARENT/.tmp-<pid>-<token>.<OUT name>.exchange`` is built holding what ``OUT``
+    will hold: hard links of everything in ``OUT`` the run neither writes nor replaces (the
+    user's files, subdirectories recreated with hard links, the lock file itself, so that
+    the lock stays held), hard links of the staged files, the directory's mode, group and
+    extended attributes. Then ``renameat2(RENAME_EXCHANGE)`` swaps it with ``OUT`` in one
+    step: a reader that opens ``OUT`` sees either the whole old directory or the whole new
+    one. The old directory, now at the sibling's name, is removed, after anything created
+    in ``OUT`` by another program while the sibling was built has been carried over into the
+    new one. A run killed before the exchange leaves ``OUT`` as it was; one killed after it
+    leaves the new result in place, and the next claim removes the old directory (its
+    journal ``OUT/.contactfem-exchange.json`` names it).
+
+    The exchange replaces the directory's inode: a process whose working directory is
+    ``OUT``, or that holds it open, keeps the old directory, which is then removed.
+
+Where atomicity cannot be had: journaled moves
+    Where no exchange can be made, the staged files are moved into ``OUT`` one by one
+    (the last file named by ``stage(last=...)`` last), after ``.switch.json`` in the staging
+    directory has recorded the decision. A reader looking while the files are moved may see
+    some new files beside old ones, and a run killed during the moves leaves that mix until
+    the next contactfem command that claims the directory completes it. That is the case:
+
+    * on any system but Linux, on Linux kernels before 3.15, or where libc has no
+      ``renameat2`` and the system call's number is not known here;
+    * on file systems without ``RENAME_EXCHANGE`` (NFS, SMB/CIFS, most FUSE file systems);
+    * when the sibling cannot be made or filled: the parent directory is not writable, the
+      sibling's name would be too long, ``OUT`` is a mount point, ``OUT`` holds a mount
+      point, an entry that cannot be hard-linked (another user's file under
+      ``fs.protected_hardlinks``) or directories nested deeper than 64, or extended
+      attributes that cannot be copied;
+    * when ``OUT`` is a symbolic link (the exchange would replace the link), or a path
+      such as ``/`` without a parent, is not owned by the user running the command, or
+      holds the command's own working directory.
 
 Leftovers and names read from disk
-    A claim removes only what the mechanism provably made: staging directories by their
-    full names (pid and random token) and the marker inside them, temporary files of
-    :func:`atomic_path` by their full name whose process is gone. A journal is executed only if every name in it is a plain name (no separator, no
+    A claim removes only what the mechanism provably made: staging directories and
+    exchange siblings by their full names (pid and random token) and the marker or journal
+    inside them, temporary files of :func:`atomic_path` by their full name whose process is
+    gone. A journal is executed only if every name in it is a plain name (no separator, no
     ``..``, not absolute) that a contactfem writer produces (:data:`OUTPUT_NAMES`);
-    otherwise it is ignored. Nothing is ever deleted or written outside ``OUT``.
+    otherwise it is ignored. Nothing is ever deleted or written outside ``OUT`` but the
+    run's own exchange sibling.
 """
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import fnmatch
 import json
 import os
+import platform
 import re
 import secrets
 import shutil
 import signal
 import stat
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -60,6 +96,7 @@ from contactfem import interrupts
 from contactfem.errors import ExistingResultError, OutputError
 
 __all__ = [
+    "EXCHANGE_FILE",
     "LOCK_FILE",
     "OUTPUT_NAMES",
     "STAGING_MARKER",
@@ -375,8 +412,13 @@ SWITCH_FILE = ".switch.json"
 #: The file inside every staging directory that marks it as made by this mechanism; it holds
 #: the directory's ``<pid>-<token>``.
 STAGING_MARKER = ".contactfem-staging"
+#: The journal of an exchange: inside the sibling while it is built, in the output directory
+#: from the exchange until the old directory is removed.
+EXCHANGE_FILE = ".contactfem-exchange.json"
 #: The largest journal read back (a journal lists file names only).
 _JOURNAL_LIMIT = 1 << 20
+#: How deep the subdirectories of an output directory may be nested for it to be exchanged.
+_MAX_DEPTH = 64
 
 _DIRECTORY_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0)
 _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
@@ -476,6 +518,68 @@ def _fsync_fd(fd: int) -> None:
         pass
 
 
+# ----------------------------------------------------------------------------- renameat2
+
+_RENAME_NOREPLACE = 1
+_RENAME_EXCHANGE = 2
+#: The renameat2 system call's number where libc lacks the function (glibc before 2.28).
+_RENAMEAT2_SYSCALL = {"x86_64": 316, "aarch64": 276, "riscv64": 276, "i386": 353, "i686": 353,
+                      "ppc64le": 357, "ppc64": 357, "s390x": 347}
+
+
+def _load_renameat2():
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
+    function = getattr(libc, "renameat2", None)
+    if function is not None:
+        function.argtypes = (ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint)
+        function.restype = ctypes.c_int
+        return function
+    number = _RENAMEAT2_SYSCALL.get(platform.machine())
+    syscall = getattr(libc, "syscall", None)
+    if number is None or syscall is None:
+        return None
+    syscall.restype = ctypes.c_long
+
+    def renameat2(old_fd, old, new_fd, new, flags):
+        return syscall(ctypes.c_long(number), ctypes.c_int(old_fd), ctypes.c_char_p(old), ctypes.c_int(new_fd),
+                       ctypes.c_char_p(new), ctypes.c_uint(flags))
+
+    return renameat2
+
+
+_renameat2_function = _load_renameat2()
+
+
+def _renameat2(old_fd: int, old: str, new_fd: int, new: str, flags: int) -> None:
+    """Linux renameat2(2); OSError(ENOSYS) where it cannot be called."""
+    if _renameat2_function is None:
+        raise OSError(errno.ENOSYS, os.strerror(errno.ENOSYS))
+    if _renameat2_function(old_fd, os.fsencode(old), new_fd, os.fsencode(new), flags) != 0:
+        code = ctypes.get_errno()
+        raise OSError(code, os.strerror(code))
+
+
+def _exchange(directory_fd: int, first: str, second: str) -> None:
+    """Swap the entries ``first`` and ``second`` of ``directory_fd`` in one step."""
+    _renameat2(directory_fd, first, directory_fd, second, _RENAME_EXCHANGE)
+
+
+def _rename_without_replacing(source_fd: int, name: str, target_fd: int) -> None:
+    try:
+        _renameat2(source_fd, name, target_fd, name, _RENAME_NOREPLACE)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP, errno.ENOTSUP):
+            raise
+        if _lstat_at(target_fd, name) is not None:
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST)) from None
+        os.rename(name, name, src_dir_fd=source_fd, dst_dir_fd=target_fd)
+
+
 # ----------------------------------------------------------------------------- journals
 
 
@@ -547,30 +651,176 @@ def _move_in(directory_fd: int, staging_fd: int, plan: _Plan) -> None:
     _fsync_fd(directory_fd)
 
 
+# ----------------------------------------------------------------------------- exchange
+
+
+class _NotExchangeable(Exception):
+    """The output directory cannot be rebuilt beside itself (see the module's docstring)."""
+
+
+def _copy_directory_metadata(source_fd: int, target_fd: int, times: bool) -> None:
+    """Give the directory ``target_fd`` the group, mode and extended attributes of
+    ``source_fd`` (and its times, ``times``); _NotExchangeable where that cannot be done."""
+    source = os.fstat(source_fd)
+    try:
+        if os.fstat(target_fd).st_gid != source.st_gid:
+            os.fchown(target_fd, -1, source.st_gid)
+        os.fchmod(target_fd, stat.S_IMODE(source.st_mode))
+        if stat.S_IMODE(os.fstat(target_fd).st_mode) != stat.S_IMODE(source.st_mode):
+            raise _NotExchangeable("mode")
+        try:
+            attributes = os.listxattr(source_fd)
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS):
+                raise
+            attributes = []
+        for attribute in attributes:
+            if attribute.startswith("security."):  # the kernel labels the new directory itself
+                continue
+            os.setxattr(target_fd, attribute, os.getxattr(source_fd, attribute))
+        if times:
+            os.utime(target_fd, ns=(source.st_atime_ns, source.st_mtime_ns))
+    except OSError as exc:
+        raise _NotExchangeable(str(exc)) from exc
+
+
+def _replicate(source_fd: int, target_fd: int, skip: frozenset[str], device: int, depth: int = 0) -> None:
+    """Hard-link every entry of ``source_fd`` but ``skip`` into ``target_fd``, recreating
+    subdirectories (with their metadata) and linking what they hold."""
+    if depth > _MAX_DEPTH:
+        raise _NotExchangeable("nested too deep")
+    for name in os.listdir(source_fd):
+        if name in skip:
+            continue
+        info = _lstat_at(source_fd, name)
+        if info is None:
+            continue
+        if info.st_dev != device:
+            raise _NotExchangeable("a mount point")
+        if not stat.S_ISDIR(info.st_mode):
+            os.link(name, name, src_dir_fd=source_fd, dst_dir_fd=target_fd, follow_symlinks=False)
+            continue
+        if info.st_uid != os.geteuid():
+            raise _NotExchangeable("another user's directory")
+        os.mkdir(name, 0o700, dir_fd=target_fd)
+        inner_source = inner_target = None
+        try:
+            inner_source = _open_directory_at(source_fd, name)
+            inner_target = _open_directory_at(target_fd, name)
+            _replicate(inner_source, inner_target, frozenset(), device, depth + 1)
+            _copy_directory_metadata(inner_source, inner_target, times=True)
+            os.fsync(inner_target)
+        finally:
+            _close(inner_source)
+            _close(inner_target)
+
+
+def _carry_over(old_fd: int, new_fd: int, skip: frozenset[str], depth: int = 0) -> bool:
+    """Bring into the new directory what another program changed in the old one while the
+    new one was built (a new file, a replaced one); False if something had to stay behind."""
+    whole = True
+    for name in os.listdir(old_fd):
+        if name in skip:
+            continue
+        old = _lstat_at(old_fd, name)
+        if old is None:
+            continue
+        new = _lstat_at(new_fd, name)
+        if new is None:
+            _rename_without_replacing(old_fd, name, new_fd)
+        elif _same(old, new):
+            continue
+        elif stat.S_ISDIR(old.st_mode) and stat.S_ISDIR(new.st_mode):
+            if depth >= _MAX_DEPTH:
+                whole = False
+                continue
+            inner_old = inner_new = None
+            try:
+                inner_old = _open_directory_at(old_fd, name)
+                inner_new = _open_directory_at(new_fd, name)
+                whole = _carry_over(inner_old, inner_new, frozenset(), depth + 1) and whole
+            finally:
+                _close(inner_old)
+                _close(inner_new)
+        elif not stat.S_ISDIR(old.st_mode) and not stat.S_ISDIR(new.st_mode):
+            os.replace(name, name, src_dir_fd=old_fd, dst_dir_fd=new_fd)
+        else:
+            whole = False
+    return whole
+
+
+def _sibling_name(token: str, name: str) -> str:
+    return f"{TEMP_PREFIX}{token}.{name}.exchange"
+
+
+def _working_directory_inside(directory_fd: int) -> bool:
+    """Whether this process's working directory is the directory ``directory_fd`` or below it."""
+    target = os.fstat(directory_fd)
+    path = "."
+    try:
+        for _ in range(4096):
+            here = os.stat(path)
+            if _same(here, target):
+                return True
+            path = os.path.join(path, "..")
+            if _same(os.stat(path), here):
+                return False
+    except OSError:
+        return True  # unsure: do not exchange
+    return True
+
+
 # ----------------------------------------------------------------------------- the claim
 
 
 class _Handle:
-    """The output directory held open: its descriptor and the lock's."""
+    """The output directory held open: its descriptor, its parent's and its name there (when
+    it can be exchanged), and the lock's descriptor."""
 
     def __init__(self, directory: Path) -> None:
         self.directory = directory
         self.fd: int | None = None
+        self.parent_fd: int | None = None
+        self.name: str | None = None
         self.lock_fd: int | None = None
+        self.exchangeable = False
 
     def open(self) -> None:
-        """Open the directory as its path names it now."""
+        """Open the directory as its path names it now, and its parent when the last
+        component is a directory (not a symbolic link) that this process owns, on the
+        parent's file system: only then may it be exchanged."""
         try:
             self.fd = os.open(self.directory, _DIRECTORY_FLAGS)
         except NotADirectoryError:
             raise OutputError(f"cannot write {self.directory}: not a directory") from None
         except OSError as exc:
             raise _wrap(self.directory, exc) from exc
+        parent, name = os.path.split(os.path.abspath(self.directory))
+        if not name or name in (".", "..") or _renameat2_function is None:
+            return
+        try:
+            self.parent_fd = os.open(parent or os.sep, _DIRECTORY_FLAGS)
+            held = os.fstat(self.fd)
+            entry = _lstat_at(self.parent_fd, name)
+            self.exchangeable = (_same(entry, held) and stat.S_ISDIR(entry.st_mode)
+                                 and held.st_uid == os.geteuid()
+                                 and os.fstat(self.parent_fd).st_dev == held.st_dev)
+        except OSError:
+            self.exchangeable = False
+        if self.exchangeable:
+            self.name = name
+        else:
+            _close(self.parent_fd)
+            self.parent_fd = None
 
     def still_here(self) -> bool:
-        """Whether the directory's path still names the held directory."""
+        """Whether the directory's path (and its name in the held parent) still names the
+        held directory."""
         try:
-            return _same(os.stat(self.directory), os.fstat(self.fd))
+            held = os.fstat(self.fd)
+            if not _same(os.stat(self.directory), held):
+                return False
+            return self.parent_fd is None or _same(_lstat_at(self.parent_fd, self.name), held)
         except OSError:
             return False
 
@@ -582,7 +832,8 @@ class _Handle:
     def close(self) -> None:
         _close(self.lock_fd)
         _close(self.fd)
-        self.lock_fd = self.fd = None
+        _close(self.parent_fd)
+        self.lock_fd = self.fd = self.parent_fd = None
 
 
 class _Busy(OutputError):
@@ -619,15 +870,15 @@ def _lock(handle: _Handle) -> None:
 
 
 def _claim(directory: Path) -> _Handle:
-    """Open ``directory`` and take its lock; retried while a run that just finished removes
-    its lock file under us."""
+    """Open ``directory`` and take its lock; retried while a run that just finished swaps
+    the directory or removes its lock file under us."""
     for _ in range(20):
         handle = _Handle(directory)
         try:
             handle.open()
             try:
                 _lock(handle)
-            except FileNotFoundError:  # the directory went away under us
+            except FileNotFoundError:  # the directory went away under us (an exchange)
                 handle.close()
                 continue
             except OSError as exc:
@@ -663,10 +914,14 @@ def _release(handle: _Handle, remove_directory: bool) -> bool:
 
 
 def _recover(handle: _Handle) -> None:
-    """Finish or discard what killed runs left (the lock is held, so every staging area
-    here belongs to a run that is gone). Only what this mechanism provably made is
+    """Finish or discard what killed runs left (the lock is held, so every staging area and
+    exchange here belongs to a run that is gone). Only what this mechanism provably made is
     removed, and a journal is executed only after its names are checked."""
     names = os.listdir(handle.fd)
+    if EXCHANGE_FILE in names:
+        _recover_exchange(handle)
+    if handle.parent_fd is not None:
+        _recover_siblings(handle)
     for name in names:
         info = _lstat_at(handle.fd, name)
         if info is None:
@@ -710,6 +965,64 @@ def _recover_staging(handle: _Handle, name: str, token: str) -> None:
         os.close(staging_fd)
 
 
+def _recover_exchange(handle: _Handle) -> None:
+    """An exchange was made but its old directory not yet removed: carry over and remove it."""
+    plan = _read_journal(handle.fd, EXCHANGE_FILE)
+    if handle.parent_fd is not None and plan is not None and plan.token is not None:
+        _finish_old(handle, _sibling_name(plan.token, handle.name), plan, f"{TEMP_PREFIX}{plan.token}.staging")
+    try:
+        os.unlink(EXCHANGE_FILE, dir_fd=handle.fd)
+    except OSError:
+        pass
+
+
+def _finish_old(handle: _Handle, sibling: str, plan: _Plan, staging: str) -> None:
+    """Carry over from the old directory (at ``sibling``) and remove it, if it is the one
+    this exchange put there (its staging directory inside, with the token's marker)."""
+    try:
+        old_fd = _open_directory_at(handle.parent_fd, sibling)
+    except OSError:
+        return
+    try:
+        try:
+            inner = _open_directory_at(old_fd, staging)
+        except OSError:
+            return
+        try:
+            if not _marked(inner, plan.token):
+                return
+        finally:
+            os.close(inner)
+        _finish_old_directory(handle, old_fd, sibling, plan, staging)
+    finally:
+        os.close(old_fd)
+
+
+def _recover_siblings(handle: _Handle) -> None:
+    """Remove exchange siblings of this directory that were never exchanged (their journal is
+    inside, with their own token) and whose process is gone."""
+    pattern = re.compile(rf"{re.escape(TEMP_PREFIX)}([0-9]{{1,10}})-([0-9a-f]{{8}})\.{re.escape(handle.name)}"
+                         r"\.exchange", re.DOTALL)
+    try:
+        names = os.listdir(handle.parent_fd)
+    except OSError:
+        return
+    for name in names:
+        found = pattern.fullmatch(name)
+        if found is None or _pid_alive(int(found[1])):
+            continue
+        try:
+            sibling_fd = _open_directory_at(handle.parent_fd, name)
+        except OSError:
+            continue
+        try:
+            plan = _read_journal(sibling_fd, EXCHANGE_FILE)
+            if plan is not None and plan.token == f"{found[1]}-{found[2]}":
+                _remove_directory_held(handle.parent_fd, name, sibling_fd)
+        finally:
+            os.close(sibling_fd)
+
+
 def _is_pattern(name: str) -> bool:
     return any(character in name for character in "*?[")
 
@@ -731,13 +1044,14 @@ class ClaimedDirectory:
     @contextmanager
     def stage(self, replaces: tuple[str, ...] = (), last: str | None = None) -> Iterator[Path]:
         """Yield a fresh staging directory inside the output directory; on success its files
-        replace the directory's in one decided step.
+        replace the directory's in one step.
 
         The block writes plain files into the staging directory. When it completes, the
         files named in ``replaces`` (names, or glob patterns such as ``path-*.vtu``) that
-        this run did not write are to go, and the directory is switched over by moving the
-        files in (``last`` moved last) after a journal has decided it (see the module's
-        docstring), with SIGINT and SIGTERM held back. If the block raises, the
+        this run did not write are to go, and the directory is switched over: exchanged in
+        one step with a copy holding the new files, or, where that cannot be done, by
+        moving the files in (``last`` moved last) after a journal has decided it (see the
+        module's docstring), with SIGINT and SIGTERM held back. If the block raises, the
         staging directory is removed and nothing in the output directory changes.
         """
         handle = self._held()
@@ -763,22 +1077,27 @@ class ClaimedDirectory:
             # A stop signal whose exception was swallowed on the way (in a finalizer) still
             # stops the run here, before anything is decided.
             interrupts.stop_if_received()
-            with _signals_deferred():
-                handle.check_still_here()
-                try:
-                    _write_file_at(staging_fd, SWITCH_FILE, plan.dump())
-                    os.fsync(staging_fd)
-                except OSError as exc:
-                    raise _wrap(staging, exc) from exc
-                switched = True
-                _reached("decided")
-                try:
-                    _move_in(handle.fd, staging_fd, plan)
-                except OSError as exc:
-                    raise _wrap(Path(self.directory), exc) from exc
-                interrupts.note_switched()
-                _reached("moved in")
-                self._remove_staging(name)
+            handle.check_still_here()
+            if handle.exchangeable and not _working_directory_inside(handle.fd):
+                switched = self._switch_by_exchange(name, staging_fd, plan)
+            if not switched:
+                interrupts.stop_if_received()
+                with _signals_deferred():
+                    handle.check_still_here()
+                    try:
+                        _write_file_at(staging_fd, SWITCH_FILE, plan.dump())
+                        os.fsync(staging_fd)
+                    except OSError as exc:
+                        raise _wrap(staging, exc) from exc
+                    switched = True
+                    _reached("decided")
+                    try:
+                        _move_in(handle.fd, staging_fd, plan)
+                    except OSError as exc:
+                        raise _wrap(Path(self.directory), exc) from exc
+                    interrupts.note_switched()
+                    _reached("moved in")
+                    self._remove_staging(name)
         finally:
             _close(staging_fd)
             if not switched:
@@ -832,6 +1151,106 @@ class ClaimedDirectory:
                 if name not in names and name not in gone and info is not None and not stat.S_ISDIR(info.st_mode):
                     gone.append(name)
         return _Plan(tuple(names), tuple(gone), token)
+
+    def _switch_by_exchange(self, staging: str, staging_fd: int, plan: _Plan) -> bool:
+        """Switch the result in by exchanging the directory with a copy holding it (see the
+        module's docstring). False, with nothing changed, where that cannot be done."""
+        handle = self._handle
+        sibling = _sibling_name(plan.token, handle.name)
+        sibling_fd = None
+        made = exchanged = False
+        try:
+            try:
+                os.mkdir(sibling, 0o700, dir_fd=handle.parent_fd)
+                made = True
+                sibling_fd = _open_directory_at(handle.parent_fd, sibling)
+                _write_file_at(sibling_fd, EXCHANGE_FILE, plan.dump())
+                _reached("sibling made")
+                self._fill(sibling_fd, staging, staging_fd, plan)
+                _reached("sibling filled")
+            except (OSError, _NotExchangeable):
+                self._give_up_exchange(sibling, sibling_fd, made)
+                return False
+            interrupts.stop_if_received()
+            with _signals_deferred():
+                handle.check_still_here()
+                try:
+                    _exchange(handle.parent_fd, sibling, handle.name)
+                except OSError:
+                    self._give_up_exchange(sibling, sibling_fd, made)
+                    return False
+                exchanged = True
+                old_fd = handle.fd
+                if not (_same(_lstat_at(handle.parent_fd, sibling), os.fstat(old_fd))
+                        and _same(_lstat_at(handle.parent_fd, handle.name), os.fstat(sibling_fd))):
+                    # The directory was moved between the check and the exchange: undo it.
+                    _exchange(handle.parent_fd, sibling, handle.name)
+                    exchanged = False
+                    raise OutputError(f"cannot write {self.directory}: the directory was moved or replaced "
+                                      "during the run; nothing was switched in")
+                handle.fd, sibling_fd = sibling_fd, None
+                _fsync_fd(handle.parent_fd)
+                interrupts.note_switched()
+                _reached("exchanged")
+                try:
+                    _finish_old_directory(handle, old_fd, sibling, plan, staging)
+                finally:
+                    os.close(old_fd)
+            return True
+        except BaseException:
+            if not exchanged:  # (if an exchange could not be undone, nothing is removed)
+                self._give_up_exchange(sibling, sibling_fd, made)
+            raise
+        finally:
+            _close(sibling_fd)
+
+    def _fill(self, sibling_fd: int, staging: str, staging_fd: int, plan: _Plan) -> None:
+        """Make the sibling hold what the directory will: hard links of what stays (the lock
+        file too, so that the lock stays held across the exchange) and of the staged files,
+        and the directory's own metadata."""
+        handle = self._handle
+        skip = frozenset((*plan.files, *plan.replaces, staging, EXCHANGE_FILE, SWITCH_FILE))
+        _replicate(handle.fd, sibling_fd, skip, os.fstat(handle.fd).st_dev)
+        if handle.lock_fd is not None and not _same(_lstat_at(sibling_fd, LOCK_FILE), os.fstat(handle.lock_fd)):
+            raise _NotExchangeable("the lock file changed")
+        for name in plan.files:
+            file_fd = os.open(name, os.O_RDONLY | _NOFOLLOW | getattr(os, "O_CLOEXEC", 0), dir_fd=staging_fd)
+            try:
+                os.fsync(file_fd)
+            finally:
+                os.close(file_fd)
+            os.link(name, name, src_dir_fd=staging_fd, dst_dir_fd=sibling_fd, follow_symlinks=False)
+        _copy_directory_metadata(handle.fd, sibling_fd, times=False)
+        os.fsync(sibling_fd)
+
+    def _give_up_exchange(self, sibling: str, sibling_fd: int | None, made: bool) -> None:
+        handle = self._handle
+        handle.exchangeable = False
+        if sibling_fd is not None:
+            _remove_directory_held(handle.parent_fd, sibling, sibling_fd)
+        elif made:
+            try:
+                os.rmdir(sibling, dir_fd=handle.parent_fd)  # made, not opened: empty
+            except OSError:
+                pass
+
+
+def _finish_old_directory(handle: _Handle, old_fd: int, sibling: str, plan: _Plan, staging: str) -> None:
+    """After an exchange: carry over what changed in the old directory meanwhile, remove it,
+    then the journal (best effort: what is left is finished by the next claim)."""
+    skip = frozenset((*plan.files, *plan.replaces, staging, LOCK_FILE, EXCHANGE_FILE))
+    try:
+        whole = _carry_over(old_fd, handle.fd, skip)
+        _reached("carried over")
+        if whole:
+            _remove_directory_held(handle.parent_fd, sibling, old_fd)
+        _reached("removed the old directory")
+        os.unlink(EXCHANGE_FILE, dir_fd=handle.fd)
+        _fsync_fd(handle.fd)
+        _fsync_fd(handle.parent_fd)
+    except OSError:
+        pass
+
 
 @contextmanager
 def claimed_directory(directory: Path | str, *, markers: tuple[str, ...] = (),
