@@ -227,6 +227,15 @@ def ensure_directory(directory: Path | str) -> Path:
         If it cannot be created, or exists and is not a directory.
     """
     directory = Path(directory)
+    for path in (directory, *directory.parents):
+        if path.exists() or path.is_symlink():
+            break
+        if _STAGING.fullmatch(path.name):
+            # Only ClaimedDirectory.stage makes a staging directory: one that is gone from
+            # its path means the output directory was swapped during the run, and making it
+            # again would write wherever the path leads now.
+            raise OutputError(f"cannot write {path.parent}: the directory was moved or replaced during the run; "
+                              "nothing was switched in")
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -899,12 +908,13 @@ def _claim(directory: Path) -> _Handle:
 
 def _release(handle: _Handle, remove_directory: bool) -> bool:
     """Remove the lock file (if it is still ours) and release the lock. Returns whether the
-    directory was left empty, with ``remove_directory`` (the caller then removes it)."""
+    directory was left empty, with ``remove_directory``, and its path still names it (the
+    caller then removes it)."""
     empty = False
     try:
         if handle.fd is not None and handle.lock_fd is not None:
             if _same(_lstat_at(handle.fd, LOCK_FILE), os.fstat(handle.lock_fd)):
-                empty = remove_directory and os.listdir(handle.fd) == [LOCK_FILE]
+                empty = remove_directory and os.listdir(handle.fd) == [LOCK_FILE] and handle.still_here()
                 os.unlink(LOCK_FILE, dir_fd=handle.fd)
     except OSError:
         empty = False
