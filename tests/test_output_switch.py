@@ -2,7 +2,9 @@
 
 Whatever an output directory holds, a run never deletes or writes outside it (but for its own
 exchange sibling), never removes a user's file, never trusts a name read from disk, never
-writes through a directory or a lock swapped for a symbolic link, and leaves no lock behind.
+writes through a directory or a lock swapped for a symbolic link, leaves no lock behind, and
+switches a result in as one step: a reader sees the old result or the new one, never a mix,
+whatever step a run is killed at.
 """
 
 from __future__ import annotations
@@ -486,3 +488,201 @@ def test_a_lock_held_by_a_live_process_refuses_until_it_dies(out):
         holder.wait()
     make_result(out, NEW)  # its flock went with it
     assert result_files(out) == NEW and not (out / LOCK_FILE).exists()
+
+
+# ----------------------------------------------------------------------------- one step
+
+
+@needs_exchange
+def test_the_switch_exchanges_the_directory_and_keeps_its_metadata(out):
+    out.chmod(0o751)
+    inode = out.stat().st_ino
+    make_result(out, NEW)
+    assert out.stat().st_ino != inode  # a new directory took the name in one step
+    assert out.stat().st_mode & 0o7777 == 0o751
+    assert result_files(out) == NEW and (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+    assert mechanism_leftovers(out.parent) == []
+
+
+@needs_exchange
+def test_solve_switches_by_exchange_and_removes_the_earlier_runs_files(tmp_path):
+    import yaml
+
+    out = tmp_path / "results"
+    assert invoke("solve", SQUARE, "--out", out, "--quiet").exit_code == 0
+    (out / "notes.txt").write_text("mine", encoding="utf-8")
+    inode = out.stat().st_ino
+    data = yaml.safe_load(SQUARE.read_text(encoding="utf-8"))
+    data["output"] = {"files": ["json"]}
+    case = tmp_path / "json_only.yaml"
+    case.write_text(yaml.safe_dump(data), encoding="utf-8")
+    assert invoke("solve", case, "--out", out, "--quiet", "--overwrite").exit_code == 0
+    assert out.stat().st_ino != inode
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "report.json"]
+    assert mechanism_leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("where", ["symlinked", "working directory"])
+def test_where_no_exchange_can_be_made_the_files_are_moved_in(out, monkeypatch, where):
+    """A symlinked output directory stays a link (the exchange would replace it), and a
+    directory holding the working directory keeps its inode."""
+    target = out
+    if where == "symlinked":
+        link = out.with_name("link")
+        os.symlink(out, link)
+        target = link
+    else:
+        monkeypatch.chdir(out)
+    inode = out.stat().st_ino
+    make_result(target, NEW)
+    assert out.stat().st_ino == inode
+    assert result_files(out) == NEW
+    if where == "symlinked":
+        assert target.is_symlink()
+    assert mechanism_leftovers(out.parent) == []
+
+
+@needs_exchange
+def test_an_exchange_the_file_system_refuses_falls_back_to_moves(out, monkeypatch):
+    def refused(*args):
+        raise OSError(22, "Invalid argument")
+
+    monkeypatch.setattr(atomic, "_exchange", refused)
+    inode = out.stat().st_ino
+    make_result(out, NEW)
+    assert out.stat().st_ino == inode and result_files(out) == NEW
+    assert mechanism_leftovers(out.parent) == []
+
+
+@needs_exchange
+@pytest.mark.parametrize("change", ["new file", "replaced file", "new file in a subdirectory"])
+def test_what_another_program_writes_while_the_copy_is_built_is_carried_over(out, monkeypatch, change):
+    (out / "data").mkdir()
+
+    def meanwhile(step):
+        if step != "sibling filled":
+            return
+        if change == "new file":
+            (out / "late.txt").write_text("late", encoding="utf-8")
+        elif change == "replaced file":
+            (out / "notes.tmp").write_text("edited", encoding="utf-8")
+            os.replace(out / "notes.tmp", out / "notes.txt")
+        else:
+            (out / "data" / "late.txt").write_text("late", encoding="utf-8")
+
+    monkeypatch.setattr(atomic, "_reached", meanwhile)
+    make_result(out, NEW)
+    assert result_files(out) == NEW
+    if change == "new file":
+        assert (out / "late.txt").read_text(encoding="utf-8") == "late"
+    elif change == "replaced file":
+        assert (out / "notes.txt").read_text(encoding="utf-8") == "edited"
+    else:
+        assert (out / "data" / "late.txt").read_text(encoding="utf-8") == "late"
+    assert mechanism_leftovers(out.parent) == []
+
+
+@needs_exchange
+@pytest.mark.parametrize("step", ["sibling made", "sibling filled"])
+def test_an_error_while_the_copy_is_built_leaves_the_old_result_and_no_copy(out, monkeypatch, step):
+    def failing(reached):
+        if reached == step:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic, "_reached", failing)
+    with pytest.raises(KeyboardInterrupt):
+        make_result(out, NEW)
+    assert result_files(out) == OLD and mechanism_leftovers(out.parent) == []
+
+
+KILLED_RUN = """
+import os, signal, sys
+from pathlib import Path
+import contactfem.io.atomic as atomic
+
+out, step, mode = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
+if mode == "moves":
+    atomic._renameat2_function = None
+
+def reached(name):
+    if name == step:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+atomic._reached = reached
+with atomic.claimed_directory(out) as claim:
+    with claim.stage(replaces={replaces!r}, last="report.json") as staging:
+        for name, text in {new!r}.items():
+            (staging / name).write_text(text)
+"""
+
+EXCHANGE_STEPS = ["sibling made", "sibling filled", "exchanged", "carried over", "removed the old directory"]
+MOVE_STEPS = ["decided", "moved solution.h5", "moved report.json", "moved in"]
+
+
+def _killed_at(out: Path, step: str, mode: str) -> None:
+    script = KILLED_RUN.format(replaces=REPLACES, new=NEW)
+    run = subprocess.run([sys.executable, "-c", script, str(out), step, mode], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == -signal.SIGKILL, run.stderr
+
+
+@needs_exchange
+@pytest.mark.parametrize("step", EXCHANGE_STEPS)
+def test_a_run_killed_at_any_step_of_the_exchange_leaves_one_result(out, step):
+    """SIGKILL at each step: a reader listing the directory sees the old result whole, or the
+    new one whole, never a mix; the next claim tidies up and the result stays the same."""
+    _killed_at(out, step, "exchange")
+    seen = result_files(out)
+    assert seen == (OLD if EXCHANGE_STEPS.index(step) < EXCHANGE_STEPS.index("exchanged") else NEW)
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+    with claimed_directory(out):
+        pass
+    assert result_files(out) == seen and (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+    assert mechanism_leftovers(out.parent) == []
+
+
+@pytest.mark.parametrize("step", MOVE_STEPS)
+def test_a_run_killed_during_the_moves_is_completed_by_the_next_claim(out, step):
+    """Where no exchange can be made, a reader may see a mix while the files are moved, until
+    the next claim completes the decided switch-over."""
+    _killed_at(out, step, "moves")
+    with claimed_directory(out):
+        pass
+    assert result_files(out) == NEW
+    assert (out / "notes.txt").read_text(encoding="utf-8") == "mine"
+    assert mechanism_leftovers(out.parent) == []
+
+
+SWITCHING = """
+import sys
+from pathlib import Path
+from contactfem.io.atomic import claimed_directory
+
+out, rounds = Path(sys.argv[1]), int(sys.argv[2])
+results = [{old!r}, {new!r}]
+for index in range(rounds):
+    with claimed_directory(out) as claim:
+        with claim.stage(replaces={replaces!r}, last="report.json") as staging:
+            for name, text in results[index % 2].items():
+                (staging / name).write_text(text + str(index // 2 % 2))
+"""
+
+
+@needs_exchange
+def test_a_reader_during_many_switches_never_sees_two_runs(out):
+    """A reader opening the directory while results are switched in over and over: every
+    listing holds the files of one run only (a run's files carry its tag)."""
+    script = SWITCHING.format(old=OLD, new=NEW, replaces=REPLACES)
+    writer = subprocess.Popen([sys.executable, "-c", script, str(out), "60"], stderr=subprocess.PIPE, text=True)
+    seen, mixed = 0, []
+    while writer.poll() is None:
+        try:
+            found = result_files(out)
+        except (FileNotFoundError, NotADirectoryError):
+            continue  # the old directory was removed while it was read
+        seen += 1
+        if len(set(found.values())) > 1:
+            mixed.append(found)
+    assert writer.wait() == 0, writer.stderr.read()
+    assert mixed == [] and seen > 0
+    assert mechanism_leftovers(out.parent) == []
