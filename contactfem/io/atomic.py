@@ -34,14 +34,16 @@ The switch-over: one atomic step where the file system allows it
     the lock stays held), hard links of the staged files, the directory's mode, group and
     extended attributes. Then ``renameat2(RENAME_EXCHANGE)`` swaps it with ``OUT`` in one
     step: a reader that opens ``OUT`` sees either the whole old directory or the whole new
-    one. The old directory, now at the sibling's name, is removed, after anything created
-    in ``OUT`` by another program while the sibling was built has been carried over into the
-    new one. A run killed before the exchange leaves ``OUT`` as it was; one killed after it
-    leaves the new result in place, and the next claim removes the old directory (its
-    journal ``OUT/.contactfem-exchange.json`` names it).
+    one, never files of both. The old directory, now at the sibling's name, is removed,
+    after anything created in ``OUT`` by another program while the sibling was built has
+    been carried over into the new one. A run killed before the exchange leaves ``OUT`` as
+    it was; one killed after it leaves the new result in place, and the next claim removes
+    the old directory (its journal ``OUT/.contactfem-exchange.json`` names it).
 
-    The exchange replaces the directory's inode: a process whose working directory is
-    ``OUT``, or that holds it open, keeps the old directory, which is then removed.
+    The exchange replaces the inodes of ``OUT`` and of the directories in it: a process
+    whose working directory is one of them, or that holds one open, keeps the old
+    directory and sees its files go as it is removed. Filling the sibling costs one hard
+    link per entry of ``OUT``, subdirectories included.
 
 Where atomicity cannot be had: journaled moves
     Where no exchange can be made, the staged files are moved into ``OUT`` one by one
@@ -65,11 +67,11 @@ Where atomicity cannot be had: journaled moves
 Leftovers and names read from disk
     A claim removes only what the mechanism provably made: staging directories and
     exchange siblings by their full names (pid and random token) and the marker or journal
-    inside them, temporary files of :func:`atomic_path` by their full name whose process is
-    gone. A journal is executed only if every name in it is a plain name (no separator, no
-    ``..``, not absolute) that a contactfem writer produces (:data:`OUTPUT_NAMES`);
-    otherwise it is ignored. Nothing is ever deleted or written outside ``OUT`` but the
-    run's own exchange sibling.
+    inside them (with the same token), once their process is gone, and temporary files of
+    :func:`atomic_path` by their full name whose process is gone. A journal is executed only
+    if every name in it is a plain name (no separator, no ``..``, not absolute) that a
+    contactfem writer produces (:data:`OUTPUT_NAMES`); otherwise it is ignored. Nothing is
+    ever deleted or written outside ``OUT`` but exchange siblings of ``OUT`` proven so.
 """
 
 from __future__ import annotations
@@ -1064,6 +1066,7 @@ class ClaimedDirectory:
         module's docstring), with SIGINT and SIGTERM held back. If the block raises, the
         staging directory is removed and nothing in the output directory changes.
         """
+        borrowed = self._handle is None
         handle = self._held()
         token = f"{os.getpid()}-{secrets.token_hex(4)}"
         name = f"{TEMP_PREFIX}{token}.staging"
@@ -1079,6 +1082,9 @@ class ClaimedDirectory:
                 _remove_tree(handle.fd, name)
             except OSError:
                 pass
+            if borrowed:
+                handle.close()
+                self._handle = None
             raise _wrap(staging, exc) from exc
         switched = False
         try:
@@ -1113,6 +1119,9 @@ class ClaimedDirectory:
             if not switched:
                 with _signals_deferred():
                     self._remove_staging(name)
+            if borrowed:
+                handle.close()
+                self._handle = None
 
     def _remove_staging(self, name: str) -> None:
         try:
