@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 import contactfem.io.atomic as atomic
+from contactfem.io import dirfd, journal
 from contactfem.errors import ExistingResultError, OutputError
 from contactfem.io.atomic import (
     EXCHANGE_FILE,
@@ -43,7 +44,7 @@ OLD = {"report.json": "old", "solution.h5": "old", "contact.csv": "old"}
 NEW = {"report.json": "new", "solution.h5": "new"}
 REPLACES = ("report.json", "solution.h5", "contact.csv", "solution.vtu")
 
-needs_exchange = pytest.mark.skipif(atomic._renameat2_function is None, reason="no renameat2 here")
+needs_exchange = pytest.mark.skipif(dirfd.renameat2_function is None, reason="no renameat2 here")
 
 
 def invoke(*args):
@@ -109,10 +110,10 @@ def out(tmp_path) -> Path:
 @pytest.fixture(params=["exchange", "moves"])
 def mode(request, monkeypatch) -> str:
     """Every behaviour holds whether the result is switched in by an exchange or by moves."""
-    if request.param == "exchange" and atomic._renameat2_function is None:
+    if request.param == "exchange" and dirfd.renameat2_function is None:
         pytest.skip("no renameat2 here")
     if request.param == "moves":
-        monkeypatch.setattr(atomic, "_renameat2_function", None)
+        monkeypatch.setattr(dirfd, "renameat2_function", None)
     return request.param
 
 
@@ -139,12 +140,12 @@ def test_every_name_the_commands_write_is_an_output_name():
     from contactfem import sweep
     from contactfem.io import registry
 
-    literals = [n for n in registry.RESULT_FILES if not atomic._is_pattern(n)]
+    literals = [n for n in registry.RESULT_FILES if not journal.is_pattern(n)]
     literals += [registry.COMPARE_JSON, registry.COMPARE_PNG, registry.CONVERGENCE_JSON, registry.CONVERGENCE_CSV,
                  *registry.CONVERGENCE_PNGS, registry.ADAPT_JSON, *sweep.SWEEP_FILES, *registry.PICTURES,
                  "compare.pvd", "convergence-positive.pvd"]
     assert [n for n in literals if not is_output_name(n)] == []
-    assert set(n for n in registry.RESULT_FILES if atomic._is_pattern(n)) <= set(atomic.OUTPUT_NAMES)
+    assert set(n for n in registry.RESULT_FILES if journal.is_pattern(n)) <= set(atomic.OUTPUT_NAMES)
 
 
 def _leftover_staging(directory: Path, journal: dict, pid: int = 999999, token: str = "deadbeef") -> Path:
@@ -547,7 +548,7 @@ def test_an_exchange_the_file_system_refuses_falls_back_to_moves(out, monkeypatc
     def refused(*args):
         raise OSError(22, "Invalid argument")
 
-    monkeypatch.setattr(atomic, "_exchange", refused)
+    monkeypatch.setattr(dirfd, "exchange", refused)
     inode = out.stat().st_ino
     make_result(out, NEW)
     assert out.stat().st_ino == inode and result_files(out) == NEW
@@ -570,7 +571,7 @@ def test_what_another_program_writes_while_the_copy_is_built_is_carried_over(out
         else:
             (out / "data" / "late.txt").write_text("late", encoding="utf-8")
 
-    monkeypatch.setattr(atomic, "_reached", meanwhile)
+    monkeypatch.setattr(dirfd, "reached", meanwhile)
     make_result(out, NEW)
     assert result_files(out) == NEW
     if change == "new file":
@@ -589,7 +590,7 @@ def test_an_error_while_the_copy_is_built_leaves_the_old_result_and_no_copy(out,
         if reached == step:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(atomic, "_reached", failing)
+    monkeypatch.setattr(dirfd, "reached", failing)
     with pytest.raises(KeyboardInterrupt):
         make_result(out, NEW)
     assert result_files(out) == OLD and mechanism_leftovers(out.parent) == []
@@ -599,16 +600,17 @@ KILLED_RUN = """
 import os, signal, sys
 from pathlib import Path
 import contactfem.io.atomic as atomic
+from contactfem.io import dirfd, journal
 
 out, step, mode = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
 if mode == "moves":
-    atomic._renameat2_function = None
+    dirfd.renameat2_function = None
 
 def reached(name):
     if name == step:
         os.kill(os.getpid(), signal.SIGKILL)
 
-atomic._reached = reached
+dirfd.reached = reached
 with atomic.claimed_directory(out) as claim:
     with claim.stage(replaces={replaces!r}, last="report.json") as staging:
         for name, text in {new!r}.items():
