@@ -19,7 +19,7 @@ from contextlib import contextmanager
 
 from contactfem.errors import Interrupted
 
-__all__ = ["listening", "note_switched", "stop_if_received", "switched"]
+__all__ = ["deferred", "listening", "note_switched", "stop_if_received", "switched"]
 
 #: The signals received since a command began listening, the earliest first.
 _received: list[int] = []
@@ -97,3 +97,33 @@ def listening() -> Iterator[None]:
 def _restore(previous: dict) -> None:
     for number, handler in previous.items():
         signal.signal(number, handler if handler is not None else signal.SIG_DFL)
+
+
+#: The signals :func:`deferred` holds back.
+_DEFERRED = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Hold back SIGINT and SIGTERM for the block (a switch-over, a lock's release), then
+    deliver them (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    previous = {}
+    try:
+        for number in _DEFERRED:
+            previous[number] = signal.signal(number, lambda signum, frame: received.append(signum))
+    except (ValueError, OSError):  # no signal support here: nothing to defer
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        yield
+        return
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    for number in received:
+        signal.raise_signal(number)
