@@ -44,7 +44,12 @@ one_blas_thread()
 OUT = ROOT / "benchmarks" / "results" / "ablation.json"
 CONFIGURATIONS = ("all", "no sequencing", "no zone fronts", "no schur updates", "no asperity correction",
                   "no layer correction", "no forward columns", "no worker thread")
-SCENES = ("square", "rough", "hertz", "punch", "strip", "rough_loading")
+#: The configurations that only switch parts of sequencing off: nothing to switch in a cold scene.
+SEQUENCING_PARTS = ("no sequencing", "no asperity correction", "no layer correction", "no worker thread")
+SCENES = ("square", "rough", "hertz", "punch", "strip", "strip_cold", "rough_loading")
+#: Scenes solved without a coarser level in every configuration: a body whose mesh has no
+#: coarser level (a mesh file), where the zone fronts alone shorten a creeping zone's path.
+COLD = ("strip_cold",)
 
 
 def scene_case(name: str, directory: Path):
@@ -61,12 +66,12 @@ def scene_case(name: str, directory: Path):
         csv = directory / "profile.csv"
         write_surface(csv, 16_000)
         return parse_case(case_text(csv), source=directory / "rough.yaml"), 0
-    refinements = {"hertz": 1, "punch": 3, "strip": 3, "rough_loading": 1}[name]
-    return load_case(ROOT / "cases" / f"{name}.yaml"), refinements
+    refinements = {"hertz": 1, "punch": 3, "strip": 3, "strip_cold": 3, "rough_loading": 1}[name]
+    return load_case(ROOT / "cases" / f"{name.removesuffix('_cold')}.yaml"), refinements
 
 
 @contextlib.contextmanager
-def switched(configuration: str):
+def switched(configuration: str, cold: bool = False):
     """The accelerators of ``configuration``, and the sequencing parts it switches off."""
     import contactfem.kernel.costs as costs
     import contactfem.sequencing as sequencing
@@ -84,7 +89,7 @@ def switched(configuration: str):
     if configuration == "no worker thread":
         solve_module.ThreadPoolExecutor = lambda *args, **kwargs: solve_module._InPlace()
     try:
-        yield Accelerators(sequencing=configuration != "no sequencing",
+        yield Accelerators(sequencing=configuration != "no sequencing" and not cold,
                            zone_fronts=configuration != "no zone fronts",
                            schur_updates=configuration != "no schur updates")
     finally:
@@ -92,12 +97,12 @@ def switched(configuration: str):
          costs.SIMPLICIAL_FORWARD_COLUMNS_FROM, solve_module.ThreadPoolExecutor) = saved
 
 
-def run(case, refine: int, configuration: str, problem) -> dict:
+def run(case, refine: int, configuration: str, problem, cold: bool = False) -> dict:
     import dataclasses
 
     import contactfem.solve as solve_module
 
-    with switched(configuration) as accelerators:
+    with switched(configuration, cold) as accelerators:
         if case.load_path is not None:
             original = solve_module.case_accelerators
             solve_module.case_accelerators = lambda _case: accelerators
@@ -122,11 +127,13 @@ def measure(name: str, repeat: int, directory: Path) -> dict:
     case, refine = scene_case(name, directory)
     problem = None if case.load_path is not None else prepare(case, refine=refine)
     unknowns = problem.n_unknowns if problem is not None else prepare(case, refine=refine).n_unknowns
-    runs: dict[str, list[dict]] = {c: [] for c in CONFIGURATIONS}
-    run(case, refine, "all", problem)  # warm-up: the process's first touch of this size's memory
+    cold = name in COLD
+    configurations = [c for c in CONFIGURATIONS if not (cold and c in SEQUENCING_PARTS)]
+    runs: dict[str, list[dict]] = {c: [] for c in configurations}
+    run(case, refine, "all", problem, cold)  # warm-up: the process's first touch of this size's memory
     for _ in range(repeat):
-        for configuration in CONFIGURATIONS:
-            runs[configuration].append(run(case, refine, configuration, problem))
+        for configuration in configurations:
+            runs[configuration].append(run(case, refine, configuration, problem, cold))
     reference = runs["all"][0]["active"]
     record = {"unknowns": unknowns, "configurations": {}}
     for configuration, samples in runs.items():
@@ -146,7 +153,8 @@ def table(results: dict) -> str:
              "|---|---|---|" + "---|" * (len(CONFIGURATIONS) - 1)]
     for name, record in results["scenes"].items():
         figures = record["configurations"]
-        cells = [f"{figures[c]['seconds']:.3g} ({figures[c]['cost_when_off']:+.0%})" for c in CONFIGURATIONS[1:]]
+        cells = [f"{figures[c]['seconds']:.3g} ({figures[c]['cost_when_off']:+.0%})" if c in figures else "—"
+                 for c in CONFIGURATIONS[1:]]
         lines.append(f"| {name} | {record['unknowns']} | {figures['all']['seconds']:.3g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
