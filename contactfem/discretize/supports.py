@@ -49,6 +49,34 @@ class PlatenConstraint:
 
 
 @dataclass(frozen=True, eq=False)
+class Holds:
+    """Every direction a support holds a node in, and the part that holds it: row i says that
+    the part ``names[parts[i]]`` holds ``nodes[i]`` along the unit vector ``directions[i]`` (a
+    prescribed component e_x or e_y, a symmetry line's normal, a platen's normal).
+
+    A node's reaction is one force along each direction holding it, each the part's own: a
+    frictionless platen's along its normal only, a symmetry line's along its normal only
+    (:func:`contactfem.report.booked_reactions`). A node a part prescribes is held by that
+    part, whatever else it lies on: a symmetry line or a platen through it holds nothing more."""
+
+    nodes: np.ndarray
+    directions: np.ndarray
+    parts: np.ndarray
+    names: tuple[str, ...]
+
+    @classmethod
+    def of(cls, rows: list[tuple[np.ndarray, np.ndarray, str]]) -> "Holds":
+        """From (nodes (k,), directions (k, 2), part name) groups, in the order given."""
+        rows = [row for row in rows if len(row[0])]
+        names = tuple(dict.fromkeys(name for _, _, name in rows))
+        if not rows:
+            return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64), names)
+        return cls(np.concatenate([np.asarray(nodes, dtype=np.int64) for nodes, _, _ in rows]),
+                   np.concatenate([np.asarray(directions, dtype=float).reshape(-1, 2) for _, directions, _ in rows]),
+                   np.concatenate([np.full(len(nodes), names.index(name)) for nodes, _, name in rows]), names)
+
+
+@dataclass(frozen=True, eq=False)
 class Supports:
     """What holds the body: prescribed unknowns ``dirichlet_dofs`` (sorted) with their
     ``dirichlet_values``, the nodes held on symmetry lines with each line's unit normal,
@@ -59,6 +87,7 @@ class Supports:
     symmetry_nodes: np.ndarray
     symmetry_normals: np.ndarray
     platens: tuple[PlatenConstraint, ...] = ()
+    holds: Holds | None = None
 
     @property
     def platen_nodes(self) -> np.ndarray:
@@ -101,7 +130,12 @@ def supports(case: Case, mesh: Mesh) -> Supports:
             values[dofs] = prescribed
             owner[dofs] = index
     prescribed = owner.reshape(-1, 2) >= 0
-    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh)
+    # Which part holds each node along which direction, for the reactions' bookkeeping: every
+    # part prescribing a component (several may, consistently), then what the symmetry lines
+    # and platens add below.
+    holds = [(nodes, np.tile(np.eye(2)[component], (len(nodes), 1)), part.name)
+             for part, nodes, component in _prescriptions(case, mesh)]
+    symmetry_nodes, symmetry_normals, symmetry_parts = _symmetry_lines(case, mesh)
     # A symmetry node with one component prescribed is held completely when the line is not
     # along that component: u · n_s = 0 then gives the other one.
     one = prescribed[symmetry_nodes].sum(axis=1) == 1
@@ -113,9 +147,17 @@ def supports(case: Case, mesh: Mesh) -> Supports:
     value = values[2 * nodes_one + given[across]]
     values[2 * nodes_one + 1 - given[across]] = -n_given[across] * value / n_other[across]
     owner[2 * nodes_one + 1 - given[across]] = len(case.parts)
+    for index in np.unique(symmetry_parts[one][across]):
+        line = symmetry_parts[one][across] == index
+        holds.append((nodes_one[line], symmetry_normals[one][across][line], case.parts[index].name))
     prescribed = owner.reshape(-1, 2) >= 0
     keep = ~prescribed[symmetry_nodes].any(axis=1)
-    symmetry_nodes, symmetry_normals = symmetry_nodes[keep], symmetry_normals[keep]
+    symmetry_nodes, symmetry_normals, symmetry_parts = symmetry_nodes[keep], symmetry_normals[keep], symmetry_parts[keep]
+    # Each symmetry line holds its nodes along its normal (a node on two lines, pinned below,
+    # along both).
+    for index in np.unique(symmetry_parts):
+        line = symmetry_parts == index
+        holds.append((symmetry_nodes[line], symmetry_normals[line], case.parts[index].name))
     # A node on two symmetry lines that are not parallel cannot move at all.
     unique, first, counts = np.unique(symmetry_nodes, return_index=True, return_counts=True)
     pinned = unique[counts > 1]
@@ -125,8 +167,23 @@ def supports(case: Case, mesh: Mesh) -> Supports:
     keep = np.isin(unique, pinned, invert=True)
     symmetry_nodes, symmetry_normals = unique[keep], symmetry_normals[first[keep]]
     platens = _platens(case, mesh, owner.reshape(-1, 2) >= 0, symmetry_nodes, symmetry_normals)
+    holds += [(p.nodes, np.tile(p.normal, (len(p.nodes), 1)), p.name) for p in platens]
     dofs = np.flatnonzero(owner >= 0)
-    return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens)
+    return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens, Holds.of(holds))
+
+
+def _prescriptions(case: Case, mesh: Mesh) -> list[tuple["object", np.ndarray, int]]:
+    """(part, nodes, component) for every component a clamped or displacement part prescribes."""
+    found = []
+    for part in case.parts:
+        if not part.is_dirichlet:
+            continue
+        nodes = mesh.nodes_of(part.name)
+        for component in range(2):
+            if part.kind is PartKind.DISPLACEMENT and part.values[component] is None:
+                continue
+            found.append((part, nodes, component))
+    return found
 
 
 def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple[np.ndarray, np.ndarray]:
@@ -148,21 +205,22 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple
     return normal, np.unique(edges)
 
 
-def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes of the symmetry parts and their line's normal.
+def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes of the symmetry parts, their line's normal and the part's index in the case.
 
     A symmetry part must be straight: all its edges on one line, whose outward unit normal
     n_s is the direction held (u · n_s = 0).
     """
-    nodes, normals = [], []
-    for part in case.parts:
+    nodes, normals, parts = [], [], []
+    for index, part in enumerate(case.parts):
         if part.kind is PartKind.SYMMETRY:
             normal, part_nodes = _straight_normal(case, mesh, part.name, PartKind.SYMMETRY)
             nodes.append(part_nodes)
             normals.append(np.tile(normal, (len(part_nodes), 1)))
+            parts.append(np.full(len(part_nodes), index))
     if not nodes:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    return np.concatenate(nodes), np.concatenate(normals)
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    return np.concatenate(nodes), np.concatenate(normals), np.concatenate(parts)
 
 
 def _platens(case: Case, mesh: Mesh, prescribed: np.ndarray, symmetry_nodes: np.ndarray,
