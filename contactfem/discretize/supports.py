@@ -391,7 +391,7 @@ def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, cent
     if n_pieces - int((count == 0).sum()) == 1:
         raise CaseError(
             f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body free "
-            f"({motion}){unheld}, so the problem is ill-posed; prescribe both components on a part of positive length"
+            f"({motion}){unheld}, so the problem is ill-posed; {_holding_remedies(case, mesh, vectors[loose, :, 0])}"
         )
     where = mesh.points[np.flatnonzero(piece_of == loose)[0]]
     raise CaseError(
@@ -399,6 +399,50 @@ def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, cent
         f"them) and the one through ({where[0]:g}, {where[1]:g}) is not held: the supports ({names}) leave "
         f"a rigid motion of it free ({motion}){unheld}; join the pieces in the mesh or support each one"
     )
+
+
+def _holding_remedies(case: Case, mesh: Mesh, mode: np.ndarray) -> str:
+    """What holds a free rigid motion (a, b, c) and nothing else, so that a load or a platen
+    force still drives the body: a symmetry line across it, or one prescribed component
+    along it. Prescribing both components on a part also holds it, but turns a problem
+    driven by force into one driven by displacement, so it comes last."""
+    kinds = "clamped, displacement, symmetry, platen, traction, pressure, contact or free"
+    last = (f"; there are no springs (a part is {kinds}); prescribing both components on a part holds it "
+            "too, but fixes that part where the load would move it")
+    a, b, c = np.where(np.abs(mode) > 1e-9 * np.abs(mode).max(), mode, 0.0) / np.abs(mode).max()
+    if abs(c) >= 1e-6:
+        return ("to hold it and keep the load, make a straight part a symmetry line (boundary.<part>: symmetry) "
+                "or prescribe one component on a part away from the centre of rotation (boundary.<part>: "
+                f"{{displacement: [0, null]}} or [null, 0]){last}")
+    direction = np.array([a, b]) / np.hypot(a, b)
+    component = "[0, null]" if abs(direction[0]) >= abs(direction[1]) else "[null, 0]"
+    across = _straight_parts_across(case, mesh, direction)
+    line = (" or ".join(f"boundary.{name}" for name in across[:2]) + ": symmetry" if across
+            else f"boundary.<part>: symmetry, the part straight and across ({direction[0]:.3g}, {direction[1]:.3g})")
+    return (f"to hold it and keep the load, make a straight part across it a symmetry line ({line}) or "
+            f"prescribe its one component on a part (boundary.<part>: {{displacement: {component}}}){last}")
+
+
+def _straight_parts_across(case: Case, mesh: Mesh, direction: np.ndarray) -> list[str]:
+    """The free parts that are straight with their normal along ``direction`` (k,), which as a
+    symmetry line would hold a translation along it."""
+    found = []
+    for part in case.parts:
+        if part.kind is not PartKind.FREE:
+            continue
+        edges = mesh.edges_of(part.name)
+        if len(edges) == 0:
+            continue
+        _, outward = edge_geometry(mesh.points, edges)
+        normal = outward.mean(axis=0)
+        if np.linalg.norm(normal) == 0:
+            continue
+        normal = normal / np.linalg.norm(normal)
+        offset = (mesh.points[np.unique(edges)] - mesh.points[edges[0, 0]]) @ normal
+        if (abs(abs(normal @ direction) - 1.0) <= 1e-9 and np.abs(outward @ normal - 1.0).max() <= 1e-9
+                and np.abs(offset).max() <= 1e-9 * coordinate_span(mesh.points).max()):
+            found.append(part.name)
+    return found
 
 
 def platen_work(platens: tuple[PlatenConstraint, ...], motion: np.ndarray) -> float:
