@@ -135,3 +135,57 @@ def test_a_body_whose_outline_is_too_thin_is_still_refused(tmp_path):
 def test_an_arc_loop_whose_vertices_coincide_is_refused_as_before(tmp_path):
     data = _half_disk([[1, 0], [1, 0]], [{"name": "rim", "arc": {"center": [0, 0]}}] * 2)
     _refused(tmp_path, data, "geometry.polygon.vertices", "too small", command="check")
+
+
+# --------------------------------------------------------------------------- the case file, always
+
+
+def _sliver(divisions: int, load_path: bool = False) -> dict:
+    """A 1 x 1e-6 cantilever: clamped on the left, its contact part (the right end) far from
+    the obstacle. Its bending stiffness is 1e-12 of its stretching one: at 64 x 1 divisions the
+    stiffness is numerically singular (condition 1e15), at 1 000 CHOLMOD meets a pivot <= 0."""
+    data = {
+        "title": "a sliver of a block",
+        "geometry": {"rectangle": {"lower": [0, 0], "upper": [1, 1.0e-6]}},
+        "mesh": {"divisions": [divisions, 1]},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"left": "clamped", "top": {"traction": [0, -1]}, "right": "contact", "bottom": "free"},
+        "obstacle": {"point": [2, 0], "normal": [1, 0]},
+    }
+    if load_path:
+        data["load_path"] = {"steps": 2}
+    return data
+
+
+@pytest.mark.parametrize("divisions, load_path", [(64, False), (1000, False), (64, True)],
+                         ids=["probe", "pivot", "load-path"])
+def test_a_numerically_singular_body_is_refused_naming_the_case_file(tmp_path, divisions, load_path):
+    """The refusal starts with the case file, like every other (it named only "the stiffness
+    matrix"); a solver's failure, exit 1, and nothing written."""
+    path = _write(tmp_path, _sliver(divisions, load_path))
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(tmp_path / "out"), "--quiet"])
+    assert result.exit_code == 1, (result.exit_code, result.stderr)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {CASE_NAME}: "), result.stderr
+    assert "singular" in lines[0]
+    assert lines[0].count(CASE_NAME) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_solver_error_already_naming_the_case_is_not_named_twice():
+    from test_semicoercive import case_of
+
+    from contactfem.errors import SolverError
+    from contactfem.solve import _names_the_case
+
+    case = case_of(_sliver(4))
+
+    @_names_the_case
+    def fails(case, message):
+        raise SolverError(message)
+
+    for message in ("the matrix is singular", f"{case.source.name}: method positive: cycling"):
+        with pytest.raises(SolverError) as caught:
+            fails(case, message)
+        assert str(caught.value).startswith(f"{case.source.name}: ")
+        assert str(caught.value).count(case.source.name) == 1
