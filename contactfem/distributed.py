@@ -52,7 +52,7 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
-from contactfem.errors import SolverError
+from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
     REFINEMENT_STEPS,
@@ -169,11 +169,13 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     Raises
     ------
+    CaseError
+        For platens or a body held only by contact (not handled yet: input this backend
+        cannot take, as a load path is).
     SolverError
-        Without petsc4py/mpi4py, for an unknown ``solver``, for platens or a body held only
-        by contact (not handled yet), and as :func:`~contactfem.solve.solve_case` does when
-        the kernel does not converge. Raised on every rank alike: every decision is taken
-        from data all ranks share.
+        Without petsc4py/mpi4py, for an unknown ``solver``, and as
+        :func:`~contactfem.solve.solve_case` does when the kernel does not converge.
+    Raised on every rank alike: every decision is taken from data all ranks share.
     """
     if solver not in SOLVERS:
         raise SolverError(f"unknown petsc solver {solver!r}; pick one of {', '.join(SOLVERS)}")
@@ -329,16 +331,16 @@ def _peak_rss() -> int:
 def _problem_without_stiffness(case: Case, mesh, refinements: int, request: MeshRequest | None = None) -> DiscreteProblem:
     """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
     is None until rank 0 gets a :class:`SolutionProduct`); refuses what this backend does
-    not handle yet."""
+    not handle yet as bad input for it (:class:`CaseError`, exit code 2, as a load path is)."""
     from contactfem.discretize import build_problem
 
     problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
     if problem.platens:
-        raise SolverError(f"{case.source.name}: the petsc backend does not handle platens yet "
-                          f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")
+        raise CaseError(f"{case.source.name}: the petsc backend does not handle platens yet "
+                        f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")
     if problem.free_modes is not None:
-        raise SolverError(f"{case.source.name}: the body is held only by contact along {problem.free_modes.shape[1]} "
-                          "rigid motion(s); the petsc backend does not handle that yet, solve without it")
+        raise CaseError(f"{case.source.name}: the body is held only by contact along {problem.free_modes.shape[1]} "
+                        "rigid motion(s); the petsc backend does not handle that yet, solve without it")
     return problem
 
 

@@ -16,6 +16,21 @@ class MeshError(ContactFemError):
     """The mesh cannot be built, read or is unusable (degenerate, wrong boundary names)."""
 
 
+class MeshCapError(MeshError):
+    """Meshing stopped at the most nodes it may make (``max_points``, from the memory budget)
+    before the triangles met the size asked for: the mesh left is coarser than the one asked
+    for, and is refused rather than solved in its place.
+
+    ``largest`` is the largest triangle's edge over the edge the size asks for there (the side
+    of the equilateral triangle of the same area; 1 or less where the size was met)."""
+
+    def __init__(self, message: str, max_points: int, nodes: int, largest: float):
+        super().__init__(message)
+        self.max_points = max_points
+        self.nodes = nodes
+        self.largest = largest
+
+
 class SolverError(ContactFemError):
     """The discrete problem cannot be solved (singular system, no convergence)."""
 

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Collection, Mapping
 import numpy as np
 
 from contactfem import __version__
-from contactfem.case import SUPPORT_KINDS, Case, PartKind
+from contactfem.case import Case, PartKind
 from contactfem.discretize import DiscreteProblem
 from contactfem.discretize.contact import contact_patches
 from contactfem.mesh.core import coordinate_span
@@ -345,8 +345,9 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     """Force and moment of every boundary part on the body, and of the body force.
 
     Applied surface forces on the natural parts, reactions on the supports (clamped,
-    prescribed, symmetry lines: K u − F − f_c on their held unknowns) and the obstacle's
-    push on the contact parts (−n Λ). Moments are about ``equilibrium``'s point (the nodes' centroid).
+    prescribed, symmetry lines, platens: K u − F − f_c on their held unknowns, each part
+    along the directions it holds, :func:`booked_reactions`) and the obstacle's push on the
+    contact parts (−n Λ). Moments are about ``equilibrium``'s point (the nodes' centroid).
     The entries sum to zero up to the solve's residual: ``total`` is that sum, relative
     to the parts' forces and to ``force_unit`` at least (see :func:`equilibrium`).
     """
@@ -359,8 +360,9 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     def resultant(force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
         return _resultant(points, centre, force, nodes)
 
-    # Reactions belong to the support parts holding the node, the obstacle's push to the
-    # contact parts: a node shared by two such parts counts for the first in the mesh's order.
+    # The obstacle's push belongs to the contact parts: a node shared by two counts for the
+    # first in the mesh's order. Each reaction is split among the parts that hold its node,
+    # each along the direction it holds (booked_reactions).
     kinds = {name: labels.get(name, PartKind.FREE).split(" ")[0] for name in mesh.part_names}
 
     def owners(selected: Collection[str]) -> np.ndarray:
@@ -370,12 +372,12 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
                 owner[np.unique(mesh.boundary_edges[mesh.edge_parts == index])] = index
         return owner
 
-    support_owner = owners(SUPPORT_KINDS)
+    booked = booked_reactions(problem, reaction)
     contact_owner = owners({PartKind.CONTACT})
     entries: dict[str, dict] = {}
     for index, name in enumerate(mesh.part_names):
         pieces = [resultant(_natural_part_load(natural, natural.parts == index, mesh.n_points)),
-                  resultant(reaction, np.flatnonzero(support_owner == index)),
+                  booked.get(name, {"force": [0.0, 0.0], "moment": 0.0}),
                   resultant(push, np.flatnonzero(contact_owner == index))]
         entries[name] = {"condition": labels.get(name, PartKind.FREE),
                          "force": [sum(p["force"][k] for p in pieces) for k in range(2)],
@@ -391,6 +393,64 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
             "total": {"force": force.tolist(), "moment": moment,
                       "relative_force_residual": float(np.hypot(*force) / scale),
                       "relative_moment_residual": float(abs(moment) / (scale * length))}}
+
+
+#: Two directions holding one node are one direction (a part prescribing a component a symmetry
+#: line along that axis also holds) below this |sin| of the angle between them.
+PARALLEL_DIRECTIONS = 1e-9
+
+
+def booked_reactions(problem: DiscreteProblem, reaction: np.ndarray) -> dict[str, dict]:
+    """Each support part's share of the reactions (2n,): its force and moment about the nodes'
+    centroid (as :func:`boundary_forces`), by part name.
+
+    A node held along two directions (a clamped or prescribed node, a platen's corner on a
+    symmetry line, a node on two symmetry lines) has its reaction R split as R = a d1 + b d2
+    along them, a d1 booked to the part holding d1 and b d2 to the one holding d2: a
+    frictionless platen then carries no tangential force, and a symmetry line all of the
+    force across it. The directions are taken in the mesh's part order, the first of each
+    node's parts first (two parts prescribing one component: the first holds it). A node held
+    along one direction books all of R to that part (R is along it, to the solve's residual).
+    """
+    mesh = problem.mesh
+    holds = problem.holds
+    points = mesh.points
+    centre = points.mean(axis=0)
+    r = reaction.reshape(-1, 2)
+    if holds is None or len(holds.nodes) == 0:
+        return {}
+    order_of = {name: index for index, name in enumerate(mesh.part_names)}
+    part_order = np.array([order_of.get(name, len(order_of)) for name in holds.names])[holds.parts]
+    # Rows by node, then by the mesh's part order, then as given.
+    rows = np.lexsort((np.arange(len(holds.nodes)), part_order, holds.nodes))
+    nodes, directions, parts = holds.nodes[rows], holds.directions[rows], holds.parts[rows]
+    start = np.flatnonzero(np.concatenate([[True], nodes[1:] != nodes[:-1]]))
+    group = np.cumsum(np.concatenate([[False], nodes[1:] != nodes[:-1]]))
+    first = directions[start][group]
+    sine = first[:, 0] * directions[:, 1] - first[:, 1] * directions[:, 0]
+    # The second direction of each node: its first row across the first direction.
+    across = np.where(np.abs(sine) > PARALLEL_DIRECTIONS, np.arange(len(rows)), len(rows))
+    second = np.minimum.reduceat(across, start)
+    paired = second < len(rows)
+    share = np.zeros((len(rows), 2))
+    node_r = r[nodes[start]]
+    share[start[~paired]] = node_r[~paired]
+    d1 = directions[start[paired]]
+    d2 = directions[second[paired]]
+    rp = node_r[paired]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    a = (rp[:, 0] * d2[:, 1] - rp[:, 1] * d2[:, 0]) / det
+    b = (d1[:, 0] * rp[:, 1] - d1[:, 1] * rp[:, 0]) / det
+    share[start[paired]] = a[:, None] * d1
+    share[second[paired]] = b[:, None] * d2
+    arm = points[nodes] - centre
+    moment = arm[:, 0] * share[:, 1] - arm[:, 1] * share[:, 0]
+    booked = {}
+    for index, name in enumerate(holds.names):
+        mine = parts == index
+        booked[name] = {"force": [float(share[mine, 0].sum()), float(share[mine, 1].sum())],
+                        "moment": float(moment[mine].sum())}
+    return booked
 
 
 def _natural_part_load(natural, selected: np.ndarray, n_points: int) -> np.ndarray:

@@ -8,6 +8,7 @@ command line hands both to the writers of :mod:`contactfem.io`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -21,7 +22,7 @@ from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.meshing import MeshRequest, estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
-from contactfem.errors import CaseError, ContactFemError, SolverError
+from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, SolverError
 from contactfem.kernel import (
     Accelerators,
     ActiveSetSolver,
@@ -125,6 +126,26 @@ def prepare(
     return problem
 
 
+def _names_the_case(solve: Callable) -> Callable:
+    """Make a solver's refusal start with the case file, as every other refusal does: the
+    linear algebra's (a singular or not positive definite stiffness, a factorisation out of
+    room) know only the matrix they were given (a 1 x 1e-6 block was refused as "the
+    stiffness matrix ... is singular", naming no file)."""
+
+    @functools.wraps(solve)
+    def named(case: Case, *args, **kwargs):
+        try:
+            return solve(case, *args, **kwargs)
+        except (SolverError, FactorCapacityError) as error:
+            prefix = f"{case.source.name}: "
+            if str(error).startswith(prefix):
+                raise
+            raise type(error)(prefix + str(error)) from None
+
+    return named
+
+
+@_names_the_case
 def solve_case(
     case: Case,
     *,
@@ -318,6 +339,7 @@ class PathResult:
         return dataclasses.replace(self.steps[-1], timings=self.timings, sequencing=self.sequencing)
 
 
+@_names_the_case
 def solve_load_path(
     case: Case,
     *,

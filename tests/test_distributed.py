@@ -184,3 +184,43 @@ def test_other_commands_refuse_the_petsc_backend(tmp_path):
     result = CliRunner().invoke(main, ["compare", str(case), "--out", str(tmp_path / "out")])
     assert result.exit_code == 2, result.output
     assert "solver.backend = petsc" in result.output and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name, fragment", [("hertz_platen", "does not handle platens"),
+                                            ("hertz_by_force", "held only by contact")])
+def test_input_the_petsc_backend_cannot_take_is_refused_as_bad_input(name, fragment):
+    """A platen and a body held only by contact are input this backend cannot take, as a load
+    path is: one line naming the case file, exit code 2 like the load path's refusal (they
+    exited 1, as a solver's failure). Checked without petsc4py: the refusal comes from the
+    problem, before any rank solves."""
+    import yaml
+
+    from contactfem.case import parse_case
+    from contactfem.cli.exits import EXIT_BAD_INPUT, _exit_code
+    from contactfem.discretize import build_mesh
+    from contactfem.distributed import _problem_without_stiffness
+    from contactfem.errors import CaseError
+
+    if name == "hertz_by_force":
+        data = yaml.safe_load((CASES / "hertz_quarter.yaml").read_text(encoding="utf-8"))
+        data["boundary"]["top"] = {"traction": [0, -1.8e3]}
+        case = parse_case(yaml.safe_dump(data, sort_keys=False), source="held.yaml")
+    else:
+        case = load_case(CASES / f"{name}.yaml")
+    with pytest.raises(CaseError, match=fragment) as refused:
+        _problem_without_stiffness(case, build_mesh(case), 0)
+    message = str(refused.value)
+    assert message.startswith(f"{case.source.name}: ") and "\n" not in message
+    assert _exit_code(refused.value) == EXIT_BAD_INPUT
+
+
+def test_a_load_path_on_the_petsc_backend_is_refused_as_bad_input_too():
+    """The load path's refusal, before any MPI is needed: the same exit code 2."""
+    from contactfem.cli.cmd_solve import _solve_distributed
+    from contactfem.cli.exits import EXIT_BAD_INPUT, _exit_code
+    from contactfem.errors import CaseError
+
+    case = load_case(CASES / "hertz_platen.yaml")
+    with pytest.raises(CaseError, match="load_path") as refused:
+        _solve_distributed(case, None, None, "mumps", Path("unused"), True, False, False, False, None)
+    assert _exit_code(refused.value) == EXIT_BAD_INPUT

@@ -118,7 +118,7 @@ def _hole(r: Reader, data: Any, key: str, extent: float, source: Path, limit: in
             raise r.fail(f"{key}.name", data["name"], "a polygonal hole names each of its edges instead")
         loop = listed_loop(r, data, key, source, limit)
         least = extent / limits.MAX_DIVISIONS
-        span = float(coordinate_span(loop.vertices).min())
+        span = float(coordinate_span(loop_outline(loop)).min())  # the hole's, arcs included
         if span < least:
             raise r.fail(f"{key}.vertices", loop.vertices.tolist(),
                          f"the hole is {span:.3g} across; expected at least the body's extent / {limits.MAX_DIVISIONS} "
@@ -224,12 +224,10 @@ def read_mesh_settings(r: Reader, data: Any, geometry: Geometry) -> MeshSettings
 
 
 def _extent(geometry: Geometry) -> float | None:
+    """The larger side of the body's bounding box: its outer loop's outline, arcs included
+    (the vertices of a half-disk's top lie on one line, and its arc gives it its height)."""
     if isinstance(geometry, RectangleGeometry):
         return max(geometry.upper[0] - geometry.lower[0], geometry.upper[1] - geometry.lower[1])
     if isinstance(geometry, PolygonGeometry):
-        v = geometry.outer.vertices
-        span = coordinate_span(v).max()
-        arcs = geometry.outer.edge_arcs
-        radii = [np.hypot(*(v[i] - arcs[i].center)) for i in geometry.outer.arc_edges.tolist()]
-        return float(max([span, *(2 * rr for rr in radii)]))
+        return float(coordinate_span(loop_outline(geometry.outer)).max())
     return None

@@ -12,7 +12,7 @@ import numpy as np
 from contactfem.case import limits
 from contactfem.case.crossings import CLOCKWISE, polygon_problems
 from contactfem.case.files import data_file_lines
-from contactfem.case.loops import Arc, Loop, coordinate_span
+from contactfem.case.loops import Arc, Loop, coordinate_span, loop_outline
 from contactfem.case.messages import shortened
 from contactfem.case.reader import Reader
 from contactfem.case.tables import DataLines, checked_numbers, is_number
@@ -135,11 +135,18 @@ def _loop(r: Reader, vertices: Any, edges: Any, key: str) -> Loop:
         problem = polygon_problems(points)
         if problem is not None and not (has_arc and problem.startswith("zero area")):
             raise r.fail(f"{key}.vertices", points.tolist(), problem)
-    check_extent(r, f"{key}.vertices", points)
+    # With arcs the vertices may lie on one line (a half-disk's straight side, split by a
+    # vertex or not): the arcs give the body its other side, checked on its outline below.
+    check_extent(r, f"{key}.vertices", points, one_side=has_arc)
     try:
-        return Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
+        loop = Loop(vertices=points, edge_names=tuple(names), edge_arcs=tuple(arcs))
     except MeshError as error:
         raise r.fail(f"{key}.vertices", points.tolist(), str(error)) from None
+    if has_arc:
+        # The body's extent, not its vertices': a half-disk's straight side split by a vertex
+        # has three vertices on one line, and its arc gives it its height.
+        check_extent(r, f"{key}.vertices", loop_outline(loop), listed=points)
+    return loop
 
 
 #: How far (relative to the radius) a listed vertex may lie from the end of an arc given by its
@@ -200,12 +207,19 @@ def listed_loop(r: Reader, spec: dict, key: str, source: Path, limit: int) -> Lo
     return _loop(r, spec["vertices"], spec["edges"], key)
 
 
-def check_extent(r: Reader, key: str, points: np.ndarray) -> None:
+def check_extent(r: Reader, key: str, points: np.ndarray, listed: np.ndarray | None = None,
+                 one_side: bool = False) -> None:
     """The body must be resolvable in float64: both sides of its bounding box at least
-    1/limits.SCALE_LIMIT and 1e-9 of its distance from the origin (or the mesh degenerates)."""
+    1/limits.SCALE_LIMIT and 1e-9 of its distance from the origin (or the mesh degenerates).
+
+    ``points`` are the body's outline (its arcs' points included), or with ``one_side`` the
+    vertices of a loop with arcs, of which only the larger side is checked (they may lie on
+    one line); ``listed``, when given, the vertices as the case lists them, which the
+    message quotes."""
     span = coordinate_span(points)
     far = float(np.abs(points).max())
     least = max(1.0 / limits.SCALE_LIMIT, 1e-9 * far)
-    if span.min() < least and not (len(points) < 3 and span.max() >= least):
-        raise r.fail(key, points.tolist(), f"the body's extent {span.min():.3g} is too small: it must be at "
-                     f"least {least:.3g} (1e-50, and 1e-9 of the distance from the origin)")
+    side = span.max() if one_side or len(points) < 3 and span.max() >= least else span.min()
+    if side < least:
+        raise r.fail(key, (points if listed is None else listed).tolist(), f"the body's extent {side:.3g} is "
+                     f"too small: it must be at least {least:.3g} (1e-50, and 1e-9 of the distance from the origin)")

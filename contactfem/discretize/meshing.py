@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, MeshSettings, Obstacle, PolygonGeometry, RectangleGeometry
-from contactfem.errors import CaseError, MeshError
+from contactfem.errors import CaseError, MeshCapError, MeshError
 from contactfem.estimate import MemoryLimit, largest_mesh_points, memory_limit
 from contactfem.mesh import (
     Mesh,
@@ -54,6 +54,8 @@ def build_mesh(case: Case, refine: int | None = None, request: MeshRequest | Non
     _refuse_oversized(case, shape, refine, limit)
     try:
         mesh = _mesh_geometry(case, shape, limit)
+    except MeshCapError as error:
+        raise MeshError(_capped_message(case, shape, limit, error)) from None
     except MeshError as error:
         raise MeshError(f"{case.source.name}: geometry.{_GEOMETRY_KEYS[type(shape.geometry)]}: {error}") from None
     missing = [p.name for p in case.parts if p.name not in mesh.part_names]
@@ -73,6 +75,24 @@ def build_mesh(case: Case, refine: int | None = None, request: MeshRequest | Non
     except MeshError as error:  # e.g. slivers of a rectangle of aspect 1e9: name the key
         raise MeshError(f"{case.source.name}: geometry.{_GEOMETRY_KEYS[type(shape.geometry)]}: {error}") from None
     return mesh
+
+
+def _capped_message(case: Case, shape: MeshRequest, limit: MemoryLimit, error: MeshCapError) -> str:
+    """One line for a mesh whose refinement the memory budget's cap on nodes stopped: the keys
+    that ask for it, what the cap is and what sets it, and what to turn. The case's own keys are
+    named (a coarser level of mesh sequencing is made from them)."""
+    settings = case.mesh
+    keys = f"mesh.size = {settings.size:g}"
+    turn = "a larger mesh.size"
+    if settings.contact_size is not None:
+        keys += f", mesh.contact_size = {settings.contact_size:g}"
+        turn = "a larger mesh.size or mesh.contact_size"
+    geometry = f"geometry.{_GEOMETRY_KEYS[type(shape.geometry)]}"
+    return (
+        f"{case.source.name}: {keys}: {geometry}: {error}; {error.max_points:,} nodes is the most whose solve "
+        f"fits {limit.source} with {_backend(case)}, and a coarser mesh is not solved in its place; use {turn}, "
+        "a simpler geometry (fewer or smoother profile points, no sliver or narrow gap) or more memory"
+    )
 
 
 def estimate_triangles(shape: Case | MeshRequest, refine: int | None = None) -> int:

@@ -15,7 +15,7 @@ from contactfem.discretize.exact_checks import check_exact_contact, exact_fields
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
 from contactfem.discretize.meshing import MeshRequest
-from contactfem.discretize.supports import PlatenConstraint, free_rigid_modes, supports
+from contactfem.discretize.supports import Holds, PlatenConstraint, free_rigid_modes, supports
 from contactfem.mesh import Mesh
 from contactfem.methods import ContactMethod
 
@@ -54,6 +54,8 @@ class DiscreteProblem:
     # What the mesh was made from (the case's geometry and sizes, or a coarser level's):
     # mesh sequencing derives the next coarser level from it.
     mesh_request: MeshRequest | None = None
+    # Which part holds each held node along which direction: the reactions are booked by it.
+    holds: Holds | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -98,4 +100,5 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
         exact=exact, refinements=refinements, symmetry_nodes=held.symmetry_nodes,
         symmetry_normals=held.symmetry_normals, free_modes=free_modes if free_modes.shape[1] else None,
         platens=held.platens, mesh_request=MeshRequest.of(case) if request is None else request,
+        holds=held.holds,
     )

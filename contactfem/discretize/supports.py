@@ -49,6 +49,34 @@ class PlatenConstraint:
 
 
 @dataclass(frozen=True, eq=False)
+class Holds:
+    """Every direction a support holds a node in, and the part that holds it: row i says that
+    the part ``names[parts[i]]`` holds ``nodes[i]`` along the unit vector ``directions[i]`` (a
+    prescribed component e_x or e_y, a symmetry line's normal, a platen's normal).
+
+    A node's reaction is one force along each direction holding it, each the part's own: a
+    frictionless platen's along its normal only, a symmetry line's along its normal only
+    (:func:`contactfem.report.booked_reactions`). A node a part prescribes is held by that
+    part, whatever else it lies on: a symmetry line or a platen through it holds nothing more."""
+
+    nodes: np.ndarray
+    directions: np.ndarray
+    parts: np.ndarray
+    names: tuple[str, ...]
+
+    @classmethod
+    def of(cls, rows: list[tuple[np.ndarray, np.ndarray, str]]) -> "Holds":
+        """From (nodes (k,), directions (k, 2), part name) groups, in the order given."""
+        rows = [row for row in rows if len(row[0])]
+        names = tuple(dict.fromkeys(name for _, _, name in rows))
+        if not rows:
+            return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64), names)
+        return cls(np.concatenate([np.asarray(nodes, dtype=np.int64) for nodes, _, _ in rows]),
+                   np.concatenate([np.asarray(directions, dtype=float).reshape(-1, 2) for _, directions, _ in rows]),
+                   np.concatenate([np.full(len(nodes), names.index(name)) for nodes, _, name in rows]), names)
+
+
+@dataclass(frozen=True, eq=False)
 class Supports:
     """What holds the body: prescribed unknowns ``dirichlet_dofs`` (sorted) with their
     ``dirichlet_values``, the nodes held on symmetry lines with each line's unit normal,
@@ -59,6 +87,7 @@ class Supports:
     symmetry_nodes: np.ndarray
     symmetry_normals: np.ndarray
     platens: tuple[PlatenConstraint, ...] = ()
+    holds: Holds | None = None
 
     @property
     def platen_nodes(self) -> np.ndarray:
@@ -101,7 +130,12 @@ def supports(case: Case, mesh: Mesh) -> Supports:
             values[dofs] = prescribed
             owner[dofs] = index
     prescribed = owner.reshape(-1, 2) >= 0
-    symmetry_nodes, symmetry_normals = _symmetry_lines(case, mesh)
+    # Which part holds each node along which direction, for the reactions' bookkeeping: every
+    # part prescribing a component (several may, consistently), then what the symmetry lines
+    # and platens add below.
+    holds = [(nodes, np.tile(np.eye(2)[component], (len(nodes), 1)), part.name)
+             for part, nodes, component in _prescriptions(case, mesh)]
+    symmetry_nodes, symmetry_normals, symmetry_parts = _symmetry_lines(case, mesh)
     # A symmetry node with one component prescribed is held completely when the line is not
     # along that component: u · n_s = 0 then gives the other one.
     one = prescribed[symmetry_nodes].sum(axis=1) == 1
@@ -113,9 +147,17 @@ def supports(case: Case, mesh: Mesh) -> Supports:
     value = values[2 * nodes_one + given[across]]
     values[2 * nodes_one + 1 - given[across]] = -n_given[across] * value / n_other[across]
     owner[2 * nodes_one + 1 - given[across]] = len(case.parts)
+    for index in np.unique(symmetry_parts[one][across]):
+        line = symmetry_parts[one][across] == index
+        holds.append((nodes_one[line], symmetry_normals[one][across][line], case.parts[index].name))
     prescribed = owner.reshape(-1, 2) >= 0
     keep = ~prescribed[symmetry_nodes].any(axis=1)
-    symmetry_nodes, symmetry_normals = symmetry_nodes[keep], symmetry_normals[keep]
+    symmetry_nodes, symmetry_normals, symmetry_parts = symmetry_nodes[keep], symmetry_normals[keep], symmetry_parts[keep]
+    # Each symmetry line holds its nodes along its normal (a node on two lines, pinned below,
+    # along both).
+    for index in np.unique(symmetry_parts):
+        line = symmetry_parts == index
+        holds.append((symmetry_nodes[line], symmetry_normals[line], case.parts[index].name))
     # A node on two symmetry lines that are not parallel cannot move at all.
     unique, first, counts = np.unique(symmetry_nodes, return_index=True, return_counts=True)
     pinned = unique[counts > 1]
@@ -125,8 +167,23 @@ def supports(case: Case, mesh: Mesh) -> Supports:
     keep = np.isin(unique, pinned, invert=True)
     symmetry_nodes, symmetry_normals = unique[keep], symmetry_normals[first[keep]]
     platens = _platens(case, mesh, owner.reshape(-1, 2) >= 0, symmetry_nodes, symmetry_normals)
+    holds += [(p.nodes, np.tile(p.normal, (len(p.nodes), 1)), p.name) for p in platens]
     dofs = np.flatnonzero(owner >= 0)
-    return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens)
+    return Supports(dofs, values[dofs], symmetry_nodes, symmetry_normals, platens, Holds.of(holds))
+
+
+def _prescriptions(case: Case, mesh: Mesh) -> list[tuple["object", np.ndarray, int]]:
+    """(part, nodes, component) for every component a clamped or displacement part prescribes."""
+    found = []
+    for part in case.parts:
+        if not part.is_dirichlet:
+            continue
+        nodes = mesh.nodes_of(part.name)
+        for component in range(2):
+            if part.kind is PartKind.DISPLACEMENT and part.values[component] is None:
+                continue
+            found.append((part, nodes, component))
+    return found
 
 
 def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple[np.ndarray, np.ndarray]:
@@ -148,21 +205,22 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple
     return normal, np.unique(edges)
 
 
-def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes of the symmetry parts and their line's normal.
+def _symmetry_lines(case: Case, mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes of the symmetry parts, their line's normal and the part's index in the case.
 
     A symmetry part must be straight: all its edges on one line, whose outward unit normal
     n_s is the direction held (u · n_s = 0).
     """
-    nodes, normals = [], []
-    for part in case.parts:
+    nodes, normals, parts = [], [], []
+    for index, part in enumerate(case.parts):
         if part.kind is PartKind.SYMMETRY:
             normal, part_nodes = _straight_normal(case, mesh, part.name, PartKind.SYMMETRY)
             nodes.append(part_nodes)
             normals.append(np.tile(normal, (len(part_nodes), 1)))
+            parts.append(np.full(len(part_nodes), index))
     if not nodes:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    return np.concatenate(nodes), np.concatenate(normals)
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    return np.concatenate(nodes), np.concatenate(normals), np.concatenate(parts)
 
 
 def _platens(case: Case, mesh: Mesh, prescribed: np.ndarray, symmetry_nodes: np.ndarray,
@@ -333,7 +391,7 @@ def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, cent
     if n_pieces - int((count == 0).sum()) == 1:
         raise CaseError(
             f"{case.source.name}: boundary: the supports ({names}) leave a rigid motion of the body free "
-            f"({motion}){unheld}, so the problem is ill-posed; prescribe both components on a part of positive length"
+            f"({motion}){unheld}, so the problem is ill-posed; {_holding_remedies(case, mesh, vectors[loose, :, 0])}"
         )
     where = mesh.points[np.flatnonzero(piece_of == loose)[0]]
     raise CaseError(
@@ -341,6 +399,50 @@ def _refuse_unheld(case: Case, mesh: Mesh, loose: int, vectors: np.ndarray, cent
         f"them) and the one through ({where[0]:g}, {where[1]:g}) is not held: the supports ({names}) leave "
         f"a rigid motion of it free ({motion}){unheld}; join the pieces in the mesh or support each one"
     )
+
+
+def _holding_remedies(case: Case, mesh: Mesh, mode: np.ndarray) -> str:
+    """What holds a free rigid motion (a, b, c) and nothing else, so that a load or a platen
+    force still drives the body: a symmetry line across it, or one prescribed component
+    along it. Prescribing both components on a part also holds it, but turns a problem
+    driven by force into one driven by displacement, so it comes last."""
+    kinds = "clamped, displacement, symmetry, platen, traction, pressure, contact or free"
+    last = (f"; there are no springs (a part is {kinds}); prescribing both components on a part holds it "
+            "too, but fixes that part where the load would move it")
+    a, b, c = np.where(np.abs(mode) > 1e-9 * np.abs(mode).max(), mode, 0.0) / np.abs(mode).max()
+    if abs(c) >= 1e-6:
+        return ("to hold it and keep the load, make a straight part a symmetry line (boundary.<part>: symmetry) "
+                "or prescribe one component on a part away from the centre of rotation (boundary.<part>: "
+                f"{{displacement: [0, null]}} or [null, 0]){last}")
+    direction = np.array([a, b]) / np.hypot(a, b)
+    component = "[0, null]" if abs(direction[0]) >= abs(direction[1]) else "[null, 0]"
+    across = _straight_parts_across(case, mesh, direction)
+    line = (" or ".join(f"boundary.{name}" for name in across[:2]) + ": symmetry" if across
+            else f"boundary.<part>: symmetry, the part straight and across ({direction[0]:.3g}, {direction[1]:.3g})")
+    return (f"to hold it and keep the load, make a straight part across it a symmetry line ({line}) or "
+            f"prescribe its one component on a part (boundary.<part>: {{displacement: {component}}}){last}")
+
+
+def _straight_parts_across(case: Case, mesh: Mesh, direction: np.ndarray) -> list[str]:
+    """The free parts that are straight with their normal along ``direction`` (k,), which as a
+    symmetry line would hold a translation along it."""
+    found = []
+    for part in case.parts:
+        if part.kind is not PartKind.FREE:
+            continue
+        edges = mesh.edges_of(part.name)
+        if len(edges) == 0:
+            continue
+        _, outward = edge_geometry(mesh.points, edges)
+        normal = outward.mean(axis=0)
+        if np.linalg.norm(normal) == 0:
+            continue
+        normal = normal / np.linalg.norm(normal)
+        offset = (mesh.points[np.unique(edges)] - mesh.points[edges[0, 0]]) @ normal
+        if (abs(abs(normal @ direction) - 1.0) <= 1e-9 and np.abs(outward @ normal - 1.0).max() <= 1e-9
+                and np.abs(offset).max() <= 1e-9 * coordinate_span(mesh.points).max()):
+            found.append(part.name)
+    return found
 
 
 def platen_work(platens: tuple[PlatenConstraint, ...], motion: np.ndarray) -> float:

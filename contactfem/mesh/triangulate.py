@@ -7,7 +7,7 @@ import math
 import numpy as np
 import triangle
 
-from contactfem.errors import MeshError
+from contactfem.errors import MeshCapError, MeshError
 from contactfem.mesh.boundary_points import SizeField, _Boundary
 from contactfem.mesh.core import Mesh
 from contactfem.mesh.refine import _undirected_keys, oriented_boundary
@@ -62,26 +62,69 @@ def _area_switch(area: float) -> str:
     return f"{area:.{digits}f}"
 
 
+#: A size-field refinement stops once every triangle is at most this many times the area
+#: of the equilateral triangle of edge h(centroid) (an edge at most 1.22 times h): the size
+#: at a new triangle's centroid is not the size its parent was refined to, and chasing it
+#: exactly would take many more rounds for a hardly different mesh.
+SIZE_AREA_SLACK = 1.5
+#: Triangle meets a uniform area bound exactly (``a``): a triangle larger than this many
+#: times it is one refinement left undone (only the bound's printed digits differ).
+AREA_BOUND_SLACK = 1.0 + 1e-6
+
+
+def _triangle_areas(result: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The areas of Triangle's triangles (t,) and their centroids (t, 2)."""
+    corners = np.asarray(result["vertices"])[np.asarray(result["triangles"])]
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]), corners.mean(axis=1)
+
+
+def _equilateral_area(h: np.ndarray | float) -> np.ndarray | float:
+    """The area of the equilateral triangle of edge ``h``."""
+    return np.sqrt(3) / 4 * np.square(h)
+
+
+def _steiner_switch(max_points: int | None, n_vertices: int) -> str:
+    """Triangle's S switch: no more Steiner points than take the mesh to ``max_points`` nodes."""
+    return "" if max_points is None else f"S{max(int(max_points) - n_vertices, 0)}"
+
+
 def _refine_to_size(result: dict, holes: np.ndarray | None, size: SizeField, min_angle: float,
-                    rounds: int = 12, steiner: str = "") -> dict:
-    """Refine Triangle's mesh until every triangle is at most the equilateral one of edge
-    h(centroid); Triangle's ``r`` switch keeps segments and their markers."""
-    switches = f"rpq{float(min_angle):.6f}aQ{steiner}"
+                    rounds: int = 12, max_points: int | None = None) -> dict:
+    """Refine Triangle's mesh until every triangle is at most :data:`SIZE_AREA_SLACK` times the
+    equilateral one of edge h(centroid); Triangle's ``r`` switch keeps segments and their
+    markers. Each round adds no more points than take the mesh to ``max_points`` nodes."""
     for _ in range(rounds):
-        vertices = np.asarray(result["vertices"])
-        tri = np.asarray(result["triangles"])
-        corners = vertices[tri]
-        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-        target = np.sqrt(3) / 4 * size(corners.mean(axis=1)) ** 2
-        if np.all(area <= 1.5 * target):
+        area, centroid = _triangle_areas(result)
+        target = _equilateral_area(size(centroid))
+        if np.all(area <= SIZE_AREA_SLACK * target):
             break
+        n_vertices = len(result["vertices"])
+        if max_points is not None and n_vertices >= max_points:
+            break  # the cap is reached: what is left undone is refused by _refuse_capped
         refine = {key: result[key] for key in ("vertices", "triangles", "segments", "segment_markers")}
         refine["triangle_max_area"] = target[:, None]
         if holes is not None:
             refine["holes"] = holes
+        switches = f"rpq{float(min_angle):.6f}aQ{_steiner_switch(max_points, n_vertices)}"
         result = triangle.triangulate(refine, switches)
     return result
+
+
+def _largest_over_size(result: dict, max_area: float, size: SizeField | None) -> tuple[float, float]:
+    """How far Triangle's triangles are from the size asked for: the largest ratio of a
+    triangle's area to its bound (``max_area``, or :data:`SIZE_AREA_SLACK` times the
+    equilateral triangle of edge h(centroid)), and the largest triangle's edge over the edge
+    asked for there (the side of the equilateral triangle of the same area)."""
+    area, centroid = _triangle_areas(result)
+    if size is None:
+        asked = np.full(len(area), max_area)
+        bound = AREA_BOUND_SLACK * asked
+    else:
+        asked = np.minimum(_equilateral_area(size(centroid)), max_area)
+        bound = SIZE_AREA_SLACK * asked
+    worst = int(np.argmax(area / bound))
+    return float(area[worst] / bound[worst]), float(np.sqrt(np.max(area / asked)))
 
 
 def _loop_label(index: int) -> str:
@@ -160,8 +203,10 @@ def _run_triangle(boundary: _Boundary, points: np.ndarray, segments: np.ndarray,
 
     Raises
     ------
+    MeshCapError
+        If it would need ``max_points`` nodes or more (:func:`_refuse_capped`).
     MeshError
-        If it would need ``max_points`` nodes or more, or gives no triangle.
+        If it gives no triangle.
     """
     pslg: dict[str, np.ndarray] = {
         "vertices": points,
@@ -173,22 +218,45 @@ def _run_triangle(boundary: _Boundary, points: np.ndarray, segments: np.ndarray,
             [_interior_point(boundary.points[h], _loop_label(h)) for h in range(1, len(boundary.points))]
         )
     max_area = max_edge**2 * math.sqrt(3) / 4
-    # Triangle's S switch caps the Steiner points it adds, so that memory stays bounded.
-    steiner = "" if max_points is None else f"S{max(int(max_points) - len(points), 0)}"
-    switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q{steiner}"
+    # Triangle's S switch caps the Steiner points it adds, so that memory stays bounded; a
+    # mesh it leaves short of the size asked for is refused (_refuse_capped), never solved.
+    switches = f"pq{float(min_angle):.6f}a{_area_switch(max_area)}Q{_steiner_switch(max_points, len(points))}"
     result = triangle.triangulate(pslg, switches)
     if size is not None:
-        result = _refine_to_size(result, pslg.get("holes"), size, min_angle, steiner=steiner)
-    if max_points is not None and len(result["vertices"]) >= max_points:
-        raise MeshError(
-            f"meshing with a smallest angle of {min_angle:g} degrees needs more than {max_points:.3g} nodes, "
-            "more than this machine can solve: the geometry has a feature far smaller than the mesh size "
-            "(a sliver, a narrow gap or a tiny edge); widen it or remove it"
-        )
+        result = _refine_to_size(result, pslg.get("holes"), size, min_angle, max_points=max_points)
+    _refuse_capped(result, len(points), max_area, size, min_angle, max_points)
     tri = result.get("triangles")
     if tri is None or len(tri) == 0:
         raise MeshError("Triangle produced no triangles; are the holes inside the outer loop?")
     return result
+
+
+def _refuse_capped(result: dict, n_input: int, max_area: float, size: SizeField | None, min_angle: float,
+                   max_points: int | None) -> None:
+    """Refuse a mesh whose refinement the cap on nodes stopped: it reached ``max_points`` nodes,
+    or a triangle is larger than the size asked for (Triangle splits triangles worst angle
+    first, those only too large last, so a refinement cut short leaves large ones behind:
+    a rough profile of 20 000 points at mesh.size 0.01 stopped with triangles of edge 0.099).
+
+    Raises
+    ------
+    MeshCapError
+        If so, with the cap, the nodes reached and the largest triangle's edge over the edge
+        asked for.
+    """
+    if max_points is None or result.get("triangles") is None or len(result["triangles"]) == 0:
+        return
+    excess, largest = _largest_over_size(result, max_area, size)
+    nodes = len(result["vertices"])
+    if nodes < max_points and excess <= 1.0:
+        return
+    raise MeshCapError(
+        f"the mesh asked for needs more than {max_points:,} nodes (meshing from {n_input:,} boundary points "
+        f"stopped there, with triangles {largest:.3g} times the edge asked for): a quality mesh (smallest angle "
+        f"{min_angle:g} degrees) around a feature far smaller than the mesh size (a sliver, a narrow gap, a tiny "
+        "edge, a rough profile's points) needs far more triangles than the size says",
+        max_points=int(max_points), nodes=nodes, largest=largest,
+    )
 
 
 def _used_nodes(result: dict, n_segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
