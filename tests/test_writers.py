@@ -149,14 +149,14 @@ def test_solution_vtu_arrays(tmp_path: Path) -> None:
 
 
 def _vtu_header(path: Path) -> ET.Element:
-    """The XML part of a VTU with raw appended data (the binary tail is not XML)."""
+    """The XML part of a VTU before its appended data."""
     data = path.read_bytes()
     return ET.fromstring(data[: data.index(b"<AppendedData")] + b"</VTKFile>")
 
 
-def test_vtu_files_hold_raw_appended_data_with_64_bit_counts(tmp_path: Path) -> None:
-    """Raw appended arrays behind UInt64 byte counts: no encoding, no compressor, and no
-    4 GB limit that would force one; meshio reads the values back exactly."""
+def test_vtu_files_hold_base64_appended_data_with_64_bit_counts(tmp_path: Path) -> None:
+    """Appended arrays in base64 behind UInt64 byte counts: no compressor, and no 4 GB
+    limit that would force one; meshio reads the values back exactly."""
     solution = _solution()
     write_vtu(solution, tmp_path)
     for name in ["solution.vtu", "contact.vtu"]:
@@ -164,7 +164,7 @@ def test_vtu_files_hold_raw_appended_data_with_64_bit_counts(tmp_path: Path) -> 
         assert root.tag == "VTKFile" and root.get("type") == "UnstructuredGrid"
         assert root.get("header_type") == "UInt64" and root.get("compressor") is None
         assert {a.get("format") for a in root.iter("DataArray")} == {"appended"}
-        assert b'<AppendedData encoding="raw">' in (tmp_path / name).read_bytes()
+        assert b'<AppendedData encoding="base64">' in (tmp_path / name).read_bytes()
     data = meshio.read(tmp_path / "solution.vtu")
     np.testing.assert_array_equal(data.cells[0].data, solution.mesh.triangles)
     np.testing.assert_array_equal(data.cell_data["von_mises"][0], solution.von_mises)
@@ -904,3 +904,20 @@ def test_result_data_carries_units_and_the_exact_pressure() -> None:
     assert finite.sum() >= len(x) - 1
     np.testing.assert_allclose(data.exact_pressure[finite], expected[finite], rtol=1e-9, atol=1e-12)
 
+
+
+@pytest.mark.parametrize("lengths", [(23, 5), (11, 1), (41, 17), (7, 64)])
+def test_meshio_reads_every_array_whatever_the_lengths_of_the_metadata(tmp_path: Path, lengths) -> None:
+    """meshio converts a raw appended section to base64 itself, rewriting the offsets in
+    place, and took a rewritten offset for a later array's: with metadata strings of these
+    lengths (a case path of 41 characters among them) the point data of a raw file read back
+    as one value. The files are base64 now; every array reads back exactly."""
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    grid = Grid(points=points, cells=np.array([[0, 1, 2]]), cell_type=VTK_TRIANGLE,
+                point_data={"d": np.arange(9.0).reshape(3, 3)}, cell_data={"v": np.array([2.5])},
+                field_data={"a": "x" * lengths[0], "b": "y" * lengths[1]})
+    write_grid(tmp_path / "g.vtu", grid)
+    data = meshio.read(tmp_path / "g.vtu")
+    np.testing.assert_array_equal(data.point_data["d"], np.arange(9.0).reshape(3, 3))
+    np.testing.assert_array_equal(data.cell_data["v"][0], [2.5])
+    assert bytes(data.field_data["a"]).decode() == "x" * lengths[0]

@@ -1,9 +1,9 @@
 """ParaView output: body and contact boundary as VTU files, tied together by a PVD collection.
 
 Every VTU file of the package goes through :func:`write_grid`, which hands the arrays to
-VTK's own ``vtkXMLUnstructuredGridWriter``: raw appended binary data, no compression,
-UInt64 byte counts, little endian, 64-bit ids. That is what ParaView reads fastest, it
-has no 4 GB limit, and meshio reads it back. VTK is imported only when a file is written.
+VTK's own ``vtkXMLUnstructuredGridWriter``: appended data encoded in base64, no
+compression, UInt64 byte counts, little endian, 64-bit ids. ParaView and meshio read it
+back as written (meshio misreads some raw appended files), and it has no 4 GB limit. VTK is imported only when a file is written.
 """
 
 from __future__ import annotations
@@ -301,7 +301,10 @@ def _vtk_write(grid, path: Path) -> None:
     writer.SetFileName(str(path))
     writer.SetInputData(grid)
     writer.SetDataModeToAppended()
-    writer.EncodeAppendedDataOff()
+    # Base64: meshio turns a raw appended section into base64 itself, rewriting the offsets
+    # in place, and mistakes a rewritten offset for a later array's (files that VTK and
+    # ParaView read unharmed lost their point data in meshio, depending on string lengths).
+    writer.EncodeAppendedDataOn()
     writer.SetCompressorTypeToNone()
     writer.SetHeaderTypeToUInt64()
     writer.SetIdTypeToInt64()
@@ -387,7 +390,7 @@ def write_vtu(solution: Solution, directory: Path | str, metadata: dict[str, str
     the directory as it was. ``directory`` is created if missing. Both VTU files are
     written by :func:`write_grid`.
 
-    ``solution.vtu`` (VTK XML, raw appended binary data, UInt64 byte counts)
+    ``solution.vtu`` (VTK XML, base64 appended data, UInt64 byte counts)
         Triangle cells; points with z = 0. Point data ``displacement`` (n, 3) with
         z = 0, so that Warp By Vector works. Cell data ``stress`` (n_tri, 6), a
         symmetric tensor in VTK's order xx, yy, zz, xy, yz, xz (yz = xz = 0), and the
