@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from contactfem.io.atomic import atomic_path
 from contactfem.io.registry import COMPARE_JSON, CONVERGENCE_PNGS
 from contactfem.norms import NORM_NAMES
+from contactfem.picture_text import chars_across, heading, save_png, shown
 
 _LABELS = {
     "displacement_l2": "‖u − u_ref‖ L²",
@@ -38,13 +38,23 @@ def _pyplot():
     return plt
 
 
-def _save(figure, path: Path, dpi: int = 110) -> Path:
-    with atomic_path(path) as temporary:
-        figure.savefig(temporary, format="png", dpi=dpi)
-    return path
+def _save(figure, path: Path, dpi: int = 110, layout: dict | None = None) -> Path:
+    """Write ``figure`` (its texts literal, :func:`contactfem.picture_text.save_png`), laid out
+    with ``tight_layout(**layout)`` first unless ``layout`` is None."""
+    return save_png(figure, path, dpi=dpi, layout={} if layout is None else layout)
+
+
+#: A unit symbol is shown with at most this many characters (a case's units have at most 16).
+UNIT_CHARS = 24
+
+
+def _unit(unit) -> str:
+    """A unit as drawn: the user's symbol (:func:`contactfem.picture_text.shown`), '' for none."""
+    return shown(unit, UNIT_CHARS) if unit else ""
 
 
 def _with_unit(label: str, unit: str | None) -> str:
+    unit = _unit(unit)
     return f"{label} ({unit})" if unit else label
 
 
@@ -122,7 +132,7 @@ def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 9
     """
     plt = _pyplot()
     attrs = data.get("attrs", {})
-    length, stress = str(attrs.get("length_unit", "")), str(attrs.get("stress_unit", ""))
+    length, stress = _unit(attrs.get("length_unit", "")), _unit(attrs.get("stress_unit", ""))
     contact = data["contact"]
     nodes = np.asarray(contact["nodes"], dtype=np.int64)
     active = np.asarray(contact["active"], dtype=bool)
@@ -153,16 +163,14 @@ def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 9
                      label="exact pressure −σnn(u_exact)")
         top.set_ylabel(_with_unit("contact pressure", stress))
         top.legend(fontsize=9)
-        top.set_title((title or "contact boundary ΓC") + "\n" + _zone_text(intervals, length), fontsize=11)
+        top.set_title(heading(title or "contact boundary ΓC", chars_across(size[0], 11, dpi), lines=1) + "\n"
+                      + _zone_text(intervals, length), fontsize=11)
         bottom.plot(s[order], gap[order], "-", color="tab:green", label="gap g0 − u_n")
         bottom.plot(s[active], gap[active], "o", ms=5, color="tab:red")
         bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
         bottom.set_xlabel(_with_unit(_ALONG, length) + "  (report.json's contact_zone abscissa)")
         bottom.legend(fontsize=9)
-        figure.tight_layout()
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png", dpi=dpi)
-        return path
+        return _save(figure, path, dpi=dpi)
     finally:
         plt.close(figure)
 
@@ -178,7 +186,8 @@ def plot_load_path(path: Path, curves: dict, units: dict | None = None, title: s
                if name.startswith("platen_") and name.endswith("_advance")]
     panels = [("contact_force", _with_unit("total contact force", f"{force}/{length}" if force and length else None)),
               ("contact_width", _with_unit("contact width", length))]
-    panels += [(f"platen_{name}_advance", _with_unit(f"platen {name}: advance", length)) for name in platens]
+    panels += [(f"platen_{name}_advance", _with_unit(f"platen {shown(name, 40)}: advance", length))
+               for name in platens]
     figure, axes = plt.subplots(len(panels), 1, figsize=(8, 2.6 * len(panels)), dpi=110, sharex=True)
     try:
         for axis, (name, label) in zip(np.atleast_1d(axes), panels):
@@ -186,8 +195,7 @@ def plot_load_path(path: Path, curves: dict, units: dict | None = None, title: s
             axis.set_ylabel(label)
             axis.grid(True, alpha=0.3)
         np.atleast_1d(axes)[-1].set_xlabel("load factor")
-        np.atleast_1d(axes)[0].set_title(title or "load path")
-        figure.tight_layout()
+        np.atleast_1d(axes)[0].set_title(heading(title or "load path", chars_across(8 * 110, 12, 110)))
         return _save(figure, path)
     finally:
         plt.close(figure)
@@ -240,7 +248,7 @@ def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
     plt = _pyplot()
     profiles = figures["profiles"]
     units = figures.get("units", {})
-    length, stress = units.get("length", ""), units.get("stress", "")
+    length, stress = _unit(units.get("length", "")), _unit(units.get("stress", ""))
     s = np.asarray(profiles["abscissa"], dtype=float)
     lam = np.asarray(profiles["lambda"], dtype=float)
     theta = np.asarray(profiles["theta"], dtype=float) if "theta" in profiles else None
@@ -259,8 +267,8 @@ def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
         if theta is not None:
             top.plot(s[order], theta[order], "-s", ms=3, label=_SYMBOLS["standard"])
         top.set_ylabel(_with_unit("contact pressure", stress))
-        top.set_title((title or figures.get("case", {}).get("title", "")) + "\n" + _zone_text(intervals, length),
-                      fontsize=11)
+        top.set_title(heading(title or figures.get("case", {}).get("title", ""), chars_across(900, 11), lines=1)
+                      + "\n" + _zone_text(intervals, length), fontsize=11)
         top.legend(fontsize=9)
 
         lift = ~active
@@ -305,7 +313,6 @@ def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
         bottom.set_xlabel(_with_unit(_ALONG, length))
         bottom.sharex(top)
         bottom.legend(fontsize=8)
-        figure.tight_layout()
         return _save(figure, Path(path))
     finally:
         plt.close(figure)
@@ -342,7 +349,7 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
                 keep = np.isfinite(y) & (y > 0) & (x > 0)
                 if not keep.any():
                     continue
-                line, = axis.loglog(x[keep], y[keep], "-o", ms=4, label=method)
+                line, = axis.loglog(x[keep], y[keep], "-o", ms=4, label=shown(method, 40))
                 every_x.extend(x[keep])
                 if x_key == "h":
                     rates = study.get("rates", {}).get(method, {}).get(norm, [])
@@ -373,16 +380,69 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
             axis.tick_params(labelsize=7)
             axis.grid(True, which="both", alpha=0.25)
             axis.legend(fontsize=7)
-        heading = f"{study['case']['title']} — reference: {study['reference']}"
+        top_line = (heading((study.get("case") or {}).get("title", ""), chars_across(1400 * 0.7, 11), lines=1)
+                    + f" — reference: {shown(study['reference'], 80)}")
         if x_key == "h":
-            heading += "\nnumbers on the segments: observed rates between consecutive levels"
-        figure.suptitle(heading, fontsize=11)
+            top_line += "\nnumbers on the segments: observed rates between consecutive levels"
+        figure.suptitle(top_line, fontsize=11)
         if biased:
-            figure.text(0.01, 0.005, "* " + study["warnings"][0], fontsize=8, color="darkred")
-        figure.tight_layout(rect=(0, 0.025 if biased else 0, 1, 1))
+            figure.text(0.01, 0.005, "* " + shown(study["warnings"][0], 300), fontsize=8, color="darkred")
         try:
-            written.append(_save(figure, Path(directory) / name))
+            written.append(_save(figure, Path(directory) / name, layout={"rect": (0, 0.025 if biased else 0, 1, 1)}))
         finally:
             plt.close(figure)
     return written
 
+
+
+# --------------------------------------------------------------------------- sweep
+
+
+def plot_sweep(path: Path, table: dict) -> Path:
+    """sweep.png from sweep.json's content: each point's error against its seconds, one colour per
+    group (its swept values outside mesh.*), the Pareto fronts drawn and numbered."""
+    import itertools
+
+    from matplotlib.ticker import FuncFormatter
+
+    from contactfem.sweep_table import pareto_series
+
+    plt = _pyplot()
+    series = list(pareto_series(table))
+    figure, axes = plt.subplots(figsize=(8.5, 6))
+    try:
+        colours = itertools.cycle(plt.rcParams["axes.prop_cycle"].by_key()["color"])
+        for (group, rows, front), colour in zip(series, colours):
+            axes.scatter([r["seconds"]["total"] for r in rows], [r["error"] for r in rows], s=24, color=colour,
+                         label=shown(group, 80) or "all points", zorder=3)
+            axes.plot([r["seconds"]["total"] for r in front], [r["error"] for r in front], "-", color=colour, lw=1.2)
+            axes.scatter([r["seconds"]["total"] for r in front], [r["error"] for r in front], s=90,
+                         facecolors="none", edgecolors="black", lw=1.0, zorder=4)
+            for r in front:
+                axes.annotate(str(r["index"]), (r["seconds"]["total"], r["error"]), textcoords="offset points",
+                              xytext=(5, 4), fontsize=7)
+        kinds = {r["error_kind"] for _, rows, _ in series for r in rows}
+        if series:
+            axes.set_xscale("log")
+            axes.set_yscale("log")
+            seconds = FuncFormatter(lambda value, _: f"{value:g}")
+            axes.xaxis.set_major_formatter(seconds)
+            axes.xaxis.set_minor_formatter(seconds)
+            axes.tick_params(axis="x", which="minor", labelsize=7)
+            axes.scatter([], [], s=90, facecolors="none", edgecolors="black", label="Pareto front (point number)")
+            axes.legend(fontsize=7, loc="best")
+        else:
+            axes.text(0.5, 0.5, "no point has an error to plot\n(one solved point per group, or none solved)",
+                      ha="center", va="center", transform=axes.transAxes)
+        axes.set_xlabel("seconds per point (meshing, assembly, solve, report)")
+        axes.set_ylabel("energy-norm error ‖u − u_h‖" if kinds == {"exact"} else
+                        "|‖u_h‖ − ‖u_finest‖|, energy norm (finest point of the group)" if kinds == {"finest"} else
+                        "error (energy norm)")
+        failed = sum(r["status"] != "ok" for r in table["points"])
+        axes.set_title(heading(table["sweep"]["title"], chars_across(8.5 * 110, 10, 110) - 40, lines=1)
+                       + ": error against time" + (f" ({failed} point(s) without figures)" if failed else ""),
+                       fontsize=10)
+        axes.grid(True, which="both", alpha=0.3)
+        return _save(figure, Path(path))
+    finally:
+        plt.close(figure)

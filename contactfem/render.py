@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from contactfem.errors import CaseError, OutputError
-from contactfem.io.atomic import atomic_path, ensure_directory
+from contactfem.errors import CaseError
+from contactfem.io.atomic import ensure_directory
 from contactfem.io.registry import (
     COMPARE_JSON,
     COMPARE_PNG,
@@ -45,6 +45,7 @@ from contactfem.io.registry import (
     PROFILE_PNG,
     SOLUTION_H5,
 )
+from contactfem.picture_text import chars_across, heading, save_png, shown
 
 __all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "check_directory", "draw_directory", "drawn_positions",
            "load_result", "make_pictures", "parse_size", "pictures_of", "render_deformed", "units_of"]
@@ -62,6 +63,8 @@ ZOOM_WHOLE_ZONE = 0.3
 #: Otherwise it frames the zone's first lift-off end, this fraction of ΓC wide.
 ZOOM_END_WIDTH = 0.25
 _DPI = 100
+#: A unit symbol is shown with at most this many characters (a case's units have at most 16).
+UNIT_CHARS = 24
 #: The zoom panel's place in the figure (left, bottom, width, height as fractions).
 _ZOOM_BOX = (0.69, 0.36, 0.29, 0.36)
 _BODY_COLOURS = "viridis"
@@ -119,8 +122,7 @@ def obstacle_of(data: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] 
 def units_of(data: dict) -> dict[str, str]:
     """The case's units as stored in solution.h5 (empty strings in files written before they were)."""
     attrs = data.get("attrs", {})
-    return {"length": str(attrs.get("length_unit", "")), "force": str(attrs.get("force_unit", "")),
-            "stress": str(attrs.get("stress_unit", ""))}
+    return {name: shown(attrs.get(f"{name}_unit", ""), UNIT_CHARS) for name in ("length", "force", "stress")}
 
 
 def with_unit(label: str, unit: str) -> str:
@@ -129,7 +131,9 @@ def with_unit(label: str, unit: str) -> str:
 
 
 def _title(data: dict) -> str:
-    return str(data["attrs"].get("title") or "contactfem result")
+    """The case's title as stored (one line, at most :data:`contactfem.picture_text.USER_CHARS`
+    characters: :func:`contactfem.picture_text.shown`)."""
+    return shown(data.get("attrs", {}).get("title") or "contactfem result")
 
 
 def auto_scale(points: np.ndarray, displacement: np.ndarray, fraction: float = AUTO_FRACTION) -> float:
@@ -481,7 +485,8 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
         _draw_panel(body_ax, plt, data, drawn, shown_obstacle, norm, cmap, xlim, ylim, units, pixels_per_unit)
         auto_turned = scale is None and turn_over < auto_scale(points, displacement)
         lines = _caption_lines(data, factor, scale, auto_turned, approach, limited, units)
-        figure.text(0.01, 0.985, _title(data), fontsize=font * 1.25, fontweight="bold", va="top")
+        title = heading(_title(data), chars_across(0.98 * width_px, font * 1.25 * 1.1), lines=1)  # bold is wider
+        figure.text(0.01, 0.985, title, fontsize=font * 1.25, fontweight="bold", va="top")
         figure.text(0.01, 0.945, "\n".join(lines), fontsize=font * 0.85, va="top", linespacing=1.4)
         body_ax.set_title("the whole body", fontsize=font)
 
@@ -507,7 +512,7 @@ def _caption_lines(data: dict, factor: float, scale: float | None, auto_turned: 
     """The caption under the title: the method, the magnification and how it was chosen
     (``auto_turned``: the auto factor was lowered so that no triangle turns over), the
     moved obstacle and the points cut back."""
-    method = data["attrs"].get("method", "?")
+    method = shown(data["attrs"].get("method", "?"), 40)
     multiplier = {"positive": "λh ≥ 0, method (4)", "standard": "θh, method (5)"}.get(method, method)
     if scale is None:
         how = (" (auto: no triangle turned over, f·|∇u| ≤ 1)" if auto_turned
@@ -582,13 +587,10 @@ def _draw_legend_and_bar(figure, body_ax, norm, cmap, units: dict, font: float, 
 
 
 def _save_png(figure, path: Path) -> None:
-    """Write ``figure`` as the PNG ``path`` (atomically); a failed write is an :class:`OutputError`."""
+    """Write ``figure`` as the PNG ``path`` (atomically, its texts literal); a failed write is an
+    :class:`~contactfem.errors.OutputError`."""
     ensure_directory(Path(path).parent)
-    try:
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png", dpi=_DPI)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    save_png(figure, path, dpi=_DPI)
 
 
 def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
