@@ -122,55 +122,218 @@ def _zone_text(intervals, unit: str) -> str:
 # --------------------------------------------------------------------------- one result
 
 
-def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 900), title: str = "") -> Path:
-    """Contact pressure and gap g0 − u_n along ΓC of one result (``read_hdf5``'s dict).
+def _abscissa(data: dict) -> np.ndarray:
+    """The contact nodes' position along the obstacle (``/contact/abscissa``; for files older
+    than schema 2, the arc length from the first contact node)."""
+    contact = data["contact"]
+    if "abscissa" in contact:
+        return np.asarray(contact["abscissa"], dtype=float)
+    nodes = np.asarray(contact["nodes"], dtype=np.int64)
+    xy = np.asarray(data["mesh"]["points"], dtype=float)[nodes]
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]) if len(xy) else xy[:, 0]
 
-    The abscissa is the position along the obstacle (``/contact/abscissa``); the active
-    nodes are marked, the contact zone shaded over report.json's intervals, and the exact
-    pressure overlaid when the file has one (``/contact/exact_pressure``). The PNG is
-    exactly ``size`` pixels.
-    """
+
+def _columns(width_pixels: float) -> int:
+    """The pixel columns of a full-width panel of a figure ``width_pixels`` wide."""
+    return int(min(max(0.8 * width_pixels, 50), 8000))
+
+
+def _span(s: np.ndarray) -> tuple[float, float]:
+    finite = s[np.isfinite(s)]
+    if not len(finite):
+        return 0.0, 1.0
+    low, high = float(finite.min()), float(finite.max())
+    return (low, high) if high > low else (low - 0.5, high + 0.5)
+
+
+def _window_of(s: np.ndarray, intervals, window, dense: bool) -> tuple[tuple[float, float] | None, str]:
+    """The zoom window and what it frames: the one asked for, else for a dense profile its
+    densest stretch of patches (:func:`contactfem.profile_view.densest_window`), else none."""
+    from contactfem.profile_view import densest_window
+
+    if window is not None:
+        return (float(window[0]), float(window[1])), "the window asked for"
+    if dense:
+        found = densest_window(s, intervals)
+        if found is not None:
+            return found, "the densest stretch of contact patches"
+    return None, ""
+
+
+def _headroom(axis, rows: int) -> None:
+    """Room above the data for a legend of ``rows`` rows across the top of ``axis``."""
+    low, high = axis.get_ylim()
+    axis.set_ylim(low, high + (0.13 * rows + 0.04) * (high - low))
+
+
+def _gap_on_right(axis, x: np.ndarray, gap: np.ndarray, length: str, label: str = "gap g0 − u_n"):
+    """The gap on a second y axis of ``axis``, its zero level with the pressure's; returns that axis."""
+    from contactfem.profile_view import GAP_GREEN
+
+    right = axis.twinx()
+    right.plot(x, gap, "-", color=GAP_GREEN, lw=1.3, label=label)
+    right.set_ylabel(_with_unit("gap g0 − u_n", length), color=GAP_GREEN)
+    right.tick_params(axis="y", colors=GAP_GREEN, labelsize=8)
+    left, right_end = axis.get_xlim()
+    seen = np.isfinite(gap) & (x >= min(left, right_end)) & (x <= max(left, right_end))
+    finite = gap[seen] if seen.any() else gap[np.isfinite(gap)]
+    low, high = axis.get_ylim()
+    top = float(finite.max()) if len(finite) else 0.0
+    if high > 0 and low < high and top > 0:
+        share = max(-low, 0.0) / (high - low)  # where 0 sits on the pressure axis
+        top *= 1.1
+        right.set_ylim(-share / max(1.0 - share, 1e-9) * top, top)
+    return right
+
+
+def _draw_zoom(axis, s: np.ndarray, curves, gap: np.ndarray, active: np.ndarray, intervals, window,
+               what: str, length: str, stress: str) -> None:
+    """Node by node over ``window``: the pressure ``curves`` ((values, marker, colour, label)), the
+    active nodes, the patches there shaded, and the gap g0 − u_n on the right axis."""
+    from contactfem.profile_view import in_window
+
+    pick = in_window(s, window)
+    here = [(a, b) for a, b in intervals if b >= window[0] and a <= window[1]]
+    _shade(axis, here, label="contact patches")
+    axis.axhline(0.0, color="k", lw=0.8)
+    axis.grid(True, alpha=0.3)
+    for values, marker, colour, label in curves:
+        axis.plot(s[pick], values[pick], "-" + marker, ms=3, color=colour, label=label)
+    touching = pick[active[pick]]
+    axis.plot(s[touching], curves[0][0][touching], "o", ms=5, color="tab:red", label="active nodes")
+    axis.set_xlim(*window)
+    axis.set_ylabel(_with_unit("contact pressure", stress))
+    _headroom(axis, 1)
+    right = _gap_on_right(axis, s[pick], gap[pick], length)
+    handles, labels = axis.get_legend_handles_labels()
+    more, names = right.get_legend_handles_labels()
+    axis.legend(handles + more, labels + names, fontsize=8, loc="upper left", ncol=len(handles) + len(more))
+    inside = sum(1 for a, b in here if a >= window[0] and b <= window[1])
+    axis.set_title(f"zoom on {what}, [{window[0]:.4g}, {window[1]:.4g}] {length}".rstrip()
+                   + f": {inside} patches, node by node, the gap on the right axis", fontsize=9)
+
+
+def _draw_dense(axis, s: np.ndarray, curves, intervals, span, columns: int, window) -> None:
+    """A full-length panel of a dense profile: each of ``curves`` ((values, colour, label, alpha))
+    as its per-pixel-column envelope, the patches as a strip along the foot, the zoom window outlined."""
+    from contactfem.profile_view import draw_envelope, draw_strip, mark_window
+
+    axis.axhline(0.0, color="k", lw=0.8)
+    axis.grid(True, alpha=0.3)
+    for values, colour, label, alpha in curves:
+        draw_envelope(axis, s, values, span[0], span[1], columns, colour, label, alpha=alpha)
+    draw_strip(axis, intervals, (span[1] - span[0]) / columns)
+    if window is not None:
+        mark_window(axis, window, label="zoom window")
+
+
+def profile_figure(data: dict, size: tuple[int, int] = (1200, 900), title: str = "",
+                   window: tuple[float, float] | None = None):
+    """The figure of contact_profile.png (see :func:`plot_result_profile`) and what it shows:
+    ``(figure, {"patches", "fraction", "dense", "window", "axes"})``. The caller closes it."""
+    from contactfem.profile_view import contact_fraction, is_dense
+
     plt = _pyplot()
     attrs = data.get("attrs", {})
     length, stress = _unit(attrs.get("length_unit", "")), _unit(attrs.get("stress_unit", ""))
     contact = data["contact"]
     nodes = np.asarray(contact["nodes"], dtype=np.int64)
     active = np.asarray(contact["active"], dtype=bool)
-    if "abscissa" in contact:
-        s = np.asarray(contact["abscissa"], dtype=float)
-    else:  # files older than schema 2: arc length from the first contact node
-        xy = np.asarray(data["mesh"]["points"], dtype=float)[nodes]
-        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))]) if len(xy) else xy[:, 0]
+    s = _abscissa(data)
     order = np.argsort(s, kind="stable")
     multiplier = np.asarray(contact["multiplier"], dtype=float)
     gap = np.asarray(contact["gap"], dtype=float) - np.asarray(contact["normal_displacement"], dtype=float)
+    exact = np.asarray(contact["exact_pressure"], dtype=float) if "exact_pressure" in contact else None
     intervals = zone_intervals(s, active, contact.get("edges"), nodes)
-    method = attrs.get("method", "")
-    symbol = _SYMBOLS.get(method, "multiplier")
+    symbol = _SYMBOLS.get(attrs.get("method", ""), "multiplier")
     dpi = 100
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi, sharex=True)
+    columns = _columns(size[0])
+    dense = is_dense(len(intervals), len(s), columns)
+    window, what = _window_of(s, intervals, window, dense)
+    fraction = contact_fraction(s, active)
+    shape = (3, 1) if window is not None else (2, 1)
+    ratios = [3, 2, 3] if window is not None else [1, 1]
+    figure, axes = plt.subplots(*shape, figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi,
+                                gridspec_kw={"height_ratios": ratios})
     try:
+        return _draw_profile(figure, axes, size, dpi, title, s, order, multiplier, gap, exact, active, intervals,
+                             symbol, length, stress, columns, dense, window, what, fraction)
+    except BaseException:
+        plt.close(figure)
+        raise
+
+
+def _draw_profile(figure, axes, size, dpi, title, s, order, multiplier, gap, exact, active, intervals, symbol,
+                  length, stress, columns, dense, window, what, fraction):
+    from contactfem.profile_view import column_envelope, patch_note
+
+    top, bottom = axes[0], axes[1]
+    bottom.sharex(top)
+    top.tick_params(labelbottom=False)
+    if dense:
+        span = _span(s)
+        _draw_dense(top, s, [(multiplier, "tab:blue", f"{symbol}, largest and smallest of each pixel column", 0.55)],
+                    intervals, span, columns, window)
+        if exact is not None:
+            x, _, largest = column_envelope(s, exact, span[0], span[1], columns)
+            top.plot(x, largest, "--", color="black", lw=1.2, label="exact pressure −σnn(u_exact)")
+        _draw_dense(bottom, s, [(gap, "tab:green", "gap g0 − u_n, smallest and largest of each pixel column",
+                                 0.45)], intervals, span, columns, window)
+        for axis in (top, bottom):
+            _headroom(axis, 1)
+        top.legend(fontsize=9, loc="upper left", ncol=4)
+    else:
         for axis in (top, bottom):
             _shade(axis, intervals)
             axis.axhline(0.0, color="k", lw=0.8)
             axis.grid(True, alpha=0.3)
         top.plot(s[order], multiplier[order], "-o", ms=3, color="tab:blue", label=symbol)
         top.plot(s[active], multiplier[active], "o", ms=5, color="tab:red", label="active nodes (in contact)")
-        if "exact_pressure" in contact:
-            exact = np.asarray(contact["exact_pressure"], dtype=float)
+        if exact is not None:
             finite = np.isfinite(exact[order])
             top.plot(s[order][finite], exact[order][finite], "--", color="black", lw=1.2,
                      label="exact pressure −σnn(u_exact)")
-        top.set_ylabel(_with_unit("contact pressure", stress))
-        top.legend(fontsize=9)
-        top.set_title(heading(title or "contact boundary ΓC", chars_across(size[0], 11, dpi), lines=1) + "\n"
-                      + _zone_text(intervals, length), fontsize=11)
         bottom.plot(s[order], gap[order], "-", color="tab:green", label="gap g0 − u_n")
         bottom.plot(s[active], gap[active], "o", ms=5, color="tab:red")
-        bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
-        bottom.set_xlabel(_with_unit(_ALONG, length) + "  (report.json's contact_zone abscissa)")
-        bottom.legend(fontsize=9)
-        return _save(figure, path, dpi=dpi)
+        if window is not None:
+            from contactfem.profile_view import mark_window
+
+            for axis in (top, bottom):
+                mark_window(axis, window, label="zoom window")
+        top.legend(fontsize=9)
+    top.set_ylabel(_with_unit("contact pressure", stress))
+    top.set_title(heading(title or "contact boundary ΓC", chars_across(size[0], 11, dpi), lines=1) + "\n"
+                  + _zone_text(intervals, length) + "\n" + patch_note(len(intervals), fraction), fontsize=11)
+    bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
+    bottom.set_xlabel(_with_unit(_ALONG, length) + "  (report.json's contact_zone abscissa)")
+    bottom.legend(fontsize=9, loc="upper left" if dense else "best", ncol=3 if dense else 1)
+    if window is not None:
+        curves = [(multiplier, "o", "tab:blue", symbol)]
+        _draw_zoom(axes[2], s, curves, gap, active, intervals, window, what, length, stress)
+        axes[2].set_xlabel(_with_unit(_ALONG, length))
+    info = {"patches": len(intervals), "fraction": fraction, "dense": dense, "window": window,
+            "axes": {"pressure": top, "gap": bottom, **({"zoom": axes[2]} if window is not None else {})}}
+    return figure, info
+
+
+def plot_result_profile(path: Path, data: dict, size: tuple[int, int] = (1200, 900), title: str = "",
+                        window: tuple[float, float] | None = None) -> Path:
+    """Contact pressure and gap g0 − u_n along ΓC of one result (``read_hdf5``'s dict).
+
+    The abscissa is the position along the obstacle (``/contact/abscissa``); the contact
+    zone is shaded over report.json's intervals, and the exact pressure overlaid when the
+    file has one (``/contact/exact_pressure``). The title gives the number of contact
+    patches and the contact fraction. A profile of few patches is drawn node by node, the
+    active nodes marked; one of many (:func:`contactfem.profile_view.is_dense`) as
+    envelopes per pixel column, the patches as a strip, with a third panel zooming node by
+    node on its densest stretch of patches, pressure and gap together. ``window`` (from,
+    to along the obstacle) asks for that zoom panel on a window of one's own. The PNG is
+    exactly ``size`` pixels.
+    """
+    plt = _pyplot()
+    figure, _ = profile_figure(data, size=size, title=title, window=window)
+    try:
+        return _save(figure, path, dpi=100)
     finally:
         plt.close(figure)
 
@@ -238,13 +401,32 @@ def plot_contact_profiles(path: Path, outcomes: dict, title: str = "") -> Path:
     return plot_compare(path, figures, title=title)
 
 
-def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
+def plot_compare(path: Path, figures: dict, title: str = "", window: tuple[float, float] | None = None) -> Path:
     """λh, θh and the gap along ΓC from compare.json's content.
 
-    Three panels: both multipliers over ΓC; the lift-off zone alone (the nodes where the
-    positive method has no contact), where θh's oscillation below zero shows at its own
-    scale; the gap g0 − u_n. The contact zone is shaded over the positive method's intervals.
+    Three panels: both multipliers over ΓC; a zoom; the gap g0 − u_n. The contact zone is
+    shaded over the positive method's intervals, and the title gives the number of
+    contact patches and the contact fraction. For few patches, the profiles are drawn node
+    by node and the zoom shows the lift-off zone (the nodes where the positive method has
+    no contact), where θh's oscillation below zero shows at its own scale, with the gap on
+    its right axis. For many (:func:`contactfem.profile_view.is_dense`), the profiles over
+    ΓC are envelopes per pixel column, the patches a strip, and the zoom shows the densest
+    stretch of patches node by node, λh, θh and the gap. ``window`` (from, to along the
+    obstacle) asks for the zoom on a window of one's own.
     """
+    plt = _pyplot()
+    figure, _ = compare_figure(figures, title=title, window=window)
+    try:
+        return _save(figure, Path(path))
+    finally:
+        plt.close(figure)
+
+
+def compare_figure(figures: dict, title: str = "", window: tuple[float, float] | None = None):
+    """The figure of compare.png (see :func:`plot_compare`) and what it shows:
+    ``(figure, {"patches", "fraction", "dense", "window", "axes"})``. The caller closes it."""
+    from contactfem.profile_view import contact_fraction, is_dense
+
     plt = _pyplot()
     profiles = figures["profiles"]
     units = figures.get("units", {})
@@ -254,11 +436,45 @@ def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
     theta = np.asarray(profiles["theta"], dtype=float) if "theta" in profiles else None
     gap = np.asarray(profiles["gap"], dtype=float)
     active = np.asarray(profiles["active"]["positive"], dtype=bool)
-    order = np.argsort(s, kind="stable")
     zone = figures.get("methods", {}).get("positive", {}).get("contact_zone", {}).get("intervals", [])
     intervals = [tuple(i["abscissa"]) for i in zone]
-    figure, (top, middle, bottom) = plt.subplots(3, 1, figsize=(9, 9.5), gridspec_kw={"height_ratios": [3, 2.2, 2]})
+    size = (900, 950)
+    columns = _columns(size[0])
+    dense = is_dense(len(intervals), len(s), columns)
+    window, what = _window_of(s, intervals, window, dense)
+    fraction = contact_fraction(s, active)
+    figure, axes = plt.subplots(3, 1, figsize=(9, 9.5), gridspec_kw={"height_ratios": [3, 2.2, 2]})
     try:
+        heading_line = heading(title or figures.get("case", {}).get("title", ""), chars_across(size[0], 11), lines=1)
+        _draw_compare(axes, s, lam, theta, gap, active, intervals, length, stress, columns, dense, window, what,
+                      fraction, heading_line)
+    except BaseException:
+        plt.close(figure)
+        raise
+    info = {"patches": len(intervals), "fraction": fraction, "dense": dense, "window": window,
+            "axes": {"pressure": axes[0], "zoom": axes[1], "gap": axes[2]}}
+    return figure, info
+
+
+def _draw_compare(axes, s, lam, theta, gap, active, intervals, length, stress, columns, dense, window, what,
+                  fraction, heading_line) -> None:
+    from contactfem.profile_view import mark_window, patch_note
+
+    top, middle, bottom = axes
+    order = np.argsort(s, kind="stable")
+    if dense:
+        span = _span(s)
+        curves = [(lam, "tab:blue", _SYMBOLS["positive"], 0.6)]
+        if theta is not None:  # under λh: θh's dips below zero show beneath
+            curves.insert(0, (theta, "tab:orange", _SYMBOLS["standard"], 0.45))
+        _draw_dense(top, s, curves, intervals, span, columns, window)
+        _draw_dense(bottom, s, [(gap, "tab:green", "gap g0 − u_n (positive)", 0.45)], intervals, span, columns,
+                    window)
+        _headroom(top, 2)
+        _headroom(bottom, 1)
+        top.legend(fontsize=8, loc="upper left", ncol=3, title="largest and smallest of each pixel column",
+                   title_fontsize=8, alignment="left")
+    else:
         for axis in (top, bottom):
             _shade(axis, intervals, label="contact zone")
             axis.axhline(0.0, color="k", lw=0.8)
@@ -266,56 +482,71 @@ def plot_compare(path: Path, figures: dict, title: str = "") -> Path:
         top.plot(s[order], lam[order], "-o", ms=3, label=_SYMBOLS["positive"])
         if theta is not None:
             top.plot(s[order], theta[order], "-s", ms=3, label=_SYMBOLS["standard"])
-        top.set_ylabel(_with_unit("contact pressure", stress))
-        top.set_title(heading(title or figures.get("case", {}).get("title", ""), chars_across(900, 11), lines=1)
-                      + "\n" + _zone_text(intervals, length), fontsize=11)
-        top.legend(fontsize=9)
-
-        lift = ~active
-        middle.axhline(0.0, color="k", lw=0.8)
-        middle.grid(True, alpha=0.3)
-        if lift.any():
-            # The lift-off nodes and one node on each side, at the scale of their own values.
-            near = lift.copy()
-            near[1:] |= lift[:-1]
-            near[:-1] |= lift[1:]
-            pick = order[near[order]]
-            middle.plot(s[pick], lam[pick], "-o", ms=3, label="λh")
-            values = [lam[lift]]
-            if theta is not None:
-                middle.plot(s[pick], theta[pick], "-s", ms=3, color="tab:orange", label="θh")
-                # θh's dips below zero, at the lift-off nodes and at the contact zone's edge.
-                values += [theta[lift], np.minimum(theta[pick], 0.0)]
-                low = pick[int(np.argmin(theta[pick]))]
-                middle.text(0.01, 0.04, f"min θh = {theta[low]:.3g} {stress} at {s[low]:.4g} {length} "
-                            f"(λh there: {lam[low]:.3g})", transform=middle.transAxes, fontsize=8, color="tab:orange")
-            spread = np.concatenate(values)
-            low_value, high_value = float(spread.min()), float(spread.max())
-            pad = 0.15 * max(high_value - low_value, abs(low_value), abs(high_value), np.finfo(float).tiny)
-            middle.set_ylim(min(low_value, 0.0) - pad, max(high_value, 0.0) + pad)
-            shown = s[pick]
-            if theta is not None:
-                # Frame the nodes where θh is not zero (its oscillation sits next to the zone's
-                # edge), with a few nodes of margin, rather than the whole lift-off zone.
-                moving = np.flatnonzero(np.abs(theta[pick]) > 1e-3 * np.abs(theta[pick]).max())
-                if moving.size:
-                    shown = shown[max(moving[0] - 4, 0):moving[-1] + 5]
-            middle.set_xlim(float(shown.min()), float(shown.max()))
-            middle.legend(fontsize=8)
-            middle.set_title("where the body lifts off (no contact for λh) next to the contact zone, at the scale "
-                             "of the values there", fontsize=9)
-        else:
-            middle.text(0.5, 0.5, "no lift-off: every contact node is in contact", transform=middle.transAxes,
-                        ha="center", va="center")
-        middle.set_ylabel(_with_unit("contact pressure", stress))
         bottom.plot(s[order], gap[order], "-", color="tab:green", label="gap g0 − u_n (positive)")
-        bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
-        bottom.set_xlabel(_with_unit(_ALONG, length))
-        bottom.sharex(top)
-        bottom.legend(fontsize=8)
-        return _save(figure, Path(path))
-    finally:
-        plt.close(figure)
+        if window is not None:
+            for axis in (top, bottom):
+                mark_window(axis, window, label="zoom window")
+        top.legend(fontsize=9)
+    top.set_ylabel(_with_unit("contact pressure", stress))
+    top.set_title(heading_line + "\n" + _zone_text(intervals, length) + "\n" + patch_note(len(intervals), fraction),
+                  fontsize=11)
+
+    if window is not None:
+        curves = [(lam, "o", "tab:blue", "λh")]
+        if theta is not None:
+            curves.append((theta, "s", "tab:orange", "θh"))
+        _draw_zoom(middle, s, curves, gap, active, intervals, window, what, length, stress)
+    else:
+        _draw_lift_off(middle, s, order, lam, theta, gap, active, length, stress)
+    bottom.set_ylabel(_with_unit("gap g0 − u_n", length))
+    bottom.set_xlabel(_with_unit(_ALONG, length))
+    bottom.sharex(top)
+    bottom.legend(fontsize=8, loc="upper left" if dense else "best", ncol=3 if dense else 1)
+
+
+def _draw_lift_off(middle, s, order, lam, theta, gap, active, length, stress) -> None:
+    """The lift-off zone (no contact for λh) and a node on each side at the scale of the values
+    there, the gap on the right axis."""
+    lift = ~active
+    middle.axhline(0.0, color="k", lw=0.8)
+    middle.grid(True, alpha=0.3)
+    if lift.any():
+        # The lift-off nodes and one node on each side, at the scale of their own values.
+        near = lift.copy()
+        near[1:] |= lift[:-1]
+        near[:-1] |= lift[1:]
+        pick = order[near[order]]
+        middle.plot(s[pick], lam[pick], "-o", ms=3, label="λh")
+        values = [lam[lift]]
+        if theta is not None:
+            middle.plot(s[pick], theta[pick], "-s", ms=3, color="tab:orange", label="θh")
+            # θh's dips below zero, at the lift-off nodes and at the contact zone's edge.
+            values += [theta[lift], np.minimum(theta[pick], 0.0)]
+            low = pick[int(np.argmin(theta[pick]))]
+            middle.text(0.01, 0.04, f"min θh = {theta[low]:.3g} {stress} at {s[low]:.4g} {length} "
+                        f"(λh there: {lam[low]:.3g})", transform=middle.transAxes, fontsize=8, color="tab:orange")
+        spread = np.concatenate(values)
+        low_value, high_value = float(spread.min()), float(spread.max())
+        pad = 0.15 * max(high_value - low_value, abs(low_value), abs(high_value), np.finfo(float).tiny)
+        middle.set_ylim(min(low_value, 0.0) - pad, max(high_value, 0.0) + pad)
+        framed = s[pick]
+        if theta is not None:
+            # Frame the nodes where θh is not zero (its oscillation sits next to the zone's
+            # edge), with a few nodes of margin, rather than the whole lift-off zone.
+            moving = np.flatnonzero(np.abs(theta[pick]) > 1e-3 * np.abs(theta[pick]).max())
+            if moving.size:
+                framed = framed[max(moving[0] - 4, 0):moving[-1] + 5]
+        middle.set_xlim(float(framed.min()), float(framed.max()))
+        right = _gap_on_right(middle, s[pick], gap[pick], length)
+        handles, labels = middle.get_legend_handles_labels()
+        more, names = right.get_legend_handles_labels()
+        middle.legend(handles + more, labels + names, fontsize=8)
+        middle.set_title("where the body lifts off (no contact for λh) next to the contact zone, at the scale "
+                         "of the values there, the gap on the right axis", fontsize=9)
+    else:
+        middle.text(0.5, 0.5, "no lift-off: every contact node is in contact", transform=middle.transAxes,
+                    ha="center", va="center")
+    middle.set_ylabel(_with_unit("contact pressure", stress))
 
 
 # --------------------------------------------------------------------------- convergence
