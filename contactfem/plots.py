@@ -25,6 +25,26 @@ _LABELS = {
     "multiplier_l2": "‖λ − λ_ref‖ L²(ΓC)",
     "multiplier_h_minus_half": "‖λ − λ_ref‖ H^-1/2(ΓC)",
 }
+
+
+def error_units(units: dict | None) -> dict[str, str]:
+    """The unit of each error norm (:data:`contactfem.norms.NORM_NAMES`) in the case's units (2D,
+    per unit thickness: an energy is a force). The H¹ norm adds an L² part (length²) to an H¹
+    seminorm (length), the H^-1/2 norm divides by such a norm: their unit is mixed, both parts named."""
+    units = units or {}
+    length, force, stress = (_unit(units.get(key)) for key in ("length", "force", "stress"))
+    if not (length and force and stress):
+        return {norm: "the case's units" for norm in NORM_NAMES}
+    return {
+        "displacement_l2": f"{length}²",
+        "displacement_h1_semi": length,
+        "displacement_h1": f"mixed: {length}², {length}",
+        "displacement_energy": f"{force}^½",
+        "multiplier_l2": f"{stress}·{length}^½",
+        "multiplier_h_minus_half": f"mixed: {stress}·{length}, {stress}",
+    }
+
+
 _SYMBOLS = {"positive": "λh (positive, method 4)", "standard": "θh (standard, method 5)"}
 _ALONG = "position along the obstacle"
 
@@ -565,11 +585,12 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
     written = []
     rows_all = study["rows"]
     methods = sorted({row["method"] for row in rows_all})
-    length = study.get("units", {}).get("length", "")
+    length = (study.get("units") or {}).get("length", "")
+    units_of_norm = error_units(study.get("units"))
     biased = bool(study.get("warnings")) and study.get("reference_extra") == 1
     for x_key, name, x_label in zip(("h", "total_seconds"), CONVERGENCE_PNGS,
-                                    (_with_unit("h (largest triangle diameter)", length),
-                                     "seconds (mesh + assembly + solve)")):
+                                    (_with_unit("h, largest triangle diameter", length),
+                                     "time (s): mesh + assembly + solve")):
         figure, axes = plt.subplots(2, 3, figsize=(14, 8.5))
         for axis, norm in zip(axes.ravel(), NORM_NAMES):
             every_x = []
@@ -602,11 +623,12 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
                 axis.xaxis.set_minor_formatter(NullFormatter())
             axis.set_title(_LABELS[norm], fontsize=10)
             axis.set_xlabel(x_label, fontsize=8)
+            axis.set_ylabel(f"error ({units_of_norm[norm]})", fontsize=8)
             if not every_x:
                 axis.text(0.5, 0.5, "no positive error on any level", transform=axis.transAxes, ha="center")
                 continue
             axis.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-            axis.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.0e}" if v > 0 else ""))
+            axis.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.2g}" if v > 0 else ""))
             axis.yaxis.set_minor_formatter(NullFormatter())
             axis.tick_params(labelsize=7)
             axis.grid(True, which="both", alpha=0.25)
@@ -629,9 +651,13 @@ def plot_convergence(directory: Path, study: dict, theoretical_rate: float = 1.0
 # --------------------------------------------------------------------------- sweep
 
 
-def plot_sweep(path: Path, table: dict) -> Path:
+def plot_sweep(path: Path, table: dict, units: dict | None = None) -> Path:
     """sweep.png from sweep.json's content: each point's error against its seconds, one colour per
-    group (its swept values outside mesh.*), the Pareto fronts drawn and numbered."""
+    group (its swept values outside mesh.*), the Pareto fronts drawn and numbered.
+
+    ``units``: the base case's units (default: the table's ``units``, if it has them); the
+    error, an energy norm, is in force^½ (2D, per unit thickness). None: "each point's case
+    units" (the sweep sets them)."""
     import itertools
 
     from matplotlib.ticker import FuncFormatter
@@ -665,10 +691,12 @@ def plot_sweep(path: Path, table: dict) -> Path:
         else:
             axes.text(0.5, 0.5, "no point has an error to plot\n(one solved point per group, or none solved)",
                       ha="center", va="center", transform=axes.transAxes)
-        axes.set_xlabel("seconds per point (meshing, assembly, solve, report)")
-        axes.set_ylabel("energy-norm error ‖u − u_h‖" if kinds == {"exact"} else
-                        "|‖u_h‖ − ‖u_finest‖|, energy norm (finest point of the group)" if kinds == {"finest"} else
-                        "error (energy norm)")
+        units = units or table.get("units")
+        unit = error_units(units)["displacement_energy"] if units else "each point's case units"
+        axes.set_xlabel("time per point (s): meshing, assembly, solve, report")
+        axes.set_ylabel(("energy-norm error ‖u − u_h‖" if kinds == {"exact"} else
+                         "|‖u_h‖ − ‖u_finest‖|, energy norm (finest point of the group)" if kinds == {"finest"} else
+                         "error (energy norm)") + f" ({unit})")
         failed = sum(r["status"] != "ok" for r in table["points"])
         axes.set_title(heading(table["sweep"]["title"], chars_across(8.5 * 110, 10, 110) - 40, lines=1)
                        + ": error against time" + (f" ({failed} point(s) without figures)" if failed else ""),

@@ -35,4 +35,25 @@ def _plot_sweep(path: Path, table: dict) -> None:
     """sweep.png: each point's error against its seconds, one colour per group, the Pareto fronts drawn."""
     from contactfem.plots import plot_sweep
 
-    plot_sweep(path, table)
+    plot_sweep(path, table, units=_base_units(table))
+
+
+def _base_units(table: dict) -> dict | None:
+    """The units of the sweep's base case (its ``units`` block), or None when the sweep sets
+    them point by point or the base case cannot be read again."""
+    from contactfem.case.files import read_text_file
+    from contactfem.case.model import Units
+    from contactfem.case.yaml_loader import load_yaml
+    from contactfem.errors import ContactFemError
+
+    if table.get("units"):
+        return table["units"]
+    if any(key == "units" or key.startswith("units.") for key in table.get("keys", [])):
+        return None
+    try:
+        path = Path(table["case"]["file"])
+        data = load_yaml(read_text_file(path), path.name)
+        block = data.get("units") or {} if isinstance(data, dict) else {}
+        return Units(length=str(block.get("length", "m")), force=str(block.get("force", "N"))).to_dict()
+    except (ContactFemError, OSError, KeyError, TypeError, AttributeError):
+        return None
