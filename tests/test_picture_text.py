@@ -83,8 +83,8 @@ def _ok(*args) -> None:
 @pytest.mark.parametrize("text", HOSTILE.values(), ids=HOSTILE.keys())
 def test_every_picture_command_draws_hostile_text_as_text(text, tmp_path, monkeypatch):
     """solve --plot (deformed.png, contact_profile.png, path.png, drawn from solution.h5 as
-    `plot` draws them), compare, converge and sweep, and plot on the compare and converge
-    directories (drawn from their JSON): exit 0, every PNG written, sweep.json written."""
+    `plot` draws them), compare, converge, adapt and sweep, and plot on the compare and
+    converge directories (drawn from their JSON): exit 0, every PNG written, sweep.json written."""
     import sys
 
     monkeypatch.setitem(sys.modules, "dask", None)  # the sweep's points in this process
@@ -104,6 +104,9 @@ def test_every_picture_command_draws_hostile_text_as_text(text, tmp_path, monkey
     for name in ("convergence_h.png", "convergence_time.png"):
         assert _is_png(tmp_path / "v" / name), name
     _ok("plot", tmp_path / "v", "--quiet")
+
+    _ok("adapt", square, "--max-unknowns", "200", "--out", tmp_path / "a", "--quiet")
+    assert _is_png(tmp_path / "a" / "adapt.png")
 
     sweep = _write(tmp_path / "sweep.yaml", {"title": text, "case": "square.yaml",
                                              "grid": {"mesh.divisions": [2, 4], "title": [text, text[:150]]}})

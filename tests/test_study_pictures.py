@@ -19,20 +19,22 @@ from contactfem.norms import NORM_NAMES
 @pytest.fixture
 def drawn(monkeypatch):
     """The axis labels and texts of every figure the pictures write, by file name."""
-    from contactfem import plots
-    from contactfem.picture_text import _texts
+    from contactfem import picture_text, plots
 
     seen: dict[str, dict] = {}
-    save = plots.save_png
+    save = picture_text.save_png
 
     def recording(figure, path, **options):
         seen[Path(path).name] = {
             "axes": [(axis.get_xlabel(), axis.get_ylabel(), axis.get_title()) for axis in figure.axes],
-            "texts": [text.get_text() for text in _texts(figure)],
+            "texts": [text.get_text() for text in picture_text._texts(figure)],
+            "collections": [(len(collection.get_paths()), np.array(collection.get_facecolors()))
+                            for axis in figure.axes for collection in axis.collections],
         }
         return save(figure, path, **options)
 
     monkeypatch.setattr(plots, "save_png", recording)
+    monkeypatch.setattr(picture_text, "save_png", recording)
     return seen
 
 
@@ -90,3 +92,24 @@ def test_sweep_png_of_swept_units_says_each_points_units(drawn, tmp_path):
     plot_sweep(tmp_path / "sweep.png", table)
     (_, y, _), = drawn["sweep.png"]["axes"]
     assert y.endswith("(each point's case units)")
+
+
+def test_adapt_writes_the_final_mesh_coloured_by_the_indicator(drawn, tmp_path):
+    """adapt.png beside adapt.json, through the pictures' writer: every triangle of the final
+    mesh filled with its own colour of η_T (a logarithmic scale), the colour bar and the
+    steps' panel in the case's units (energy norm: N^½)."""
+    root = Path(__file__).resolve().parents[1]
+    result = invoke("adapt", root / "cases" / "manufactured.yaml", "--max-unknowns", "2000", "--out", tmp_path,
+                    "--quiet")
+    assert result.exit_code == 0, result.stderr
+    assert (tmp_path / "adapt.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "adapt.json").is_file()
+    report = json.loads((tmp_path / "report.json").read_text())
+    picture = drawn["adapt.png"]
+    paths, faces = picture["collections"][0]
+    assert paths == report["mesh"]["triangles"]
+    assert len(np.unique(faces.round(3), axis=0)) > 20
+    assert any("error indicator η_T (N^½)" == y for _, y, _ in picture["axes"])
+    assert any(y == "η and error (N^½)" for _, y, _ in picture["axes"])
+    history = json.loads((tmp_path / "adapt.json").read_text())
+    assert any(f"{len(history['steps'])} steps" in title for _, _, title in picture["axes"])
