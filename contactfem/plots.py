@@ -207,30 +207,42 @@ def _gap_on_right(axis, x: np.ndarray, gap: np.ndarray, length: str, label: str 
 
 
 def _draw_zoom(axis, s: np.ndarray, curves, gap: np.ndarray, active: np.ndarray, intervals, window,
-               what: str, length: str, stress: str) -> None:
+               what: str, length: str, stress: str, columns: int) -> None:
     """Node by node over ``window``: the pressure ``curves`` ((values, marker, colour, label)), the
-    active nodes, the patches there shaded, and the gap g0 − u_n on the right axis."""
-    from contactfem.profile_view import in_window
+    active nodes, the patches there shaded, and the gap g0 − u_n on the right axis. A window
+    asked for that holds more nodes than the panel can show apart
+    (:func:`contactfem.profile_view.is_dense`) is drawn as envelopes per pixel column instead."""
+    from contactfem.profile_view import column_envelope, draw_envelope, draw_strip, in_window, is_dense
 
     pick = in_window(s, window)
     here = [(a, b) for a, b in intervals if b >= window[0] and a <= window[1]]
-    _shade(axis, here, label="contact patches")
+    inside = sum(1 for a, b in here if a >= window[0] and b <= window[1])
+    crowded = is_dense(inside, len(pick), columns)
     axis.axhline(0.0, color="k", lw=0.8)
     axis.grid(True, alpha=0.3)
-    for values, marker, colour, label in curves:
-        axis.plot(s[pick], values[pick], "-" + marker, ms=3, color=colour, label=label)
-    touching = pick[active[pick]]
-    axis.plot(s[touching], curves[0][0][touching], "o", ms=5, color="tab:red", label="active nodes")
+    if crowded:
+        for values, _, colour, label in curves:
+            draw_envelope(axis, s[pick], values[pick], window[0], window[1], columns, colour, label)
+        draw_strip(axis, here, (window[1] - window[0]) / columns)
+        x, smallest, _ = column_envelope(s[pick], gap[pick], window[0], window[1], columns)
+    else:
+        _shade(axis, here, label="contact patches")
+        for values, marker, colour, label in curves:
+            axis.plot(s[pick], values[pick], "-" + marker, ms=3, color=colour, label=label)
+        touching = pick[active[pick]]
+        axis.plot(s[touching], curves[0][0][touching], "o", ms=5, color="tab:red", label="active nodes")
+        x, smallest = s[pick], gap[pick]
     axis.set_xlim(*window)
     axis.set_ylabel(_with_unit("contact pressure", stress))
     _headroom(axis, 1)
-    right = _gap_on_right(axis, s[pick], gap[pick], length)
+    right = _gap_on_right(axis, x, smallest, length,
+                          label="gap g0 − u_n" + (", smallest of each pixel column" if crowded else ""))
     handles, labels = axis.get_legend_handles_labels()
     more, names = right.get_legend_handles_labels()
     axis.legend(handles + more, labels + names, fontsize=8, loc="upper left", ncol=len(handles) + len(more))
-    inside = sum(1 for a, b in here if a >= window[0] and b <= window[1])
+    how = "as envelopes per pixel column (too many nodes to show apart)" if crowded else "node by node"
     axis.set_title(f"zoom on {what}, [{window[0]:.4g}, {window[1]:.4g}] {length}".rstrip()
-                   + f": {inside} patches, node by node, the gap on the right axis", fontsize=9)
+                   + f": {inside} patches, {how}, the gap on the right axis", fontsize=9)
 
 
 def _draw_dense(axis, s: np.ndarray, curves, intervals, span, columns: int, window) -> None:
@@ -329,7 +341,7 @@ def _draw_profile(figure, axes, size, dpi, title, s, order, multiplier, gap, exa
     bottom.legend(fontsize=9, loc="upper left" if dense else "best", ncol=3 if dense else 1)
     if window is not None:
         curves = [(multiplier, "o", "tab:blue", symbol)]
-        _draw_zoom(axes[2], s, curves, gap, active, intervals, window, what, length, stress)
+        _draw_zoom(axes[2], s, curves, gap, active, intervals, window, what, length, stress, columns)
         axes[2].set_xlabel(_with_unit(_ALONG, length))
     info = {"patches": len(intervals), "fraction": fraction, "dense": dense, "window": window,
             "axes": {"pressure": top, "gap": bottom, **({"zoom": axes[2]} if window is not None else {})}}
@@ -515,7 +527,7 @@ def _draw_compare(axes, s, lam, theta, gap, active, intervals, length, stress, c
         curves = [(lam, "o", "tab:blue", "λh")]
         if theta is not None:
             curves.append((theta, "s", "tab:orange", "θh"))
-        _draw_zoom(middle, s, curves, gap, active, intervals, window, what, length, stress)
+        _draw_zoom(middle, s, curves, gap, active, intervals, window, what, length, stress, columns)
     else:
         _draw_lift_off(middle, s, order, lam, theta, gap, active, length, stress)
     bottom.set_ylabel(_with_unit("gap g0 − u_n", length))

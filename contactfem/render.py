@@ -48,7 +48,8 @@ from contactfem.io.registry import (
 from contactfem.picture_text import chars_across, heading, save_png, shown
 
 __all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "check_directory", "draw_directory", "drawn_positions",
-           "load_result", "make_pictures", "parse_size", "pictures_of", "render_deformed", "units_of"]
+           "load_result", "make_pictures", "parse_size", "parse_zoom", "pictures_of", "render_deformed",
+           "units_of"]
 
 #: The auto magnification makes the largest displacement this fraction of the body's size.
 AUTO_FRACTION = 0.10
@@ -82,6 +83,21 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (100 <= width <= 8000 and 100 <= height <= 8000):
         raise CaseError(f"--size {text!r}: each side must be between 100 and 8000 pixels")
     return width, height
+
+
+def parse_zoom(text: str | None) -> tuple[float, float] | None:
+    """``"0.2:0.25"`` -> (0.2, 0.25), a window along the obstacle; None -> None."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        low, high = (float(p) for p in parts)
+    except ValueError:
+        low = high = float("nan")
+    if not (np.isfinite(low) and np.isfinite(high) and low < high):
+        raise CaseError(f"--zoom {text!r}: expected FROM:TO, two finite positions along the obstacle with "
+                        "FROM < TO, e.g. 0.2:0.25")
+    return low, high
 
 
 def parse_scale(text: str) -> float | None:
@@ -594,8 +610,11 @@ def _save_png(figure, path: Path) -> None:
 
 
 def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
-                  size: tuple[int, int] = (1200, 900), scale: float | None = None) -> dict:
-    """Write ``deformed.png`` and ``contact_profile.png`` of ``result_dir`` into ``out_dir``.
+                  size: tuple[int, int] = (1200, 900), scale: float | None = None,
+                  window: tuple[float, float] | None = None) -> dict:
+    """Write ``deformed.png`` and ``contact_profile.png`` of ``result_dir`` into ``out_dir``;
+    ``window`` (from, to along the obstacle) is the profile's zoom window (default: its
+    densest stretch of patches, when there are many).
 
     Returns ``{"files": [...], "scale": factor, "zoom_scale": factor or None, "size": [w, h]}``
     (JSON-ready).
@@ -605,7 +624,7 @@ def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
     data = load_result(result_dir)
     out = ensure_directory(Path(out_dir) if out_dir is not None else Path(result_dir))
     drawn = render_deformed(data, out / DEFORMED_PNG, size=size, scale=scale)
-    plot_result_profile(out / PROFILE_PNG, data, size=size, title=_title(data))
+    plot_result_profile(out / PROFILE_PNG, data, size=size, title=_title(data), window=window)
     return {"files": [str(out / DEFORMED_PNG), str(out / PROFILE_PNG)], "scale": drawn["scale"],
             "zoom_scale": drawn["zoom_scale"], "size": list(size)}
 
@@ -652,8 +671,9 @@ def check_directory(result_dir: Path | str) -> tuple[str, ...]:
 
 
 def draw_directory(result_dir: Path | str, out_dir: Path | str | None = None, size: tuple[int, int] = (1200, 900),
-                   scale: float | None = None) -> dict:
-    """Every picture of ``result_dir`` (:func:`pictures_of`) into ``out_dir`` (default: the same).
+                   scale: float | None = None, window: tuple[float, float] | None = None) -> dict:
+    """Every picture of ``result_dir`` (:func:`pictures_of`) into ``out_dir`` (default: the same);
+    ``window`` is the zoom window of contact_profile.png and compare.png.
 
     Returns ``{"files": [...], "scale": f or None, "zoom_scale": f or None, "size": [w, h]}``;
     the factors are those of deformed.png, None without a solve.
@@ -665,9 +685,9 @@ def draw_directory(result_dir: Path | str, out_dir: Path | str | None = None, si
     names = pictures_of(directory)
     made = {"files": [], "scale": None, "zoom_scale": None, "size": list(size)}
     if DEFORMED_PNG in names:
-        made.update(make_pictures(directory, out, size=size, scale=scale))
+        made.update(make_pictures(directory, out, size=size, scale=scale, window=window))
     if COMPARE_PNG in names:
-        plot_compare(out / COMPARE_PNG, _study(directory / COMPARE_JSON, "profiles"))
+        plot_compare(out / COMPARE_PNG, _study(directory / COMPARE_JSON, "profiles"), window=window)
         made["files"].append(str(out / COMPARE_PNG))
     if CONVERGENCE_PNGS[0] in names:
         made["files"] += [str(p) for p in plot_convergence(out, _study(directory / CONVERGENCE_JSON, "rows"))]

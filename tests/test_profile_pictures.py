@@ -243,3 +243,28 @@ def test_the_lift_off_panel_shows_the_gap_too(pyplot):
     middle = info["axes"]["zoom"]
     twins = [axis for axis in figure.axes if axis is not middle and axis.bbox.bounds == middle.bbox.bounds]
     assert twins and any("gap" in line.get_label() for line in twins[0].lines)
+
+
+def test_plot_zooms_on_a_window_given_by_an_option(rough, tmp_path, pyplot):
+    """`plot --zoom FROM:TO` sets the zoom window of contact_profile.png (and compare.png); a
+    window holding the whole of ΓC's 4 001 nodes is drawn as envelopes, not node by node;
+    a window that is not FROM < TO is refused."""
+    from contactfem.plots import profile_figure
+    from contactfem.render import load_result
+
+    result = invoke("plot", rough / "solve", "--zoom", "0.36:0.38", "--out", tmp_path / "figs", "--quiet")
+    assert result.exit_code == 0, result.stderr
+    assert (tmp_path / "figs" / "contact_profile.png").read_bytes()[:4] == b"\x89PNG"
+    result = invoke("plot", rough / "compare", "--zoom", "0.6:0.62", "--out", tmp_path / "cmp", "--quiet")
+    assert result.exit_code == 0, result.stderr
+    for bad in ("0.4:0.3", "a:b", "0.1", "nan:1"):
+        refused = invoke("plot", rough / "solve", "--zoom", bad, "--out", tmp_path / "no")
+        assert refused.exit_code == 2 and "--zoom" in refused.stderr, bad
+
+    data = load_result(rough / "solve")
+    figure, info = profile_figure(data, size=(1200, 900), window=(0.36, 0.38))
+    assert info["window"] == (0.36, 0.38) and info["axes"]["zoom"].get_xlim() == pytest.approx((0.36, 0.38))
+    figure, info = profile_figure(data, size=(1200, 900), window=(0.0, 1.0))
+    _, vertices, markers = _drawn(info["axes"]["zoom"])
+    assert markers == 0 and vertices <= 12 * 960 + 100
+    assert "as envelopes per pixel column" in info["axes"]["zoom"].get_title()
