@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from contactfem.errors import CaseError, OutputError
-from contactfem.io.atomic import atomic_path, ensure_directory
+from contactfem.errors import CaseError
+from contactfem.io.atomic import ensure_directory
 from contactfem.io.registry import (
     COMPARE_JSON,
     COMPARE_PNG,
@@ -45,9 +45,11 @@ from contactfem.io.registry import (
     PROFILE_PNG,
     SOLUTION_H5,
 )
+from contactfem.picture_text import chars_across, heading, save_png, shown
 
 __all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "check_directory", "draw_directory", "drawn_positions",
-           "load_result", "make_pictures", "parse_size", "pictures_of", "render_deformed", "units_of"]
+           "load_result", "make_pictures", "parse_size", "parse_zoom", "pictures_of", "render_deformed",
+           "units_of"]
 
 #: The auto magnification makes the largest displacement this fraction of the body's size.
 AUTO_FRACTION = 0.10
@@ -62,6 +64,8 @@ ZOOM_WHOLE_ZONE = 0.3
 #: Otherwise it frames the zone's first lift-off end, this fraction of ΓC wide.
 ZOOM_END_WIDTH = 0.25
 _DPI = 100
+#: A unit symbol is shown with at most this many characters (a case's units have at most 16).
+UNIT_CHARS = 24
 #: The zoom panel's place in the figure (left, bottom, width, height as fractions).
 _ZOOM_BOX = (0.69, 0.36, 0.29, 0.36)
 _BODY_COLOURS = "viridis"
@@ -79,6 +83,21 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (100 <= width <= 8000 and 100 <= height <= 8000):
         raise CaseError(f"--size {text!r}: each side must be between 100 and 8000 pixels")
     return width, height
+
+
+def parse_zoom(text: str | None) -> tuple[float, float] | None:
+    """``"0.2:0.25"`` -> (0.2, 0.25), a window along the obstacle; None -> None."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        low, high = (float(p) for p in parts)
+    except ValueError:
+        low = high = float("nan")
+    if not (np.isfinite(low) and np.isfinite(high) and low < high):
+        raise CaseError(f"--zoom {text!r}: expected FROM:TO, two finite positions along the obstacle with "
+                        "FROM < TO, e.g. 0.2:0.25")
+    return low, high
 
 
 def parse_scale(text: str) -> float | None:
@@ -119,8 +138,7 @@ def obstacle_of(data: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] 
 def units_of(data: dict) -> dict[str, str]:
     """The case's units as stored in solution.h5 (empty strings in files written before they were)."""
     attrs = data.get("attrs", {})
-    return {"length": str(attrs.get("length_unit", "")), "force": str(attrs.get("force_unit", "")),
-            "stress": str(attrs.get("stress_unit", ""))}
+    return {name: shown(attrs.get(f"{name}_unit", ""), UNIT_CHARS) for name in ("length", "force", "stress")}
 
 
 def with_unit(label: str, unit: str) -> str:
@@ -129,7 +147,9 @@ def with_unit(label: str, unit: str) -> str:
 
 
 def _title(data: dict) -> str:
-    return str(data["attrs"].get("title") or "contactfem result")
+    """The case's title as stored (one line, at most :data:`contactfem.picture_text.USER_CHARS`
+    characters: :func:`contactfem.picture_text.shown`)."""
+    return shown(data.get("attrs", {}).get("title") or "contactfem result")
 
 
 def auto_scale(points: np.ndarray, displacement: np.ndarray, fraction: float = AUTO_FRACTION) -> float:
@@ -481,7 +501,8 @@ def render_deformed(data: dict, path: Path, size: tuple[int, int] = (1200, 900),
         _draw_panel(body_ax, plt, data, drawn, shown_obstacle, norm, cmap, xlim, ylim, units, pixels_per_unit)
         auto_turned = scale is None and turn_over < auto_scale(points, displacement)
         lines = _caption_lines(data, factor, scale, auto_turned, approach, limited, units)
-        figure.text(0.01, 0.985, _title(data), fontsize=font * 1.25, fontweight="bold", va="top")
+        title = heading(_title(data), chars_across(0.98 * width_px, font * 1.25 * 1.1), lines=1)  # bold is wider
+        figure.text(0.01, 0.985, title, fontsize=font * 1.25, fontweight="bold", va="top")
         figure.text(0.01, 0.945, "\n".join(lines), fontsize=font * 0.85, va="top", linespacing=1.4)
         body_ax.set_title("the whole body", fontsize=font)
 
@@ -507,7 +528,7 @@ def _caption_lines(data: dict, factor: float, scale: float | None, auto_turned: 
     """The caption under the title: the method, the magnification and how it was chosen
     (``auto_turned``: the auto factor was lowered so that no triangle turns over), the
     moved obstacle and the points cut back."""
-    method = data["attrs"].get("method", "?")
+    method = shown(data["attrs"].get("method", "?"), 40)
     multiplier = {"positive": "λh ≥ 0, method (4)", "standard": "θh, method (5)"}.get(method, method)
     if scale is None:
         how = (" (auto: no triangle turned over, f·|∇u| ≤ 1)" if auto_turned
@@ -582,18 +603,18 @@ def _draw_legend_and_bar(figure, body_ax, norm, cmap, units: dict, font: float, 
 
 
 def _save_png(figure, path: Path) -> None:
-    """Write ``figure`` as the PNG ``path`` (atomically); a failed write is an :class:`OutputError`."""
+    """Write ``figure`` as the PNG ``path`` (atomically, its texts literal); a failed write is an
+    :class:`~contactfem.errors.OutputError`."""
     ensure_directory(Path(path).parent)
-    try:
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png", dpi=_DPI)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    save_png(figure, path, dpi=_DPI)
 
 
 def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
-                  size: tuple[int, int] = (1200, 900), scale: float | None = None) -> dict:
-    """Write ``deformed.png`` and ``contact_profile.png`` of ``result_dir`` into ``out_dir``.
+                  size: tuple[int, int] = (1200, 900), scale: float | None = None,
+                  window: tuple[float, float] | None = None) -> dict:
+    """Write ``deformed.png`` and ``contact_profile.png`` of ``result_dir`` into ``out_dir``;
+    ``window`` (from, to along the obstacle) is the profile's zoom window (default: its
+    densest stretch of patches, when there are many).
 
     Returns ``{"files": [...], "scale": factor, "zoom_scale": factor or None, "size": [w, h]}``
     (JSON-ready).
@@ -603,7 +624,7 @@ def make_pictures(result_dir: Path | str, out_dir: Path | str | None = None,
     data = load_result(result_dir)
     out = ensure_directory(Path(out_dir) if out_dir is not None else Path(result_dir))
     drawn = render_deformed(data, out / DEFORMED_PNG, size=size, scale=scale)
-    plot_result_profile(out / PROFILE_PNG, data, size=size, title=_title(data))
+    plot_result_profile(out / PROFILE_PNG, data, size=size, title=_title(data), window=window)
     return {"files": [str(out / DEFORMED_PNG), str(out / PROFILE_PNG)], "scale": drawn["scale"],
             "zoom_scale": drawn["zoom_scale"], "size": list(size)}
 
@@ -650,8 +671,9 @@ def check_directory(result_dir: Path | str) -> tuple[str, ...]:
 
 
 def draw_directory(result_dir: Path | str, out_dir: Path | str | None = None, size: tuple[int, int] = (1200, 900),
-                   scale: float | None = None) -> dict:
-    """Every picture of ``result_dir`` (:func:`pictures_of`) into ``out_dir`` (default: the same).
+                   scale: float | None = None, window: tuple[float, float] | None = None) -> dict:
+    """Every picture of ``result_dir`` (:func:`pictures_of`) into ``out_dir`` (default: the same);
+    ``window`` is the zoom window of contact_profile.png and compare.png.
 
     Returns ``{"files": [...], "scale": f or None, "zoom_scale": f or None, "size": [w, h]}``;
     the factors are those of deformed.png, None without a solve.
@@ -663,9 +685,9 @@ def draw_directory(result_dir: Path | str, out_dir: Path | str | None = None, si
     names = pictures_of(directory)
     made = {"files": [], "scale": None, "zoom_scale": None, "size": list(size)}
     if DEFORMED_PNG in names:
-        made.update(make_pictures(directory, out, size=size, scale=scale))
+        made.update(make_pictures(directory, out, size=size, scale=scale, window=window))
     if COMPARE_PNG in names:
-        plot_compare(out / COMPARE_PNG, _study(directory / COMPARE_JSON, "profiles"))
+        plot_compare(out / COMPARE_PNG, _study(directory / COMPARE_JSON, "profiles"), window=window)
         made["files"].append(str(out / COMPARE_PNG))
     if CONVERGENCE_PNGS[0] in names:
         made["files"] += [str(p) for p in plot_convergence(out, _study(directory / CONVERGENCE_JSON, "rows"))]

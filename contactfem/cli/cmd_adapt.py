@@ -17,7 +17,7 @@ from contactfem.cli.options import (
     quiet_option,
 )
 from contactfem.errors import CaseError, ContactFemError
-from contactfem.io.registry import ADAPT_JSON, RESULT_FILES, RESULT_MARKERS, to_json
+from contactfem.io.registry import ADAPT_JSON, ADAPT_PNG, RESULT_FILES, RESULT_MARKERS, to_json
 
 
 @click.command()
@@ -43,14 +43,16 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
     Solve, estimate (Hild–Nicaise residual estimator, see contactfem/estimator.py), mark
     (Dörfler, θ) and refine (newest-vertex bisection) until η ≤ --target or a budget is
     reached. Writes the final solution like `solve` (report.json gains "estimator",
-    solution.vtu the cell data error_indicator = η_T) and adapt.json (per step: unknowns, η,
-    seconds, and the true errors when the case has an exact solution).
+    solution.vtu the cell data error_indicator = η_T), adapt.json (per step: unknowns, η,
+    seconds, and the true errors when the case has an exact solution) and adapt.png (the
+    final mesh coloured by η_T, and η against the unknowns).
 
     \b
     Examples:
       contactfem adapt cases/square.yaml --max-unknowns 20000
       contactfem adapt cases/manufactured.yaml --target 2e-5 --theta 0.3
     """
+    from contactfem.adapt_plot import plot_adapt
     from contactfem.adaptive import adapt as adaptive_loop
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
@@ -67,8 +69,11 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
             report = build_report(case, run.result, extras={"estimator": run.estimate.summary()})
             with claim.stage(replaces=(*RESULT_FILES, ADAPT_JSON), last=ADAPT_JSON) as staging:
                 _write_solution(staging, case, run.result, report, progress)
+                final = run.result.solution
+                plot_adapt(staging / ADAPT_PNG, final.mesh.points, final.mesh.triangles, run.estimate.indicators,
+                           run.history(), boundary_edges=final.mesh.boundary_edges, contact_edges=final.contact.edges)
                 atomic_write_text(staging / ADAPT_JSON, to_json(run.history()))
-        written = [directory / name for name in (*_files_of(case.output.files), ADAPT_JSON)]
+        written = [directory / name for name in (*_files_of(case.output.files), ADAPT_PNG, ADAPT_JSON)]
     except ContactFemError as error:
         _fail(error)
         return

@@ -21,10 +21,14 @@ from contactfem.errors import ContactFemError
               help="Displacement magnification; auto makes the largest displacement 10% of the body's size.")
 @click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Where the PNGs go. Default: RESULT_DIR.")
+@click.option("--zoom", default=None, metavar="FROM:TO",
+              help="The window of the profiles' zoom panel, as positions along the obstacle in the case's "
+                   "length unit. Default: the densest stretch of contact patches, when there are many.")
 @quiet_option
 @click.option("--json", "as_json", is_flag=True, help="Print the written files and the factor as JSON.")
 @_interruptible
-def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: bool, as_json: bool) -> None:
+def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: bool, as_json: bool,
+         zoom: str | None = None) -> None:
     """Draw the result in RESULT_DIR as PNGs: a solve's, a compare's or a converge's.
 
     A solve (solution.h5): deformed.png, the body at x + f·u coloured by von Mises stress,
@@ -38,6 +42,7 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
     Examples:
       contactfem plot results/square
       contactfem plot results/square --size 1600x1000 --scale 20 --out figures
+      contactfem plot results/rough --zoom 0.2:0.25      # the profiles' zoom on that window
       contactfem plot results/square-compare          # compare.png from compare.json
       contactfem plot results/square-convergence      # the convergence PNGs
     """
@@ -47,11 +52,13 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
         draw_directory,
         parse_scale,
         parse_size,
+        parse_zoom,
     )
 
     try:
         pixels = parse_size(size)
         factor = parse_scale(scale)
+        window = parse_zoom(zoom)
         names = check_directory(result_dir)  # nothing to draw, or unreadable: refused before anything is touched
         progress = _progress(quiet)
         directory = out_dir if out_dir is not None else result_dir
@@ -59,7 +66,7 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
             with claim.stage(replaces=names) as staging:
                 if progress is not None:
                     progress("rendering pictures")
-                made = draw_directory(result_dir, staging, size=pixels, scale=factor)
+                made = draw_directory(result_dir, staging, size=pixels, scale=factor, window=window)
         made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
     except ContactFemError as error:
         _fail(error)

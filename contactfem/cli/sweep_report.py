@@ -33,53 +33,27 @@ def _sweep_summary(table: dict, directory: Path) -> str:
 
 def _plot_sweep(path: Path, table: dict) -> None:
     """sweep.png: each point's error against its seconds, one colour per group, the Pareto fronts drawn."""
-    import itertools
+    from contactfem.plots import plot_sweep
 
-    import matplotlib
+    plot_sweep(path, table, units=_base_units(table))
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter
 
-    from contactfem.io.atomic import atomic_path
-    from contactfem.sweep import pareto_series
+def _base_units(table: dict) -> dict | None:
+    """The units of the sweep's base case (its ``units`` block), or None when the sweep sets
+    them point by point or the base case cannot be read again."""
+    from contactfem.case.files import read_text_file
+    from contactfem.case.model import Units
+    from contactfem.case.yaml_loader import load_yaml
+    from contactfem.errors import ContactFemError
 
-    series = list(pareto_series(table))
-    figure, axes = plt.subplots(figsize=(8.5, 6))
-    colours = itertools.cycle(plt.rcParams["axes.prop_cycle"].by_key()["color"])
-    for (group, rows, front), colour in zip(series, colours):
-        axes.scatter([r["seconds"]["total"] for r in rows], [r["error"] for r in rows], s=24, color=colour,
-                     label=group or "all points", zorder=3)
-        axes.plot([r["seconds"]["total"] for r in front], [r["error"] for r in front], "-", color=colour, lw=1.2)
-        axes.scatter([r["seconds"]["total"] for r in front], [r["error"] for r in front], s=90,
-                     facecolors="none", edgecolors="black", lw=1.0, zorder=4)
-        for r in front:
-            axes.annotate(str(r["index"]), (r["seconds"]["total"], r["error"]), textcoords="offset points",
-                          xytext=(5, 4), fontsize=7)
-    kinds = {r["error_kind"] for _, rows, _ in series for r in rows}
-    if series:
-        axes.set_xscale("log")
-        axes.set_yscale("log")
-        seconds = FuncFormatter(lambda value, _: f"{value:g}")
-        axes.xaxis.set_major_formatter(seconds)
-        axes.xaxis.set_minor_formatter(seconds)
-        axes.tick_params(axis="x", which="minor", labelsize=7)
-        axes.scatter([], [], s=90, facecolors="none", edgecolors="black", label="Pareto front (point number)")
-        axes.legend(fontsize=7, loc="best")
-    else:
-        axes.text(0.5, 0.5, "no point has an error to plot\n(one solved point per group, or none solved)",
-                  ha="center", va="center", transform=axes.transAxes)
-    axes.set_xlabel("seconds per point (meshing, assembly, solve, report)")
-    axes.set_ylabel("energy-norm error ‖u − u_h‖" if kinds == {"exact"} else
-                    "|‖u_h‖ − ‖u_finest‖|, energy norm (finest point of the group)" if kinds == {"finest"} else
-                    "error (energy norm)")
-    failed = sum(r["status"] != "ok" for r in table["points"])
-    axes.set_title(f"{table['sweep']['title']}: error against time"
-                   + (f" ({failed} point(s) without figures)" if failed else ""), fontsize=10)
-    axes.grid(True, which="both", alpha=0.3)
-    figure.tight_layout()
+    if table.get("units"):
+        return table["units"]
+    if any(key == "units" or key.startswith("units.") for key in table.get("keys", [])):
+        return None
     try:
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, format="png", dpi=110)
-    finally:
-        plt.close(figure)
+        path = Path(table["case"]["file"])
+        data = load_yaml(read_text_file(path), path.name)
+        block = data.get("units") or {} if isinstance(data, dict) else {}
+        return Units(length=str(block.get("length", "m")), force=str(block.get("force", "N"))).to_dict()
+    except (ContactFemError, OSError, KeyError, TypeError, AttributeError):
+        return None

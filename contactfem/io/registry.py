@@ -42,6 +42,8 @@ CONVERGENCE_JSON = "convergence.json"
 CONVERGENCE_CSV = "convergence.csv"
 CONVERGENCE_PNGS = ("convergence_h.png", "convergence_time.png")
 ADAPT_JSON = "adapt.json"
+#: The final mesh of `adapt` coloured by the error indicator η_T, and η step by step.
+ADAPT_PNG = "adapt.png"
 #: The JSON Schema of each JSON file the commands write, shipped in contactfem/schemas/.
 JSON_SCHEMAS = {REPORT_JSON: "report.schema.json", COMPARE_JSON: "compare.schema.json",
                 CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json"}
