@@ -37,7 +37,7 @@ OUTPUT_NAMES = (
     "compare.json", "compare.png", "compare.pvd", "compare-*.vtu",
     "convergence.json", "convergence.csv", "convergence_h.png", "convergence_time.png",
     "convergence-*.pvd", "convergence-*.vtu",
-    "adapt.json",
+    "adapt.json", "adapt.png",
     "sweep.json", "sweep.csv", "sweep.png",
 )
 #: The characters of a written name (the parts a pattern leaves open are labels and numbers).
