@@ -41,16 +41,19 @@ __all__ = ["COMPARE_LAYOUT", "MAX_COMPARE_BYTES", "MAX_CONVERGENCE_BYTES", "MAX_
 
 #: compare.json holds seven numbers per contact node: 256 MiB is millions of them.
 MAX_COMPARE_BYTES = 256 << 20
-#: convergence.json holds a row per level and method.
-MAX_CONVERGENCE_BYTES = 16 << 20
+#: convergence.json holds a row per level and method (and texts of any length: see _DRAWN).
+MAX_CONVERGENCE_BYTES = 64 << 20
 #: A sweep's stored point: its case text (at most 1 MiB) and its figures.
 MAX_POINT_BYTES = 2 << 20
 #: Longest message or warning a stored point may carry.
 _MAX_MESSAGE_BYTES = 64 << 10
 
 _METHODS = ("positive", "standard")
-_UNITS = Object({"length": Text(), "stress": Text()}, optional={"force": Text()})
-_TITLE = Object({"title": Text()})
+#: A text the pictures draw (a title, a unit, a method's name): any string, bounded only by the
+#: file's size, since the pictures draw each cut to one line (contactfem.picture_text.shown).
+_DRAWN = Text(max_bytes=MAX_COMPARE_BYTES)
+_UNITS = Object({"length": _DRAWN, "stress": _DRAWN}, optional={"force": _DRAWN})
+_TITLE = Object({"title": _DRAWN})
 
 
 def read_solution(path: Path | str) -> dict[str, Any]:
@@ -89,18 +92,18 @@ def convergence_layout() -> Node:
     from contactfem.norms import NORM_NAMES
 
     error = Number(minimum=0, nullable=True)
-    row = Object({"method": Choice(_METHODS), "h": Number(minimum=0, positive=True),
+    row = Object({"method": _DRAWN, "h": Number(minimum=0, positive=True),
                   "total_seconds": Number(minimum=0), **{norm: error for norm in NORM_NAMES}})
     return Object({
         "schema_version": Choice((1,)),
         "case": _TITLE,
-        "units": Object({"length": Text()}),
-        "reference": Text(),
+        "units": Object({"length": _DRAWN}, optional={"force": _DRAWN, "stress": _DRAWN}),
+        "reference": _DRAWN,
         "reference_extra": Integer(minimum=1, nullable=True),
         "rows": Items(row, max_items=10_000),
         "rates": Mapping(Mapping(Items(Number(nullable=True), max_items=10_000), max_items=len(NORM_NAMES)),
-                         max_items=len(_METHODS)),
-        "warnings": Items(Text(), max_items=100),
+                         max_items=10_000),
+        "warnings": Items(_DRAWN, max_items=100),
     })
 
 
