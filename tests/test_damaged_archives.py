@@ -204,7 +204,8 @@ CORRUPTIONS = [
     ("von-mises-per-point", modify("fields/von_mises", lambda v: np.zeros(25)),
      ("/fields/von_mises: has shape (25,); expected (n_tri,) (n_tri = 32, the rows of /mesh/triangles)",)),
     ("points-too-large", modify("mesh/points", set_item((1, 1), 1e300)),
-     (f"/mesh/points: holds 1e+300 at row 1, column 1; expected finite numbers of magnitude at most {MAX_MAGNITUDE:g}",)),
+     ("/mesh/points: holds 1e+300 at row 1, column 1; expected finite numbers of magnitude at most "
+      f"{MAX_MAGNITUDE:g}",)),
     ("contact-node-out-of-range", modify("contact/nodes", set_item(0, 25)),
      ("/contact/nodes: holds 25 at row 0; expected indices from 0 to 24",)),
     ("contact-edge-negative", modify("contact/edges", set_item((1, 1), -1)), ("/contact/edges: holds -1",)),
@@ -212,7 +213,8 @@ CORRUPTIONS = [
      ("/mesh/edge_parts: holds 4 at row 0; expected indices from 0 to 3 (parts = 4",)),
     ("edge-curve-below-minus-one", modify("mesh/edge_curves", set_item(0, -2)),
      ("/mesh/edge_curves: holds -2 at row 0; expected indices from -1 to -1",)),
-    ("active-flag-two", modify("contact/active", set_item(0, 2)), ("/contact/active: holds 2 at row 0; expected 0 or 1",)),
+    ("active-flag-two", modify("contact/active", set_item(0, 2)),
+     ("/contact/active: holds 2 at row 0; expected 0 or 1",)),
     ("multiplier-nan", modify("contact/multiplier", set_item(1, np.nan)), ("/contact/multiplier: holds nan at row 1",)),
     ("gap-missing", delete("contact/gap"), ("/contact/gap: missing; expected a dataset",)),
     ("case-not-a-string", replace("case", np.zeros(3)), ("/case: is floats of shape (3,); expected one UTF-8 string",)),
@@ -220,7 +222,8 @@ CORRUPTIONS = [
      ("/contact/@obstacle_point: is floats of shape (3,); expected finite numbers of shape (2,)",)),
     ("obstacle-normal-nan", set_attribute("contact", "obstacle_normal", np.array([np.nan, 1.0])),
      ("/contact/@obstacle_normal: holds nan at row 0",)),
-    ("method-unknown", set_attribute("/", "method", "magic"), ("@method: is 'magic'; expected one of positive, standard",)),
+    ("method-unknown", set_attribute("/", "method", "magic"),
+     ("@method: is 'magic'; expected one of positive, standard",)),
     ("part-names-numbers", set_attribute("mesh", "part_names", np.arange(4)),
      ("/mesh/@part_names: is integers of shape (4,); expected a list of strings",)),
     ("unit-not-utf8", set_attribute("/", "length_unit", np.bytes_(b"\xff\xfe")), ("@length_unit: is not UTF-8",)),
@@ -286,7 +289,8 @@ def test_a_heap_that_hangs_hdf5_is_refused_in_time(damaged, monkeypatch):
 @pytest.mark.skipif(not can_isolate(), reason="no fork here, or other threads run: parsed in this process")
 def test_a_parser_that_hangs_or_crashes_is_one_line():
     clock = time.perf_counter()
-    with pytest.raises(ArchiveError, match=r"^x\.h5: HDF5 did not finish reading it within 0\.5 s; the file is damaged$"):
+    late = r"^x\.h5: HDF5 did not finish reading it within 0\.5 s; the file is damaged$"
+    with pytest.raises(ArchiveError, match=late):
         run_isolated(lambda: time.sleep(30), 0.5, "x.h5")
     assert time.perf_counter() - clock < 5
     with pytest.raises(ArchiveError, match=r"^x\.h5: HDF5 crashed reading it \(SIGSEGV\); the file is damaged$"):
@@ -408,7 +412,8 @@ JSON_CORRUPTIONS = [
      ("convergence.json: rows[0].multiplier_l2: is 'big'; expected a finite number >= 0 or null",)),
     ("convergence.json", "method-a-list", _json_edit(lambda d: d["rows"][0].__setitem__("method", ["positive"])),
      ("convergence.json: rows[0].method: is a list of 1 items; expected a string",)),
-    ("convergence.json", "rate-string", _json_edit(lambda d: d["rates"]["positive"].__setitem__("multiplier_l2", ["x"])),
+    ("convergence.json", "rate-string",
+     _json_edit(lambda d: d["rates"]["positive"].__setitem__("multiplier_l2", ["x"])),
      ("convergence.json: rates.positive.multiplier_l2[0]: is 'x'",)),
     ("convergence.json", "warnings-numbers", _json_edit(lambda d: d.__setitem__("warnings", [1])),
      ("convergence.json: warnings[0]: is 1; expected a string",)),
@@ -454,7 +459,8 @@ def test_a_damaged_stored_point_is_refused_by_its_reader(tmp_path):
         ({"seconds": "abc"}, "seconds: is 'abc'; expected an object"),
         ({"unknowns": None}, "unknowns: is null; expected an integer for a point whose status is ok"),
         ({"errors": [1]}, "errors: is a list of 1 items"),
-        ({"contact_zone": {"active_nodes": 2, "intervals": [[1.0]]}}, "contact_zone.intervals[0]: is a list of 1 items"),
+        ({"contact_zone": {"active_nodes": 2, "intervals": [[1.0]]}},
+         "contact_zone.intervals[0]: is a list of 1 items"),
         ({"status": "great"}, "status: is 'great'"),
         ({"warnings": "none"}, "warnings: is 'none'"),
     ]:

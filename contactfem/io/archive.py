@@ -5,9 +5,9 @@ cut short, another program, or anyone with write access can leave any bytes unde
 names contactfem reads back. Every such file is read here, against a declared layout,
 before anything is computed from it:
 
-- the file itself (:func:`open_regular`): a regular file (not a FIFO or a device), not
-  empty, its size taken from the descriptor that is then read;
-- an HDF5 file (:func:`read_hdf5_file` with a :class:`Layout`), parsed in a child
+- the file itself (:func:`contactfem.io.untrusted.open_regular`): a regular file (not a
+  FIFO or a device), not empty, its size taken from the descriptor that is then read;
+- an HDF5 file (:func:`read_hdf5_file` here, with a :class:`Layout`), parsed in a child
   process with a deadline (:mod:`contactfem.io.isolated`: a damaged file can hang or
   crash the HDF5 library itself): the ``format`` and
   ``schema_version`` attributes first; then, before any data is read, each expected
@@ -20,7 +20,8 @@ before anything is computed from it:
   (triangles within the point count, non-negative), finiteness, magnitudes and allowed
   values; attributes only by name, their type and shape checked before their value is
   read, strings bounded (:data:`MAX_ATTRIBUTE_BYTES`);
-- a JSON file (:func:`read_json_file` with a tree of :class:`Node`): at most a given
+- a JSON file (:func:`contactfem.io.json_layout.read_json_file` with a tree of
+  :class:`~contactfem.io.json_layout.Node`): at most a given
   size read, strict JSON (no NaN or Infinity), then the keys the commands use, their
   types, ranges (finite numbers) and consistent lengths.
 
@@ -31,12 +32,10 @@ it (bad input). Nothing here writes.
 
 from __future__ import annotations
 
-import json
 import os
-import stat
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,100 +43,21 @@ import numpy as np
 
 from contactfem.errors import ArchiveError
 from contactfem.io.isolated import run_isolated
+from contactfem.io.untrusted import MAX_MAGNITUDE, Where, number_text, open_regular, reason, shortened
 
-__all__ = [
-    "MAX_ATTRIBUTE_BYTES", "MAX_MAGNITUDE", "Array", "Attribute", "Boolean", "Choice", "Integer", "Items",
-    "Layout", "Mapping", "Node", "Number", "Object", "Series", "Text", "TextData", "open_regular",
-    "read_hdf5_file", "read_json_file",
-]
+__all__ = ["MAX_ATTRIBUTES", "MAX_ATTRIBUTE_BYTES", "MAX_MAGNITUDE", "PARSE_SECONDS", "Array", "Attribute", "Layout",
+           "Series", "TextData", "read_hdf5_file"]
 
 #: A string attribute (a title, a unit, a part name) is refused above this many bytes.
 MAX_ATTRIBUTE_BYTES = 4096
 #: At most this many attributes on one object, and this many datasets in a :class:`Series`.
 MAX_ATTRIBUTES = 64
-#: Numbers that must be finite must also be at most this large in magnitude, so that
-#: squares and products of them stay finite in float64.
-MAX_MAGNITUDE = 1e100
 #: An HDF5 file is parsed in a child process (:mod:`contactfem.io.isolated`) given this
 #: many seconds, plus one per PARSE_BYTES_PER_SECOND bytes of the file, to answer.
 PARSE_SECONDS = 10.0
 PARSE_BYTES_PER_SECOND = 50e6
 #: The signature every HDF5 file written without a user block starts with.
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-
-
-# --------------------------------------------------------------------------- messages
-
-
-def _shortened(text: str, limit: int = 120) -> str:
-    if len(text) <= limit:
-        return text
-    tail = (limit - 3) * 2 // 3
-    return text[: limit - 3 - tail] + "..." + text[-tail:]
-
-
-def _number(value: Any) -> str:
-    """A number as a message shows it (``nan``, ``-1000000000``, ``1e+300``)."""
-    if isinstance(value, (bool, np.bool_)):
-        return str(bool(value))
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    return f"{float(value):.6g}"
-
-
-def _reason(error: BaseException) -> str:
-    """An HDF5 or OS error's reason, on one short line."""
-    text = getattr(error, "strerror", None) or str(error) or type(error).__name__
-    return _shortened(" ".join(str(text).split()), 160)
-
-
-class _Where:
-    """The file being read, for the one-line refusals."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.shown = _shortened(str(path))
-
-    def fail(self, where: str, problem: str) -> ArchiveError:
-        return ArchiveError(f"{self.shown}: {where}: {problem}" if where else f"{self.shown}: {problem}")
-
-
-# --------------------------------------------------------------------------- the file
-
-
-def open_regular(path: Path | str, what: str) -> tuple[int, int]:
-    """Open ``path`` for reading: (descriptor, size in bytes). Refused unless it is a
-    regular, non-empty file; the size is the opened file's, not the name's."""
-    where = _Where(Path(path))
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
-    try:
-        fd = os.open(path, flags)
-    except (OSError, ValueError) as error:
-        raise where.fail("", f"cannot be opened ({_reason(error)}); expected {what}") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
-            raise where.fail("", f"is {kind}; expected {what}")
-        if info.st_size == 0:
-            raise where.fail("", f"is empty; expected {what}")
-    except BaseException:
-        os.close(fd)
-        raise
-    return fd, info.st_size
-
-
-def _read_all(fd: int, size: int, where: _Where, what: str) -> bytes:
-    chunks, total = [], 0
-    while total <= size:
-        chunk = os.read(fd, size + 1 - total)
-        if not chunk:
-            break
-        chunks.append(chunk)
-        total += len(chunk)
-    if total > size:
-        raise where.fail("", f"grew while it was read; expected {what}")
-    return b"".join(chunks)
 
 
 # --------------------------------------------------------------------------- HDF5 layouts
@@ -237,7 +157,7 @@ class Layout:
 class _HDF5:
     """One HDF5 file being read against a layout."""
 
-    def __init__(self, where: _Where, handle: Any, size: int, layout: Layout) -> None:
+    def __init__(self, where: Where, handle: Any, size: int, layout: Layout) -> None:
         self.where = where
         self.file = handle
         self.size = size
@@ -253,7 +173,7 @@ class _HDF5:
         except (ArchiveError, MemoryError):
             raise
         except Exception as error:  # noqa: BLE001 - h5py raises OSError, KeyError, ValueError, RuntimeError...
-            raise self.where.fail(name, f"cannot be read ({_reason(error)}); the file is damaged") from None
+            raise self.where.fail(name, f"cannot be read ({reason(error)}); the file is damaged") from None
 
     def fail(self, name: str, problem: str) -> ArchiveError:
         return self.where.fail(name, problem)
@@ -374,7 +294,7 @@ class _HDF5:
                 raise self.fail(name, f"is {self.attribute_type(shape, dtype)}; expected {self.attribute_words(spec)}")
             with self.reading(name):
                 value = np.asarray(group.attrs[spec.name], dtype=np.float64)
-            bad = self.first_bad_number(value)
+            bad = self.first_bad_value(value)
             if bad is not None:
                 raise self.fail(name, f"holds {bad}; expected finite numbers")
             if spec.unit and not abs(float(np.linalg.norm(value)) - 1.0) <= 1e-6:
@@ -428,7 +348,7 @@ class _HDF5:
         value = np.asarray(value, dtype=object).reshape(-1)[0] if not isinstance(value, (str, bytes)) else value
         text = self.decoded(name, value)
         if choices and text not in choices:
-            raise self.fail(name, f"is {_shortened(repr(text), 60)}; expected one of {', '.join(choices)}")
+            raise self.fail(name, f"is {shortened(repr(text), 60)}; expected one of {', '.join(choices)}")
         return text
 
     def decoded(self, name: str, value: Any) -> str:
@@ -461,8 +381,8 @@ class _HDF5:
             if key in known:
                 continue
             if not isinstance(key, str):
-                raise self.fail("/", f"has an attribute named {_shortened(repr(key), 60)}; expected UTF-8 names")
-            name = f"@{_shortened(key, 60)}"
+                raise self.fail("/", f"has an attribute named {shortened(repr(key), 60)}; expected UTF-8 names")
+            name = f"@{shortened(key, 60)}"
             if len(key.encode("utf-8", "surrogatepass")) > 255:
                 raise self.fail(name, "has a name longer than 255 bytes; expected a short name")
             with self.reading(name):
@@ -480,7 +400,7 @@ class _HDF5:
 
     # ----------------------------------------------------------------- data
 
-    def first_bad_number(self, values: np.ndarray) -> str | None:
+    def first_bad_value(self, values: np.ndarray) -> str | None:
         """'NaN at row 3' for the first value that is not finite or too large, or None."""
         flat = values.reshape(-1)
         with np.errstate(invalid="ignore"):
@@ -488,7 +408,7 @@ class _HDF5:
         if not bad.any():
             return None
         first = int(np.flatnonzero(bad)[0])
-        return f"{_number(flat[first])} at {self.position(values.shape, first)}"
+        return f"{number_text(flat[first])} at {self.position(values.shape, first)}"
 
     @staticmethod
     def position(shape: tuple[int, ...], flat_index: int) -> str:
@@ -499,7 +419,7 @@ class _HDF5:
 
     def check_values(self, array: Array, values: np.ndarray) -> np.ndarray:
         if array.finite:
-            bad = self.first_bad_number(values)
+            bad = self.first_bad_value(values)
             if bad is not None:
                 raise self.fail(array.path, f"holds {bad}; expected finite numbers of magnitude at most "
                                             f"{MAX_MAGNITUDE:g}")
@@ -511,16 +431,16 @@ class _HDF5:
             outside = (flat < array.lowest) | (flat >= count)
             if outside.any():
                 first = int(np.flatnonzero(outside)[0])
-                raise self.fail(array.path, f"holds {_number(flat[first])} at {self.position(values.shape, first)}; "
-                                            f"expected indices from {array.lowest} to {count - 1} "
+                at = f"{number_text(flat[first])} at {self.position(values.shape, first)}"
+                raise self.fail(array.path, f"holds {at}; expected indices from {array.lowest} to {count - 1} "
                                             f"({self.describe(array.index_of)})")
         if array.flags and values.size:
             flat = values.reshape(-1)
             outside = (flat != 0) & (flat != 1)
             if outside.any():
                 first = int(np.flatnonzero(outside)[0])
-                raise self.fail(array.path, f"holds {_number(flat[first])} at {self.position(values.shape, first)}; "
-                                            "expected 0 or 1")
+                at = f"{number_text(flat[first])} at {self.position(values.shape, first)}"
+                raise self.fail(array.path, f"holds {at}; expected 0 or 1")
         if array.dtype is not None:
             values = values.astype(array.dtype, copy=False)
         return values
@@ -558,7 +478,7 @@ def read_hdf5_file(path: Path | str, layout: Layout, what: str) -> dict[str, Any
         On the first violation: one line naming the file and the dataset or attribute.
     """
     path = Path(path)
-    where = _Where(path)
+    where = Where(path)
     fd, size = open_regular(path, what)
     with os.fdopen(fd, "rb") as stream:
         if stream.read(len(HDF5_SIGNATURE)) != HDF5_SIGNATURE:
@@ -568,7 +488,7 @@ def read_hdf5_file(path: Path | str, layout: Layout, what: str) -> dict[str, Any
         return run_isolated(lambda: _parse(stream, size, where, layout, what), seconds, where.shown)
 
 
-def _parse(stream: Any, size: int, where: _Where, layout: Layout, what: str) -> dict[str, Any]:
+def _parse(stream: Any, size: int, where: Where, layout: Layout, what: str) -> dict[str, Any]:
     import h5py
 
     try:
@@ -576,15 +496,31 @@ def _parse(stream: Any, size: int, where: _Where, layout: Layout, what: str) -> 
     except MemoryError:
         raise
     except Exception as error:  # noqa: BLE001 - whatever HDF5 says about a damaged file
-        raise where.fail("", f"cannot be read as HDF5 ({_reason(error)}); expected {what}") from None
+        raise where.fail("", f"cannot be read as HDF5 ({reason(error)}); expected {what}") from None
     with handle:
         return _read_layout(_HDF5(where, handle, size, layout), what)
 
 
 def _read_layout(reader: _HDF5, what: str) -> dict[str, Any]:
+    """What the file is, its attributes, every dataset's metadata, and only then the data."""
+    tree: dict[str, Any] = {"attrs": _identify(reader, what)}
+    _read_attributes(reader, tree)
+    planned, total = _plan(reader, tree)
+    if total > reader.size:
+        raise reader.fail("", f"declares {total} bytes of data, more than its own {reader.size}; the file is damaged")
+    for spec, dataset in planned:
+        _insert(tree, spec.path, _load(reader, spec, dataset))
+    for rule in reader.layout.rules:
+        with np.errstate(all="ignore"):
+            broken = rule(tree)
+        if broken is not None:
+            raise reader.fail(*broken)
+    return tree
+
+
+def _identify(reader: _HDF5, what: str) -> dict[str, Any]:
+    """The format and schema_version attributes, before anything else is read."""
     layout, root = reader.layout, reader.file
-    tree: dict[str, Any] = {"attrs": {}}
-    # What the file is, before anything else.
     with reader.reading("/"):
         has_format = "format" in root.attrs
     if not has_format:
@@ -593,45 +529,54 @@ def _read_layout(reader: _HDF5, what: str) -> dict[str, Any]:
         identifier = root.attrs.get_id("format")
     found = reader.text_attribute("@format", root, "format", identifier.shape, identifier.dtype)
     if found != layout.format:
-        raise reader.fail("@format", f"is {_shortened(repr(found), 60)}; expected {layout.format!r}: not {what}")
+        raise reader.fail("@format", f"is {shortened(repr(found), 60)}; expected {layout.format!r}: not {what}")
+    expected = f"an integer from 1 to {layout.newest}"
     with reader.reading("/"):
         has_version = "schema_version" in root.attrs
     if not has_version:
-        raise reader.fail("@schema_version", f"missing; expected an integer from 1 to {layout.newest}")
+        raise reader.fail("@schema_version", f"missing; expected {expected}")
     with reader.reading("@schema_version"):
         identifier = root.attrs.get_id("schema_version")
         shape, dtype = identifier.shape, identifier.dtype
     if shape not in ((), (1,)) or dtype.kind not in "iu":
         shown = reader.attribute_type(shape, dtype)
         if h5py_is_string(dtype) and shape in ((), (1,)):
-            shown = _shortened(repr(reader.text_attribute("@schema_version", root, "schema_version", shape, dtype)),
-                               60)
-        raise reader.fail("@schema_version", f"is {shown}; expected an integer from 1 to {layout.newest}")
+            text = reader.text_attribute("@schema_version", root, "schema_version", shape, dtype)
+            shown = shortened(repr(text), 60)
+        raise reader.fail("@schema_version", f"is {shown}; expected {expected}")
     with reader.reading("@schema_version"):
         version = int(np.asarray(root.attrs["schema_version"]).reshape(-1)[0])
     if version > layout.newest:
         raise reader.fail("@schema_version", f"is {version}, newer than {layout.newest}, the one this contactfem "
                                              "reads; expected a file written by this version or an earlier one")
     if version < 1:
-        raise reader.fail("@schema_version", f"is {version}; expected an integer from 1 to {layout.newest}")
+        raise reader.fail("@schema_version", f"is {version}; expected {expected}")
     reader.version = version
-    tree["attrs"].update(format=found, schema_version=version)
+    return {"format": found, "schema_version": version}
 
-    # Attributes by name (their types and shapes checked before their values are read).
+
+def _read_attributes(reader: _HDF5, tree: dict[str, Any]) -> None:
+    """The layout's attributes by name (types and shapes checked before values are read),
+    then the root's other scalar attributes."""
+    layout, root = reader.layout, reader.file
     groups: dict[str, Any] = {"/": root}
     for spec in layout.attributes:
-        if spec.since > version:
+        if spec.since > reader.version:
             continue
         group = groups.get(spec.group)
         if group is None:
-            group = groups[spec.group] = root if spec.group == "/" else reader.find(spec.group, "group")
+            group = groups[spec.group] = reader.find(spec.group, "group")
         value = reader.attribute(spec, group)
         if value is not None:
             _group_of(tree, spec.group)["attrs"][spec.name] = value
     known = {"format", "schema_version"} | {s.name for s in layout.attributes if s.group == "/"}
     tree["attrs"].update(reader.free_attributes(root, known))
 
-    # Every dataset's presence, type, shape and storage, before any data is read.
+
+def _plan(reader: _HDF5, tree: dict[str, Any]) -> tuple[list[tuple[Array | TextData, Any]], int]:
+    """Every dataset to read, its presence, type, shape and storage checked, and the total of
+    their declared sizes: nothing of their data is read yet."""
+    layout, version = reader.layout, reader.version
     planned: list[tuple[Array | TextData, Any]] = []
     total = 0
     for array in layout.arrays:
@@ -655,66 +600,61 @@ def _read_layout(reader: _HDF5, what: str) -> dict[str, Any]:
             raise reader.fail(text.path, f"is {reader.attribute_type(shape, dtype)}; expected one UTF-8 string")
         total += reader.check_storage(text.path, dataset)
         planned.append((text, dataset))
-    series_plan = []
     for series in layout.series:
-        group = reader.find(series.path, "group", optional=series.optional)
-        if group is None:
-            continue
-        with reader.reading(series.path):
-            count = len(group)
-        if count > MAX_ATTRIBUTES:
-            raise reader.fail(series.path, f"has {count} members; expected at most {MAX_ATTRIBUTES}")
-        with reader.reading(series.path):
-            names = list(group.keys())
-        _group_of(tree, series.path)
-        for key in names:
-            if not isinstance(key, str) or len(key) > 255:
-                raise reader.fail(series.path, f"has a member named {_shortened(repr(key), 60)}; expected short "
-                                               "UTF-8 names")
-            array = Array(f"{series.path}/{key}", "iufb", ("_",))
-            dataset = reader.find(array.path, "dataset")
-            with reader.reading(array.path):
-                shape, dtype = tuple(dataset.shape or ()), dataset.dtype
-            if dtype.kind not in "iufb" or dtype.itemsize > 8:
-                raise reader.fail(array.path, f"has dtype {dtype}; expected numbers")
-            if len(shape) != 1 or shape[0] > series.max_length:
-                raise reader.fail(array.path, f"has shape {shape}; expected one dimension of at most "
-                                              f"{series.max_length} values")
-            total += reader.check_storage(array.path, dataset)
-            series_plan.append((array, dataset))
-    if total > reader.size:
-        raise reader.fail("", f"declares {total} bytes of data, more than its own {reader.size}; the file is damaged")
+        members, size = _plan_series(reader, series)
+        if members is not None:
+            _group_of(tree, series.path)
+            planned += members
+            total += size
+    return planned, total
 
-    # The data, then what its values must satisfy.
-    for spec, dataset in planned:
-        if isinstance(spec, TextData):
-            with reader.reading(spec.path):
-                raw = dataset[()]
-            raw = np.asarray(raw, dtype=object).reshape(-1)[0] if not isinstance(raw, (str, bytes)) else raw
-            if isinstance(raw, bytes):
-                if len(raw) > spec.max_bytes:
-                    raise reader.fail(spec.path, f"is a string of {len(raw)} bytes; expected at most {spec.max_bytes}")
-                try:
-                    raw = raw.decode("utf-8")
-                except UnicodeDecodeError:
-                    raise reader.fail(spec.path, "is not UTF-8 text; expected a UTF-8 string") from None
-            if not isinstance(raw, str) or len(raw.encode("utf-8", "surrogatepass")) > spec.max_bytes:
-                raise reader.fail(spec.path, f"is not a string of at most {spec.max_bytes} bytes")
-            _insert(tree, spec.path, raw)
-            continue
-        with reader.reading(spec.path):
-            values = np.asarray(dataset[()])
-        _insert(tree, spec.path, reader.check_values(spec, values))
-    for spec, dataset in series_plan:
-        with reader.reading(spec.path):
-            values = np.asarray(dataset[()])
-        _insert(tree, spec.path, values)
-    for rule in layout.rules:
-        with np.errstate(all="ignore"):
-            broken = rule(tree)
-        if broken is not None:
-            raise reader.fail(*broken)
-    return tree
+
+def _plan_series(reader: _HDF5, series: Series) -> tuple[list[tuple[Array, Any]] | None, int]:
+    group = reader.find(series.path, "group", optional=series.optional)
+    if group is None:
+        return None, 0
+    with reader.reading(series.path):
+        count = len(group)
+    if count > MAX_ATTRIBUTES:
+        raise reader.fail(series.path, f"has {count} members; expected at most {MAX_ATTRIBUTES}")
+    with reader.reading(series.path):
+        names = list(group.keys())
+    members, total = [], 0
+    for key in names:
+        if not isinstance(key, str) or len(key) > 255:
+            raise reader.fail(series.path, f"has a member named {shortened(repr(key), 60)}; expected short UTF-8 names")
+        # Read as stored: no dtype, no checks of values beyond its type and length.
+        array = Array(f"{series.path}/{key}", "iufb", ("_",))
+        dataset = reader.find(array.path, "dataset")
+        with reader.reading(array.path):
+            shape, dtype = tuple(dataset.shape or ()), dataset.dtype
+        if dtype.kind not in "iufb" or dtype.itemsize > 8:
+            raise reader.fail(array.path, f"has dtype {dtype}; expected numbers")
+        if len(shape) != 1 or shape[0] > series.max_length:
+            raise reader.fail(array.path, f"has shape {shape}; expected one dimension of at most "
+                                          f"{series.max_length} values")
+        total += reader.check_storage(array.path, dataset)
+        members.append((array, dataset))
+    return members, total
+
+
+def _load(reader: _HDF5, spec: Array | TextData, dataset: Any) -> Any:
+    """One planned dataset's data, checked."""
+    with reader.reading(spec.path):
+        raw = dataset[()]
+    if isinstance(spec, Array):
+        return reader.check_values(spec, np.asarray(raw))
+    raw = np.asarray(raw, dtype=object).reshape(-1)[0] if not isinstance(raw, (str, bytes)) else raw
+    if isinstance(raw, bytes):
+        if len(raw) > spec.max_bytes:
+            raise reader.fail(spec.path, f"is a string of {len(raw)} bytes; expected at most {spec.max_bytes}")
+        try:
+            raw = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise reader.fail(spec.path, "is not UTF-8 text; expected a UTF-8 string") from None
+    if not isinstance(raw, str) or len(raw.encode("utf-8", "surrogatepass")) > spec.max_bytes:
+        raise reader.fail(spec.path, f"is not a string of at most {spec.max_bytes} bytes")
+    return raw
 
 
 def h5py_is_string(dtype: np.dtype) -> bool:
@@ -727,293 +667,3 @@ def _kinds(kinds: str) -> str:
     words = {"f": "floats", "i": "integers", "u": "integers", "b": "booleans"}
     names = list(dict.fromkeys(words[k] for k in kinds))
     return " or ".join(names) + " (8 bytes at most)"
-
-
-# --------------------------------------------------------------------------- JSON layouts
-
-
-class Node:
-    """What one JSON value must be; :meth:`check` returns it (possibly converted) or raises."""
-
-    nullable: bool = False
-
-    def words(self) -> str:
-        raise NotImplementedError
-
-    def check(self, value: Any, key: str, context: _JSON) -> Any:
-        raise NotImplementedError
-
-    def accepts_null(self, value: Any) -> bool:
-        return value is None and self.nullable
-
-    def or_null(self) -> str:
-        return " or null" if self.nullable else ""
-
-
-def _found(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int) and abs(value) >= 10**30:
-        return "a very large integer"
-    if isinstance(value, (int, float)):
-        return _number(value)
-    if isinstance(value, str):
-        return _shortened(repr(value), 60)
-    if isinstance(value, list):
-        return f"a list of {len(value)} items"
-    return "an object"
-
-
-@dataclass
-class Number(Node):
-    """A finite number (an integer too) of magnitude at most :data:`MAX_MAGNITUDE`, at least
-    ``minimum`` (above it with ``positive``)."""
-
-    minimum: float | None = None
-    positive: bool = False
-    nullable: bool = False
-
-    def words(self) -> str:
-        bound = "" if self.minimum is None else f" {'>' if self.positive else '>='} {self.minimum:g}"
-        return f"a finite number{bound}{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not abs(value) <= MAX_MAGNITUDE:
-            raise context.fail(key, value, self.words())
-        if self.minimum is not None and (value < self.minimum or (self.positive and value == self.minimum)):
-            raise context.fail(key, value, self.words())
-        return value
-
-
-@dataclass
-class Integer(Node):
-    minimum: int | None = None
-    nullable: bool = False
-
-    def words(self) -> str:
-        return f"an integer{'' if self.minimum is None else f' >= {self.minimum}'}{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if isinstance(value, bool) or not isinstance(value, int) or (self.minimum is not None and value < self.minimum):
-            raise context.fail(key, value, self.words())
-        return value
-
-
-@dataclass
-class Boolean(Node):
-    nullable: bool = False
-
-    def words(self) -> str:
-        return f"true or false{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value) or isinstance(value, bool):
-            return value
-        raise context.fail(key, value, self.words())
-
-
-@dataclass
-class Text(Node):
-    """A string of at most ``max_bytes`` bytes (UTF-8)."""
-
-    max_bytes: int = MAX_ATTRIBUTE_BYTES
-    nullable: bool = False
-
-    def words(self) -> str:
-        return f"a string of at most {self.max_bytes} bytes{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if not isinstance(value, str) or len(value) > self.max_bytes \
-                or len(value.encode("utf-8", "surrogatepass")) > self.max_bytes:
-            shown = f"a string of {len(value.encode('utf-8', 'surrogatepass'))} bytes" if isinstance(value, str) \
-                else None
-            raise context.fail(key, value, self.words(), shown)
-        return value
-
-
-@dataclass
-class Choice(Node):
-    choices: tuple = ()
-    nullable: bool = False
-
-    def words(self) -> str:
-        return "one of " + ", ".join(json.dumps(c) for c in self.choices) + self.or_null()
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if isinstance(value, bool) or value not in self.choices or type(value) is not type(self.choices[0]):
-            raise context.fail(key, value, self.words())
-        return value
-
-
-@dataclass
-class Items(Node):
-    """A list of ``item`` values; ``size`` names a length shared with other lists (the first
-    list with that name binds it), ``length`` fixes it, ``max_items`` bounds it."""
-
-    item: Node = field(default_factory=lambda: Number())
-    size: str | None = None
-    length: int | None = None
-    max_items: int = 10_000_000
-    nullable: bool = False
-
-    def words(self) -> str:
-        count = f"{self.length} " if self.length is not None else ""
-        return f"a list of {count}items, each {self.item.words()}{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if not isinstance(value, list):
-            raise context.fail(key, value, self.words())
-        if self.length is not None and len(value) != self.length:
-            raise context.fail(key, value, f"a list of exactly {self.length} items")
-        if len(value) > self.max_items:
-            raise context.fail(key, value, f"a list of at most {self.max_items} items")
-        if self.size is not None:
-            if self.size in context.sizes:
-                expected, origin = context.sizes[self.size]
-                if len(value) != expected:
-                    raise context.fail(key, value, f"a list of {expected} items, one per item of {origin}")
-            else:
-                context.sizes[self.size] = (len(value), key)
-        if type(self.item) is Number and _plain_numbers(value, self.item):
-            return value  # the common case, checked at once; otherwise item by item, to name the first bad one
-        return [self.item.check(v, f"{key}[{i}]", context) for i, v in enumerate(value)]
-
-
-def _plain_numbers(values: list, node: Number) -> bool:
-    """Whether every value is an int or float ``node`` accepts (null aside), without a call per value."""
-    if not all(type(v) is float or type(v) is int for v in values):
-        return False
-    try:
-        numbers = np.asarray(values, dtype=np.float64) if values else np.zeros(0)
-    except (OverflowError, ValueError):  # an integer beyond float64
-        return False
-    with np.errstate(invalid="ignore", over="ignore"):
-        if not (np.abs(numbers) <= MAX_MAGNITUDE).all():
-            return False
-        if node.minimum is not None:
-            low = numbers > node.minimum if node.positive else numbers >= node.minimum
-            return bool(low.all())
-    return True
-
-
-@dataclass
-class Object(Node):
-    """A JSON object with the ``required`` keys and possibly the ``optional`` ones (other
-    keys are kept, unchecked: nothing reads them). ``rule``, given the checked object,
-    returns (key, what was expected) for a combination of values it refuses, or None."""
-
-    required: dict[str, Node] = field(default_factory=dict)
-    optional: dict[str, Node] = field(default_factory=dict)
-    nullable: bool = False
-    rule: Callable[[dict], tuple[str, str] | None] | None = None
-
-    def words(self) -> str:
-        return f"an object{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if not isinstance(value, dict):
-            raise context.fail(key, value, self.words())
-        out = dict(value)
-        for name, node in self.required.items():
-            inner = f"{key}.{name}" if key else name
-            if name not in value:
-                raise context.missing(inner, node.words())
-            out[name] = node.check(value[name], inner, context)
-        for name, node in self.optional.items():
-            if name in value:
-                out[name] = node.check(value[name], f"{key}.{name}" if key else name, context)
-        broken = self.rule(out) if self.rule is not None else None
-        if broken is not None:
-            name, expected = broken
-            raise context.fail(f"{key}.{name}" if key else name, out.get(name), expected)
-        return out
-
-
-@dataclass
-class Mapping(Node):
-    """An object of any keys (at most ``max_items``, each a short string), each value a ``value``."""
-
-    value: Node = field(default_factory=lambda: Number())
-    max_items: int = 1000
-    nullable: bool = False
-
-    def words(self) -> str:
-        return f"an object whose values are each {self.value.words()}{self.or_null()}"
-
-    def check(self, value, key, context):
-        if self.accepts_null(value):
-            return value
-        if not isinstance(value, dict):
-            raise context.fail(key, value, self.words())
-        if len(value) > self.max_items:
-            raise context.fail(key, value, f"an object of at most {self.max_items} keys")
-        out = {}
-        for name, item in value.items():
-            if len(name) > 255:
-                raise context.fail(key, value, "keys of at most 255 characters", f"a key of {len(name)} characters")
-            out[name] = self.value.check(item, f"{key}.{name}" if key else name, context)
-        return out
-
-
-class _JSON:
-    def __init__(self, where: _Where) -> None:
-        self.where = where
-        self.sizes: dict[str, tuple[int, str]] = {}
-
-    def fail(self, key: str, value: Any, expected: str, shown: str | None = None) -> ArchiveError:
-        return self.where.fail(_shortened(key or "the top level", 80),
-                               f"is {shown or _found(value)}; expected {expected}")
-
-    def missing(self, key: str, expected: str) -> ArchiveError:
-        return self.where.fail(_shortened(key, 80), f"missing; expected {expected}")
-
-
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
-
-
-def read_json_file(path: Path | str, node: Node, what: str, max_bytes: int) -> Any:
-    """Read the JSON file ``path`` of at most ``max_bytes`` bytes and check it against ``node``.
-
-    Refused: not a regular file, empty, larger than ``max_bytes`` (known from its size,
-    before it is read), not UTF-8, not strict JSON (NaN, Infinity, integers past Python's
-    digit limit; nesting past the interpreter's recursion limit), or a value ``node`` does
-    not accept (a number that overflowed to infinity among them); ``what`` names the
-    file's kind in refusals. Only what ``node`` describes is traversed.
-    """
-    path = Path(path)
-    where = _Where(path)
-    fd, size = open_regular(path, what)
-    try:
-        if size > max_bytes:
-            raise where.fail("", f"is {size} bytes; expected {what} of at most {max_bytes} bytes")
-        try:
-            data = _read_all(fd, size, where, what)
-        except OSError as error:
-            raise where.fail("", f"cannot be read ({_reason(error)})") from None
-    finally:
-        os.close(fd)
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise where.fail("", f"is not UTF-8 text (byte {error.start}); expected {what}") from None
-    try:
-        value = json.loads(text, parse_constant=_no_constant)
-    except (ValueError, RecursionError) as error:
-        reason = _shortened(str(error).splitlines()[0] if str(error) else type(error).__name__, 160)
-        raise where.fail("", f"is not valid JSON ({reason}); expected {what}") from None
-    return node.check(value, "", _JSON(where))

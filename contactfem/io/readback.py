@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contactfem.io.archive import (
+from contactfem.io.hdf5 import read_hdf5
+from contactfem.io.json_layout import (
     Boolean,
     Choice,
     Integer,
@@ -33,11 +34,11 @@ from contactfem.io.archive import (
     Text,
     read_json_file,
 )
-from contactfem.io.hdf5 import read_hdf5
 from contactfem.io.registry import COMPARE_JSON, CONVERGENCE_JSON, SOLUTION_H5
 
-__all__ = ["COMPARE_LAYOUT", "MAX_COMPARE_BYTES", "MAX_CONVERGENCE_BYTES", "MAX_POINT_BYTES",
-           "ResultFiles", "convergence_layout", "point_layout", "read_compare", "read_convergence", "read_point_record", "read_results", "read_solution"]
+__all__ = ["COMPARE_LAYOUT", "MAX_COMPARE_BYTES", "MAX_CONVERGENCE_BYTES", "MAX_POINT_BYTES", "ResultFiles",
+           "convergence_layout", "point_layout", "read_compare", "read_convergence", "read_point_record",
+           "read_results", "read_solution"]
 
 #: compare.json holds seven numbers per contact node: 256 MiB is millions of them.
 MAX_COMPARE_BYTES = 256 << 20
