@@ -42,6 +42,14 @@ class FactorCapacityError(ContactFemError, MemoryError):
     written) handles it; its message says which limit and what to do."""
 
 
+class ArchiveError(ContactFemError):
+    """A file contactfem wrote and reads back (solution.h5, compare.json, a sweep's stored
+    point) is missing a part, damaged, or not what contactfem writes: bad input.
+
+    The message names the file, the dataset or key, and what was expected.
+    """
+
+
 class OutputError(ContactFemError):
     """An output file cannot be written."""
 

@@ -49,8 +49,8 @@ from typing import Any
 import numpy as np
 
 from contactfem import __version__
-from contactfem.case import MAX_CASE_BYTES, parse_case, shortened
-from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, MeshError, SolverError
+from contactfem.case import parse_case, shortened
+from contactfem.errors import ArchiveError, CaseError, ContactFemError, FactorCapacityError, MeshError, SolverError
 from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
 from contactfem.solve import solve_case
@@ -212,23 +212,24 @@ def storable(record: dict) -> bool:
     return record.get("status") in STORED_STATUSES
 
 
-def finished_points(points_dir: Path, sweep: Sweep) -> dict[str, dict]:
-    """The stored records of this sweep's points in ``points_dir`` (by digest). A file that is
-    unreadable, too large, of another schema or of another case text is ignored: its point is
-    solved again and the file replaced."""
+def finished_points(points_dir: Path, sweep: Sweep, read: Callable[[Path], dict]) -> dict[str, dict]:
+    """The stored records of this sweep's points in ``points_dir`` (by digest), each read as
+    untrusted input by ``read`` (the command line's is
+    :func:`contactfem.io.readback.read_point_record`, which raises ArchiveError for a file it
+    refuses). A file that is unreadable, too large, damaged, of another schema or of another
+    case text is ignored: its point is solved again and the file replaced."""
     found: dict[str, dict] = {}
     for point in sweep.points:
         if point.digest is None or point.problem is not None or point.digest in found:
             continue
         path = Path(points_dir) / point_file(point.digest)
-        try:
-            if not path.is_file() or path.stat().st_size > 2 * MAX_CASE_BYTES:
-                continue
-            record = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+        if not os.path.lexists(path):
             continue
-        if (isinstance(record, dict) and record.get("schema_version") == POINT_SCHEMA_VERSION
-                and record.get("case_text") == point.text and storable(record)):
+        try:
+            record = read(path)
+        except ArchiveError:
+            continue
+        if record["case_text"] == point.text and storable(record):
             found[point.digest] = record
     return found
 

@@ -536,11 +536,12 @@ def test_converge_on_an_unloaded_body_reports_undefined_rates_as_null(tmp_path):
     assert all(rate is None for rates in study["rates"].values() for values in rates.values() for rate in values)
 
 
-@pytest.mark.parametrize("content", [b"", b"garbage", b"\x89HDF\r\n\x1a\n" + b"\x00" * 64])
-def test_plot_on_a_corrupt_archive_is_one_line(tmp_path, content):
+@pytest.mark.parametrize("content, problem", [(b"", "is empty"), (b"garbage", "is not an HDF5 file"),
+                                              (b"\x89HDF\r\n\x1a\n" + b"\x00" * 64, "cannot be read as HDF5")])
+def test_plot_on_a_corrupt_archive_is_one_line(tmp_path, content, problem):
+    """A damaged archive is bad input: exit 2 (tests/test_damaged_archives.py has many more)."""
     (tmp_path / "solution.h5").write_bytes(content)
-    line = assert_one_line(invoke("plot", tmp_path), "solution.h5", code=1)
-    assert "cannot read" in line
+    assert_one_line(invoke("plot", tmp_path), f"solution.h5: {problem}", code=2)
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["solution.h5"]
 
 

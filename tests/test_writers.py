@@ -14,7 +14,7 @@ import meshio
 import numpy as np
 import pytest
 
-from contactfem.errors import OutputError
+from contactfem.errors import ArchiveError, OutputError
 from contactfem.io import (
     atomic_path,
     atomic_write_text,
@@ -73,7 +73,7 @@ def _solution(newton: dict[str, np.ndarray] | None = None,
         multiplier=np.array([2.5, 0.0]),
         nodal_force=np.array([1.25, 0.0]),
         normal_displacement=np.array([0.1, 0.05]),
-        gap=np.array([0.1, 0.2]),
+        gap=np.array([0.1, 0.1]),  # (p − x)·n of the nodes (0.5, 0) and (1, 0): read_hdf5 checks it
         active=np.array([True, False]),
         abscissa=np.array([0.5, 1.0]),
         obstacle_point=np.array([0.0, -0.1]),
@@ -190,7 +190,7 @@ def test_contact_vtu(tmp_path: Path) -> None:
         "contact_pressure": [0.0, 2.5, 0.0],
         "nodal_force": [0.0, 1.25, 0.0],
         "normal_displacement": [0.0, 0.1, 0.05],
-        "gap": [0.0, 0.1, 0.2],
+        "gap": [0.0, 0.1, 0.1],
         "active": [0, 1, 0],
         "contact_node": [0, 1, 1],
     }
@@ -717,19 +717,20 @@ def test_write_hdf5_under_a_file_is_an_output_error(tmp_path: Path) -> None:
 
 
 def test_read_hdf5_errors(tmp_path: Path) -> None:
-    with pytest.raises(OutputError, match="cannot read"):
+    """What read_hdf5 cannot use is bad input (ArchiveError, exit 2), one line naming the file."""
+    with pytest.raises(ArchiveError, match="missing.h5: cannot be opened"):
         read_hdf5(tmp_path / "missing.h5")
     (tmp_path / "text.h5").write_text("not hdf5")
-    with pytest.raises(OutputError, match="cannot read"):
+    with pytest.raises(ArchiveError, match="text.h5: is not an HDF5 file"):
         read_hdf5(tmp_path / "text.h5")
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f.attrs["format"] = "something-else"
-    with pytest.raises(OutputError, match="not a contactfem-solution file"):
+    with pytest.raises(ArchiveError, match="not a contactfem-solution file"):
         read_hdf5(tmp_path / "other.h5")
     path = _write_h5(_solution(), tmp_path / "future.h5")
     with h5py.File(path, "a") as f:
         f.attrs["schema_version"] = 99
-    with pytest.raises(OutputError, match="schema version 99"):
+    with pytest.raises(ArchiveError, match="schema_version: is 99, newer than 3"):
         read_hdf5(path)
 
 

@@ -44,7 +44,7 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     """
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
-    from contactfem.plots import plot_contact_profiles
+    from contactfem.plots import plot_compare
     from contactfem.studies import compare_methods
 
     try:
@@ -54,7 +54,8 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
             figures, outcomes = compare_methods(case, refine=refine, progress=_progress(quiet))
             with claim.stage(last=COMPARE_JSON) as staging:
                 atomic_write_text(staging / COMPARE_JSON, to_json(figures))
-                plot_contact_profiles(staging / COMPARE_PNG, outcomes, title=case.title)
+                # Drawn from the figures just written, not from the file read back.
+                plot_compare(staging / COMPARE_PNG, figures, title=case.title)
                 _write_series(staging, "compare", [(name, o.solution) for name, o in outcomes.items()])
     except ContactFemError as error:
         _fail(error)

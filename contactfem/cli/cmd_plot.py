@@ -47,26 +47,23 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
       contactfem plot results/square-convergence      # the convergence PNGs
     """
     from contactfem.io.atomic import claimed_directory
-    from contactfem.render import (
-        check_directory,
-        draw_directory,
-        parse_scale,
-        parse_size,
-        parse_zoom,
-    )
+    from contactfem.io.readback import read_results
+    from contactfem.render import parse_scale, parse_size, parse_zoom, pictures_of
 
     try:
         pixels = parse_size(size)
         factor = parse_scale(scale)
         window = parse_zoom(zoom)
-        names = check_directory(result_dir)  # nothing to draw, or unreadable: refused before anything is touched
+        # Every file drawn from, read and checked as untrusted input before anything is touched.
+        loaded = read_results(result_dir)
+        names = pictures_of(result_dir)  # refused when there is nothing to draw
         progress = _progress(quiet)
         directory = out_dir if out_dir is not None else result_dir
         with claimed_directory(directory) as claim:
             with claim.stage(replaces=names) as staging:
                 if progress is not None:
                     progress("rendering pictures")
-                made = draw_directory(result_dir, staging, size=pixels, scale=factor, window=window)
+                made = _draw(result_dir, loaded, staging, pixels, factor, window)
         made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
     except ContactFemError as error:
         _fail(error)
@@ -77,3 +74,24 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
     elif not quiet:
         magnified = f", displacement x {made['scale']:.3g}" if made["scale"] is not None else ""
         click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}{magnified})")
+
+
+def _draw(result_dir: Path, loaded, out: Path, size: tuple[int, int], scale: float | None,
+          window: tuple[float, float] | None) -> dict:
+    """The pictures of what :func:`~contactfem.io.readback.read_results` read, into ``out``
+    (as :func:`contactfem.render.draw_directory` draws them, from the files already read):
+    ``{"files": [...], "scale": f or None, "zoom_scale": f or None, "size": [w, h]}``."""
+    from contactfem.io.registry import COMPARE_PNG
+    from contactfem.plots import plot_compare, plot_convergence
+    from contactfem.render import make_pictures
+
+    made = {"files": [], "scale": None, "zoom_scale": None, "size": list(size)}
+    if loaded.solution is not None:
+        # make_pictures reads solution.h5 again, through the same checks (read_hdf5).
+        made.update(make_pictures(result_dir, out, size=size, scale=scale, window=window))
+    if loaded.compare is not None:
+        plot_compare(out / COMPARE_PNG, loaded.compare, window=window)
+        made["files"].append(str(out / COMPARE_PNG))
+    if loaded.convergence is not None:
+        made["files"] += [str(p) for p in plot_convergence(out, loaded.convergence)]
+    return made

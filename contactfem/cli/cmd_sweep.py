@@ -53,6 +53,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
         claimed_directory,
         ensure_directory,
     )
+    from contactfem.io.readback import read_point_record
 
     def say(line: str) -> None:
         if not quiet:
@@ -75,7 +76,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
         directory = Path(out_dir if out_dir is not None else plan.directory)
         with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
             points = directory / sweeps.POINTS_DIR
-            done = sweeps.finished_points(points, plan)
+            done = sweeps.finished_points(points, plan, read=read_point_record)
             pending = plan.pending(done)
             if done:
                 reused = sum(p.digest in done for p in plan.points)

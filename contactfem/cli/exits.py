@@ -7,6 +7,7 @@ import sys
 import click
 
 from contactfem.errors import (
+    ArchiveError,
     CaseError,
     ContactFemError,
     ExistingResultError,
@@ -23,7 +24,7 @@ EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
 def _exit_code(error: ContactFemError) -> int:
-    return EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ExistingResultError)) else EXIT_FAILURE
+    return EXIT_BAD_INPUT if isinstance(error, (CaseError, MeshError, ArchiveError, ExistingResultError)) else EXIT_FAILURE
 
 
 def _fail(error: ContactFemError) -> None:

@@ -43,7 +43,8 @@ obstacle)::
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
 more than the copy itself (gzip level 1 took several seconds for a 2 M triangle mesh),
 and any HDF5 reader can open the file without filter plugins. Readers must check
-``format`` and ``schema_version``.
+``format`` and ``schema_version``; :func:`read_hdf5` checks everything else as well
+(:data:`SOLUTION_LAYOUT`), since a results directory is untrusted input.
 """
 
 from __future__ import annotations
@@ -53,11 +54,12 @@ from typing import Any
 
 import numpy as np
 
-from contactfem.errors import OutputError
+from contactfem.io.archive import Array, Attribute, Layout, Series, TextData, read_hdf5_file
 from contactfem.io.atomic import atomic_path, ensure_directory
 from contactfem.result import Solution
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "SOLUTION_H5", "STRESS_COMPONENTS", "read_hdf5", "vtk_stress", "write_hdf5"]
+__all__ = ["FORMAT", "SCHEMA_VERSION", "SOLUTION_H5", "SOLUTION_LAYOUT", "STRESS_COMPONENTS", "read_hdf5", "vtk_stress",
+           "write_hdf5"]
 
 #: The archive's file name in a result directory.
 SOLUTION_H5 = "solution.h5"
@@ -67,6 +69,9 @@ SCHEMA_VERSION = 3
 STRESS_COMPONENTS = ("xx", "yy", "zz", "xy", "yz", "xz")
 _RESERVED_ATTRS = ("format", "schema_version", "method", "case_hash")
 _ATTR_TYPES = (str, int, float, np.integer, np.floating, np.bool_)
+#: The stored case text is read back up to this size, a case file's own limit
+#: (contactfem.case.limits.MAX_CASE_BYTES).
+MAX_CASE_TEXT_BYTES = 1 << 20
 
 
 def _dataset(group: Any, name: str, data: np.ndarray, dtype: Any) -> Any:
@@ -206,34 +211,95 @@ def write_hdf5(
     return path
 
 
-def _attr_value(value: Any) -> Any:
-    """HDF5 attribute -> plain Python value (str, int, float, bool or list)."""
-    if isinstance(value, bytes):
-        return value.decode("utf-8")
-    if isinstance(value, np.ndarray):
-        return [_attr_value(v) for v in value.tolist()]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
+def _triangles_turn_left(data: dict) -> tuple[str, str] | None:
+    """Every triangle counter-clockwise, of positive area (a mesh contactfem solved on)."""
+    points, triangles = data["mesh"]["points"], data["mesh"]["triangles"]
+    a, b, c = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    twice_area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    flat = ~(twice_area > 0)
+    if flat.any():
+        first = int(np.flatnonzero(flat)[0])
+        return "/mesh/triangles", (f"row {first} {triangles[first].tolist()} has area {0.5 * twice_area[first]:.3g}; "
+                                   "expected counter-clockwise triangles of positive area")
+    return None
 
 
-def _read_group(group: Any) -> dict[str, Any]:
-    import h5py
+def _contact_on_the_obstacle(data: dict) -> tuple[str, str] | None:
+    """The stored abscissae and initial gaps are those of the contact nodes' points against
+    the stored obstacle (files of schema 2 on): s = x·t and g0 = (p − x)·n."""
+    contact = data["contact"]
+    attrs = contact["attrs"]
+    if "abscissa" not in contact or "obstacle_normal" not in attrs:
+        return None
+    x = data["mesh"]["points"][contact["nodes"]]
+    point, normal = np.asarray(attrs["obstacle_point"]), np.asarray(attrs["obstacle_normal"])
+    tangent = np.array([-normal[1], normal[0]])
+    scale = max(float(np.abs(data["mesh"]["points"]).max()), float(np.abs(point).max()), 1e-300)
+    for name, stored, expected, formula in (("abscissa", contact["abscissa"], x @ tangent, "x·t"),
+                                            ("gap", contact["gap"], (point - x) @ normal, "(p − x)·n")):
+        off = np.abs(stored - expected) > 1e-8 * scale
+        if off.any():
+            first = int(np.flatnonzero(off)[0])
+            return f"/contact/{name}", (f"holds {stored[first]:.6g} at row {first} where the node's point and the "
+                                        f"obstacle give {expected[first]:.6g}; expected {formula} of each contact node")
+    return None
 
-    out: dict[str, Any] = {"attrs": {k: _attr_value(v) for k, v in group.attrs.items()}}
-    for name, item in group.items():
-        if isinstance(item, h5py.Group):
-            out[name] = _read_group(item)
-        elif h5py.check_string_dtype(item.dtype) is not None:
-            # asstr() gives str instead of the bytes h5py 3 returns by default.
-            out[name] = item.asstr()[()]
-        else:
-            out[name] = item[()]
-    return out
+
+#: The layout :func:`read_hdf5` checks a file against (the module docstring in code). Named
+#: sizes: n points, n_tri triangles, n_be boundary edges, n_curves curves, parts part names,
+#: m contact nodes, k contact edges.
+SOLUTION_LAYOUT = Layout(
+    format=FORMAT,
+    newest=SCHEMA_VERSION,
+    sizes={"n": "the rows of /mesh/points", "n_tri": "the rows of /mesh/triangles",
+           "n_be": "the rows of /mesh/boundary_edges", "n_curves": "the rows of /mesh/curves",
+           "parts": "the names in /mesh/@part_names", "m": "the entries of /contact/nodes",
+           "k": "the rows of /contact/edges"},
+    arrays=(
+        Array("/mesh/points", "f", ("n", 2), "float64", finite=True, at_least=3),
+        Array("/mesh/triangles", "iu", ("n_tri", 3), "int64", index_of="n", at_least=1),
+        Array("/mesh/boundary_edges", "iu", ("n_be", 2), "int64", index_of="n"),
+        Array("/mesh/edge_parts", "iu", ("n_be",), "int64", index_of="parts"),
+        Array("/mesh/curves", "f", ("n_curves", 3), "float64", finite=True),
+        Array("/mesh/edge_curves", "iu", ("n_be",), "int64", index_of="n_curves", lowest=-1),
+        Array("/fields/displacement", "f", ("n", 2), "float64", finite=True),
+        Array("/fields/stress", "f", ("n_tri", len(STRESS_COMPONENTS)), "float64", finite=True, since=3),
+        Array("/fields/stress", "f", ("n_tri", 4), "float64", finite=True, until=2),
+        Array("/fields/von_mises", "f", ("n_tri",), "float64", finite=True),
+        Array("/contact/nodes", "iu", ("m",), "int64", index_of="n"),
+        Array("/contact/edges", "iu", ("k", 2), "int64", index_of="n"),
+        Array("/contact/multiplier", "f", ("m",), "float64", finite=True),
+        Array("/contact/nodal_force", "f", ("m",), "float64", finite=True),
+        Array("/contact/normal_displacement", "f", ("m",), "float64", finite=True),
+        Array("/contact/gap", "f", ("m",), "float64", finite=True),
+        Array("/contact/active", "iub", ("m",), "uint8", flags=True),
+        Array("/contact/abscissa", "f", ("m",), "float64", finite=True, since=2),
+        # NaN where the exact stress is not finite.
+        Array("/contact/exact_pressure", "f", ("m",), "float64", since=3, optional=True),
+    ),
+    texts=(TextData("/case", MAX_CASE_TEXT_BYTES),),
+    attributes=(
+        Attribute("/", "method", "text", choices=("positive", "standard")),
+        Attribute("/", "case_hash", "text"),
+        Attribute("/mesh", "part_names", "texts", size="parts"),
+        Attribute("/contact", "obstacle_point", "vector", shape=(2,), since=2),
+        Attribute("/contact", "obstacle_normal", "vector", shape=(2,), unit=True, since=2),
+        Attribute("/contact", "obstacle_ends", "vector", shape=(2, 2), since=2, optional=True),
+    ),
+    series=(Series("/newton", max_length=1_000_000),),
+    rules=(_triangles_turn_left, _contact_on_the_obstacle),
+)
 
 
 def read_hdf5(path: Path | str) -> dict[str, Any]:
-    """Read a file written by :func:`write_hdf5` back into nested dicts.
+    """Read a file written by :func:`write_hdf5` back into nested dicts, as untrusted input.
+
+    Everything is checked against :data:`SOLUTION_LAYOUT` before it is returned (see
+    :mod:`contactfem.io.archive`): the format and schema version; each dataset's
+    presence (no links followed), dtype, shape and storage, and the total declared size
+    against the file's, before any data is read; then index ranges, finiteness and flags;
+    attributes by name, strings bounded. Root attributes other than the layout's are
+    returned when they are scalars; other groups, datasets and attributes are not read.
 
     Parameters
     ----------
@@ -242,32 +308,17 @@ def read_hdf5(path: Path | str) -> dict[str, Any]:
     Returns
     -------
     dict
-        One entry per dataset or group, nested by group: datasets as numpy arrays,
-        string datasets (``case``) as str. Every dict has an ``"attrs"`` entry with that
-        object's attributes as plain Python values (str, int, float, list of str),
-        e.g. ``data["attrs"]["method"]``, ``data["mesh"]["attrs"]["part_names"]``,
-        ``data["fields"]["displacement"]``.
+        One entry per dataset or group, nested by group: datasets as numpy arrays
+        (float64, int64, ``/contact/active`` uint8, ``/newton`` as stored), the ``case``
+        string as str. Every dict has an ``"attrs"`` entry with that object's attributes
+        as plain Python values (str, int, float, list), e.g. ``data["attrs"]["method"]``,
+        ``data["mesh"]["attrs"]["part_names"]``, ``data["fields"]["displacement"]``.
 
     Raises
     ------
-    OutputError
-        If the file cannot be opened, is not a contactfem solution file, or was
-        written with a newer schema than this version reads.
+    ArchiveError
+        If the file cannot be opened, is not a contactfem solution file, was written with
+        a newer schema than this version reads, or anything in it is not as the layout
+        says: one line naming the file, the dataset or attribute and what was expected.
     """
-    import h5py
-
-    path = Path(path)
-    try:
-        with h5py.File(path, "r") as f:
-            data = _read_group(f)
-    except OSError as exc:
-        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    attrs = data["attrs"]
-    if attrs.get("format") != FORMAT:
-        raise OutputError(f"cannot read {path}: not a {FORMAT} file")
-    if attrs.get("schema_version", 0) > SCHEMA_VERSION:
-        raise OutputError(
-            f"cannot read {path}: schema version {attrs['schema_version']} is newer "
-            f"than {SCHEMA_VERSION}, the one this contactfem reads"
-        )
-    return data
+    return read_hdf5_file(path, SOLUTION_LAYOUT, f"a {FORMAT} file (written by contactfem solve)")
