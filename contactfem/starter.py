@@ -58,8 +58,11 @@ output:
 
 
 def starter_case(path: Path) -> str:
-    """The starter case's text for a file at ``path`` (its name fills the comments)."""
-    return _TEMPLATE.format(name=path.name, stem=path.stem or "case")
+    """The starter case's text for a file at ``path`` (its name fills the comments and the output
+    directory; a byte of it that is not UTF-8 is written as ``\\xNN``, the file being UTF-8)."""
+    from contactfem.io.registry import shown_text
+
+    return _TEMPLATE.format(name=shown_text(path.name), stem=shown_text(path.stem) or "case")
 
 
 def write_starter_case(path: Path | str) -> Path:

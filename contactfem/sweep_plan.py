@@ -7,6 +7,7 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -95,7 +96,8 @@ def load_sweep(path: str | Path) -> Sweep:
     for key in ("title", "description"):
         if key in top and not isinstance(top[key], str):
             raise r.fail(key, top[key], "expected a string")
-    title = top.get("title", path.stem)
+    # A file name's bytes that are not UTF-8 as \xNN: the default title is shown and written as text.
+    title = top.get("title", os.fsencode(path.stem).decode("utf-8", "backslashreplace"))
     if len(title) > 200 or not title.isprintable():
         raise r.fail("title", title, "expected one line of at most 200 printable characters")
 

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from contactfem.cli.common import _load
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.exits import _fail, _interruptible, _printable, _shown
 from contactfem.cli.options import case_argument, json_option, refine_option
 from contactfem.errors import ContactFemError
+from contactfem.io.registry import shown_path, to_json
 
 
 @click.command()
@@ -38,7 +38,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     mesh = problem.mesh
     diameters = mesh.triangle_diameters()
     summary = {
-        "case": str(case_file),
+        "case": shown_path(case_file),
         "title": case.title,
         "geometry": _geometry_figures(case),
         "material": {"E": case.material.young, "nu": case.material.poisson, "plane": case.material.plane},
@@ -53,12 +53,12 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         "load_path": None if case.load_path is None else list(case.load_path.factors),
     }
     if as_json:
-        click.echo(json.dumps(summary, indent=2, sort_keys=True))
+        click.echo(to_json(summary), nl=False)
         return
     if quiet:
         return
-    click.echo(f"{case_file}: valid — {case.title}")
-    click.echo(f"  geometry   {_geometry_text(summary['geometry'])}")
+    click.echo(f"{_shown(case_file)}: valid — {case.title}")
+    click.echo(_printable(f"  geometry   {_geometry_text(summary['geometry'])}"))
     click.echo(f"  material   E = {case.material.young:g}, nu = {case.material.poisson:g}, plane {case.material.plane}")
     for part in case.parts:
         click.echo(f"  boundary   {part.name}: {part.label}")
@@ -90,7 +90,7 @@ def _geometry_figures(case) -> dict:
     from contactfem.case import PolygonGeometry, RectangleGeometry
 
     geometry = case.geometry
-    figures: dict = {"files": [str(path) for path in case.data_files]}  # a mesh file among them
+    figures: dict = {"files": [shown_path(path) for path in case.data_files]}  # a mesh file among them
     if isinstance(geometry, RectangleGeometry):
         figures.update(kind="rectangle", lower=list(geometry.lower), upper=list(geometry.upper))
     elif isinstance(geometry, PolygonGeometry):

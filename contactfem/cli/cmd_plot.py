@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from contactfem.cli.common import _end_progress, _progress
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import _CheckedPath, quiet_option
 from contactfem.errors import ContactFemError
+from contactfem.io.registry import to_json
 
 
 @click.command()
@@ -66,7 +66,8 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
         return
     _end_progress()
     if as_json:
-        click.echo(json.dumps(made, indent=2, sort_keys=True))
+        click.echo(to_json(made), nl=False)
     elif not quiet:
         magnified = f", displacement x {made['scale']:.3g}" if made["scale"] is not None else ""
-        click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}{magnified})")
+        files = ", ".join(_shown(f) for f in made["files"])
+        click.echo(f"wrote {files} ({made['size'][0]}x{made['size'][1]}{magnified})")

@@ -10,7 +10,7 @@ from contactfem.cli.exits import _fail, _interruptible, _printable
 from contactfem.cli.options import _CheckedPath, overwrite_option, quiet_option
 from contactfem.cli.sweep_report import _plot_sweep, _sweep_summary
 from contactfem.errors import CaseError, ContactFemError
-from contactfem.io.registry import to_json
+from contactfem.io.registry import shown_data, to_json
 
 
 @click.command()
@@ -91,10 +91,11 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
                 ensure_directory(points)
                 for leftover in points.glob(f"{TEMP_PREFIX}*"):  # a killed run's unfinished write
                     leftover.unlink(missing_ok=True)
-                table = sweeps.run_sweep(
+                # Messages naming a file whose name is not UTF-8 are stored and shown as text.
+                table = shown_data(sweeps.run_sweep(
                     plan, engine, finished=done, progress=finished,
                     store=lambda record: atomic_write_text(points / sweeps.point_file(record["digest"]),
-                                                           sweeps.point_json(record)))
+                                                           sweeps.point_json(shown_data(record)))))
             with claim.stage(replaces=sweeps.SWEEP_FILES, last=sweeps.SWEEP_JSON) as staging:
                 atomic_write_text(staging / sweeps.SWEEP_CSV, sweeps.table_csv(table))
                 _plot_sweep(staging / sweeps.SWEEP_PNG, table)

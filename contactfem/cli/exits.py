@@ -33,8 +33,18 @@ def _fail(error: ContactFemError) -> None:
 
 def _printable(text: str) -> str:
     """Escape control and separator characters a case file may carry into a message
-    (a key with a record separator would otherwise split the one-line error)."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    (a key with a record separator would otherwise split the one-line error), and show a
+    byte of a file name that is not UTF-8 (a surrogate U+DC80..U+DCFF) as ``\\xNN``, the
+    byte, as :func:`contactfem.io.registry.shown_text` does."""
+    return "".join(c if c.isprintable() else f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
+                   else repr(c)[1:-1] for c in text)
+
+
+def _shown(path) -> str:
+    """A path for a line on stdout or stderr (see :func:`_printable`)."""
+    import os
+
+    return _printable(os.fsdecode(path))
 
 
 def _interruptible(command):
