@@ -55,7 +55,14 @@ from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
 from contactfem.solve import solve_case
 # Re-exported: the plan and the table are part of this module's interface.
-from contactfem.sweep_plan import MAX_SWEEP_POINTS, SWEEP_KEYS, Sweep, SweepPoint, load_sweep  # noqa: F401
+from contactfem.sweep_plan import (  # noqa: F401
+    MAX_SWEEP_PLAN_BYTES,
+    MAX_SWEEP_POINTS,
+    SWEEP_KEYS,
+    Sweep,
+    SweepPoint,
+    load_sweep,
+)
 from contactfem.sweep_table import (  # noqa: F401
     ERROR_NORMS,
     STAGES,

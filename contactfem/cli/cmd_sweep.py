@@ -71,7 +71,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
         if scheduler is not None and workers is not None:
             raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
                             "(the cluster's own workers run the points)")
-        plan = sweeps.load_sweep(sweep_file)
+        plan = sweeps.load_sweep(sweep_file, progress=say)
         directory = Path(out_dir if out_dir is not None else plan.directory)
         with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
             points = directory / sweeps.POINTS_DIR
