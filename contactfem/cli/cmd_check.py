@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _load
+from contactfem.cli.common import _files_of, _load
 from contactfem.cli.exits import _fail, _interruptible, _printable, _shown
 from contactfem.cli.options import case_argument, json_option, refine_option
 from contactfem.errors import ContactFemError
@@ -51,6 +51,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         "method": case.solver.method,
         "estimate": _estimate(case, problem),
         "load_path": None if case.load_path is None else list(case.load_path.factors),
+        "output": _output_figures(case),
     }
     if as_json:
         click.echo(to_json(summary), nl=False)
@@ -70,9 +71,21 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         factors = case.load_path.factors
         click.echo(f"  load path  {len(factors)} steps, load factors {factors[0]:g} to {factors[-1]:g} "
                    "(every load, prescribed displacement and platen drive times each factor)")
+    output = summary["output"]
+    click.echo(_printable(f"  output     {output['directory']}: {', '.join(output['files'])} "
+                          f"(output.files: {', '.join(output['formats'])})"))
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
                f"{cost['backend']} (measured on 2 cores; ±50%), of {cost['limit']}")
+
+
+def _output_figures(case) -> dict:
+    """Where a solve of the case writes, and exactly which files: those of output.files (a load
+    path adds its own format and path.png)."""
+    from contactfem.io.registry import PATH_PNG
+
+    files = _files_of(case.output.files) + ([PATH_PNG] if case.load_path is not None else [])
+    return {"directory": shown_path(case.output.directory), "formats": list(case.output.files), "files": files}
 
 
 def _estimate(case, problem) -> dict:

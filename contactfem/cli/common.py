@@ -67,9 +67,10 @@ def _load(case_file: Path, backend: str | None = None, distributed: bool = False
 
 
 def _files_of(formats: tuple[str, ...]) -> list[str]:
+    """The files the ``formats`` write, in the order they are written (the report last)."""
     from contactfem.io.registry import FORMATS
 
-    return [name for format in formats for name in FORMATS[format].files]
+    return [name for format, output in FORMATS.items() if format in formats for name in output.files]
 
 
 def _write_solution(staging: Path, case, result, report: dict, progress, path_writer=None) -> dict:
