@@ -6,11 +6,12 @@ from pathlib import Path
 
 import click
 
+from contactfem import __version__
 from contactfem.cli.common import _files_of, _load
 from contactfem.cli.exits import _fail, _interruptible, _printable, _shown
 from contactfem.cli.options import case_argument, json_option, refine_option
 from contactfem.errors import ContactFemError
-from contactfem.io.registry import shown_path, to_json
+from contactfem.io.registry import CHECK_SCHEMA_VERSION, shown_path, to_json
 
 
 @click.command()
@@ -38,6 +39,8 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     mesh = problem.mesh
     diameters = mesh.triangle_diameters()
     summary = {
+        "schema_version": CHECK_SCHEMA_VERSION,
+        "contactfem_version": __version__,
         "case": shown_path(case_file),
         "title": case.title,
         "geometry": _geometry_figures(case),
@@ -51,6 +54,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         "method": case.solver.method,
         "estimate": _estimate(case, problem),
         "load_path": None if case.load_path is None else list(case.load_path.factors),
+        "units": case.units.to_dict(),
         "output": _output_figures(case),
     }
     if as_json:

@@ -6,11 +6,12 @@ from pathlib import Path
 
 import click
 
+from contactfem import __version__
 from contactfem.cli.common import _end_progress, _progress
 from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import _CheckedPath, quiet_option
 from contactfem.errors import ContactFemError
-from contactfem.io.registry import to_json
+from contactfem.io.registry import PLOT_SCHEMA_VERSION, to_json
 
 
 @click.command()
@@ -61,6 +62,8 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
                     progress("rendering pictures")
                 made = draw_directory(result_dir, staging, size=pixels, scale=factor)
         made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
+        made = {"schema_version": PLOT_SCHEMA_VERSION, "contactfem_version": __version__,
+                "result_dir": str(result_dir), **made}
     except ContactFemError as error:
         _fail(error)
         return

@@ -43,9 +43,19 @@ CONVERGENCE_JSON = "convergence.json"
 CONVERGENCE_CSV = "convergence.csv"
 CONVERGENCE_PNGS = ("convergence_h.png", "convergence_time.png")
 ADAPT_JSON = "adapt.json"
-#: The JSON Schema of each JSON file the commands write, shipped in contactfem/schemas/.
+SWEEP_JSON = "sweep.json"
+#: The JSON the commands print on stdout that is no file's copy: check's and plot's --json.
+CHECK_OUTPUT = "check --json"
+PLOT_OUTPUT = "plot --json"
+#: The version of each of them (their "schema_version").
+CHECK_SCHEMA_VERSION = 1
+PLOT_SCHEMA_VERSION = 1
+#: The JSON Schema of each JSON file the commands write, and of the JSON they print that is no
+#: file's copy, shipped in contactfem/schemas/.
 JSON_SCHEMAS = {REPORT_JSON: "report.schema.json", COMPARE_JSON: "compare.schema.json",
-                CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json"}
+                CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json",
+                SWEEP_JSON: "sweep.schema.json", CHECK_OUTPUT: "check.schema.json",
+                PLOT_OUTPUT: "plot.schema.json"}
 
 
 def shown_text(text: str) -> str:
@@ -71,7 +81,8 @@ def shown_path(path: str | bytes | os.PathLike) -> str:
 
 
 def schema_path(file_name: str) -> Path:
-    """The JSON Schema (a file inside the installed package) of ``file_name``, e.g. ``report.json``."""
+    """The JSON Schema (a file inside the installed package) of ``file_name``, e.g. ``report.json``,
+    or of a command's printed JSON, ``check --json`` or ``plot --json``."""
     return Path(__file__).resolve().parents[1] / "schemas" / JSON_SCHEMAS[file_name]
 
 
