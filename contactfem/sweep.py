@@ -452,6 +452,7 @@ def run_sweep(
         "contactfem_version": __version__,
         "sweep": {"file": str(sweep.source), "title": sweep.title, "sha256": sweep.digest, "kind": sweep.kind},
         "case": {"file": str(sweep.base), "title": sweep.base_title, "sha256": sweep.base_digest},
+        "units": dict(sweep.units),
         "keys": list(sweep.keys),
         "error_measure": {
             "exact": "energy norm of u - u_h against the case's exact solution (report.json errors."

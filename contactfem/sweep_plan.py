@@ -19,7 +19,7 @@ import math
 import os
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +57,8 @@ _STEP = re.compile(rf"({_NAME})|\[(\d+)\]")
 class SweepPoint:
     """One point: ``values`` by dotted key, its case ``text`` (None when the values could not
     be set) and its ``digest``, the case's (the text and the data files it reads), or the
-    text's SHA-256 when it is refused; ``problem`` is its one-line refusal, if any."""
+    text's SHA-256 when it is refused; ``problem`` is its one-line refusal, if any; ``units``
+    its case's units (length, force, stress; None when it is refused): a sweep may set them."""
 
     index: int  # 1-based, in the order of the grid or the list
     values: dict[str, Any]
@@ -66,6 +67,7 @@ class SweepPoint:
     text: str | None
     digest: str | None
     problem: str | None = None
+    units: dict[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,7 @@ class Sweep:
     keys: tuple[str, ...]
     points: tuple[SweepPoint, ...]
     directory: Path
+    units: dict[str, str] = field(default_factory=dict)  # the base case's
 
     def pending(self, finished: Mapping[str, dict]) -> list[dict]:
         """The tasks still to solve: one per distinct case text that is valid and not finished."""
@@ -168,7 +171,7 @@ def load_sweep(path: str | Path, progress: Callable[[str], None] | None = None) 
                         f"{'the point' if len(points) == 1 else 'point 1'}: {points[0].problem}")
     return Sweep(source=path, digest=hashlib.sha256(text.encode("utf-8")).hexdigest(), title=title, base=base,
                  base_title=base_case.title, base_digest=base_case.digest, kind=kind, keys=keys, points=points,
-                 directory=Path(directory))
+                 directory=Path(directory), units=base_case.units.to_dict())
 
 
 def _value_bytes(value: Any) -> int:
@@ -338,7 +341,7 @@ def _point(base: Path, texts: _PointTexts, values: dict[str, Any], index: int, n
                           str(error))
     # The case's own digest covers the data files it reads (a profile, an outline, a mesh):
     # a point whose surface file changed is another point, never a stored one reused.
-    return SweepPoint(index, values, label, source, text, case.digest)
+    return SweepPoint(index, values, label, source, text, case.digest, units=case.units.to_dict())
 
 
 def _absolute_data_paths(geometry: Any, directory: Path) -> None:

@@ -9,6 +9,7 @@ this process. Meshes are tiny (at most 64 divisions) so that the file runs in se
 from __future__ import annotations
 
 import copy
+import csv
 import json
 import os
 import signal
@@ -702,3 +703,23 @@ def test_a_sweep_of_a_large_inline_case_within_the_bound_plans_and_runs(tmp_path
     assert result.stderr.startswith("planning 3 points: ") and "kB of case text" in result.stderr.splitlines()[0]
     table = json.loads((tmp_path / "out" / "sweep.json").read_text())
     assert [row["status"] for row in table["points"]] == ["ok", "ok", "ok"]
+
+
+def test_sweep_json_and_csv_say_the_units_of_each_row(tmp_path, no_dask):
+    """The base case's units, and each row's, its case's: a sweep may set units.*, and a
+    refused point has none."""
+    base = square_case_dict(4)
+    base["units"] = {"length": "mm", "force": "N"}
+    path = write_sweep(tmp_path, {"points": [{"material.nu": 0.3}, {"units.length": "m"}, {"material.nu": 0.7}]},
+                       base=base)
+    result = invoke("sweep", path, "--out", tmp_path / "out", "--quiet")
+    assert result.exit_code == 1, result.stderr  # the third point is refused
+    table = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    jsonschema = pytest.importorskip("jsonschema")
+    jsonschema.validate(table, json.loads(SCHEMA.read_text()), cls=jsonschema.Draft202012Validator)
+    assert table["units"] == {"length": "mm", "force": "N", "stress": "MPa"}
+    assert [row["units"] for row in table["points"]] == [
+        {"length": "mm", "force": "N", "stress": "MPa"}, {"length": "m", "force": "N", "stress": "Pa"}, None]
+    rows = list(csv.DictReader((tmp_path / "out" / "sweep.csv").read_text().splitlines()))
+    assert [(r["length_unit"], r["force_unit"], r["stress_unit"]) for r in rows] == [
+        ("mm", "N", "MPa"), ("m", "N", "Pa"), ("", "", "")]
