@@ -190,7 +190,7 @@ def test_solve_a_case_named_with_such_bytes_into_such_a_directory(locale, tmp_pa
     assert not any(name.startswith(".tmp-") for name in names)
     report = _strict_json(out / "report.json")
     assert report["case"]["file"] == "\\xfe.yaml" and report["case"]["title"] == "\\xfe"
-    for vtu in ("solution.vtu",):
+    for vtu in ("solution.vtu", "contact.vtu"):
         metadata = meshio.read(out / vtu).field_data
         assert bytes(metadata["case_file"]).decode("utf-8") == "\\xfe.yaml", vtu
     with h5py.File(out / "solution.h5", "r") as archive:

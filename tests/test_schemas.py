@@ -137,7 +137,7 @@ def test_what_check_and_plot_print_says_what_it_describes(written):
 
 def test_units_reach_every_output(written):
     """units: {length: mm, force: N}: MPa for stresses, in report.json, compare.json,
-    convergence.json, solution.h5's attributes and solution.vtu's metadata."""
+    convergence.json, solution.h5's attributes and the metadata of solution.vtu and contact.vtu."""
     solve = next(p.parent for p in written[REPORT_JSON] if p.parent.name == "solve")
     assert json.loads((solve / REPORT_JSON).read_text())["units"] == MILLIMETRES
     compare = next(p for p in written[COMPARE_JSON])
@@ -146,8 +146,10 @@ def test_units_reach_every_output(written):
     assert json.loads(converge.read_text())["units"] == MILLIMETRES
     with h5py.File(solve / "solution.h5", "r") as f:
         assert (f.attrs["length_unit"], f.attrs["force_unit"], f.attrs["stress_unit"]) == ("mm", "N", "MPa")
-    metadata = meshio.read(solve / "solution.vtu").field_data
-    assert bytes(metadata["stress_unit"]).decode() == "MPa" and bytes(metadata["length_unit"]).decode() == "mm"
+    for vtu in ("solution.vtu", "contact.vtu"):
+        metadata = meshio.read(solve / vtu).field_data
+        assert bytes(metadata["stress_unit"]).decode() == "MPa" and bytes(metadata["length_unit"]).decode() == "mm"
+        assert bytes(metadata["case_file"]).decode().endswith("small.yaml")
     exact = next(p for p in written[REPORT_JSON] if p.parent.name == "exact")
     assert json.loads(exact.read_text())["units"] == {"length": "m", "force": "N", "stress": "Pa"}  # the default
 
