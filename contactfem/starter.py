@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from contactfem.case.names import DEFAULT_FORMATS
 from contactfem.errors import CaseError, OutputError
 
 __all__ = ["starter_case", "write_starter_case"]
@@ -51,15 +52,19 @@ solver:
 
 output:
   directory: results/{stem}  # relative to the working directory
-  files: [vtu, h5, json]
+  files: [{files}]   # the default; exactly these are written (xdmf: add it, with h5)
 
 # load_path: {{steps: 10}}     # solve at 10 load factors up to 1 (a PVD series, curves)
 """
 
 
 def starter_case(path: Path) -> str:
-    """The starter case's text for a file at ``path`` (its name fills the comments)."""
-    return _TEMPLATE.format(name=path.name, stem=path.stem or "case")
+    """The starter case's text for a file at ``path`` (its name fills the comments and the output
+    directory; a byte of it that is not UTF-8 is written as ``\\xNN``, the file being UTF-8)."""
+    from contactfem.io.registry import shown_text
+
+    return _TEMPLATE.format(name=shown_text(path.name), stem=shown_text(path.stem) or "case",
+                            files=", ".join(DEFAULT_FORMATS))
 
 
 def write_starter_case(path: Path | str) -> Path:

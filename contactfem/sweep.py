@@ -55,7 +55,14 @@ from contactfem.estimate import MemoryLimit, memory_budget
 from contactfem.report import build_report
 from contactfem.solve import solve_case
 # Re-exported: the plan and the table are part of this module's interface.
-from contactfem.sweep_plan import MAX_SWEEP_POINTS, SWEEP_KEYS, Sweep, SweepPoint, load_sweep  # noqa: F401
+from contactfem.sweep_plan import (  # noqa: F401
+    MAX_SWEEP_PLAN_BYTES,
+    MAX_SWEEP_POINTS,
+    SWEEP_KEYS,
+    Sweep,
+    SweepPoint,
+    load_sweep,
+)
 from contactfem.sweep_table import (  # noqa: F401
     ERROR_NORMS,
     STAGES,
@@ -446,6 +453,7 @@ def run_sweep(
         "contactfem_version": __version__,
         "sweep": {"file": str(sweep.source), "title": sweep.title, "sha256": sweep.digest, "kind": sweep.kind},
         "case": {"file": str(sweep.base), "title": sweep.base_title, "sha256": sweep.base_digest},
+        "units": dict(sweep.units),
         "keys": list(sweep.keys),
         "error_measure": {
             "exact": "energy norm of u - u_h against the case's exact solution (report.json errors."

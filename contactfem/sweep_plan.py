@@ -1,4 +1,13 @@
-"""Sweep files: their validation, and the case text of each point with its values set."""
+"""Sweep files: their validation, and the case text of each point with its values set.
+
+Every point's case text is built and validated before the first solve, so the plan is
+bounded by its size as well as by its number of points: the points times the base case's
+size may not pass :data:`MAX_SWEEP_PLAN_BYTES`, checked from the sweep file and the base
+case's size before anything is built. Building is linear in the plan's size: the base case
+is dumped to YAML once, section by section (its top-level keys), and a point dumps anew only
+the sections its values change; the rest of its text is the base's, as dumped. What remains
+per point is validating its text (:func:`contactfem.case.parse_case`), which reads it whole.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +16,10 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +39,13 @@ from contactfem.errors import CaseError
 
 #: The most points a sweep may have (the product of a grid's list lengths).
 MAX_SWEEP_POINTS = 10_000
+#: The most bytes of case text a sweep's points may make together: each point's text is built,
+#: validated and held before the first solve, and travels to its worker. Validating takes
+#: about 1.2 s per MB of inline numbers (0.83 MB of 85 000 heights: 1.0 s a point), so
+#: planning stays under about a minute and a half; 10 000 points of a 6 kB case fit.
+MAX_SWEEP_PLAN_BYTES = 64 << 20
+#: A plan larger than this is announced (``progress``) before it is built: it takes seconds.
+PLAN_NOTE_BYTES = 4 << 20
 SWEEP_KEYS = ("title", "description", "case", "grid", "points", "output")
 
 _NAME = r"[^.\[\]\s][^.\[\]]*"
@@ -40,7 +57,8 @@ _STEP = re.compile(rf"({_NAME})|\[(\d+)\]")
 class SweepPoint:
     """One point: ``values`` by dotted key, its case ``text`` (None when the values could not
     be set) and its ``digest``, the case's (the text and the data files it reads), or the
-    text's SHA-256 when it is refused; ``problem`` is its one-line refusal, if any."""
+    text's SHA-256 when it is refused; ``problem`` is its one-line refusal, if any; ``units``
+    its case's units (length, force, stress; None when it is refused): a sweep may set them."""
 
     index: int  # 1-based, in the order of the grid or the list
     values: dict[str, Any]
@@ -49,6 +67,7 @@ class SweepPoint:
     text: str | None
     digest: str | None
     problem: str | None = None
+    units: dict[str, str] | None = None
 
 
 @dataclass(frozen=True)
@@ -63,6 +82,7 @@ class Sweep:
     keys: tuple[str, ...]
     points: tuple[SweepPoint, ...]
     directory: Path
+    units: dict[str, str] = field(default_factory=dict)  # the base case's
 
     def pending(self, finished: Mapping[str, dict]) -> list[dict]:
         """The tasks still to solve: one per distinct case text that is valid and not finished."""
@@ -74,15 +94,17 @@ class Sweep:
         return list(tasks.values())
 
 
-def load_sweep(path: str | Path) -> Sweep:
+def load_sweep(path: str | Path, progress: Callable[[str], None] | None = None) -> Sweep:
     """Read and validate a sweep file and its base case, and build every point's case text.
 
     A point whose values make an invalid case is kept, with its refusal as ``problem``.
+    ``progress`` is told, once, when the plan is large enough to take a while.
 
     Raises
     ------
     CaseError
-        If the sweep file or the base case cannot be read or is malformed.
+        If the sweep file or the base case cannot be read or is malformed, or if its points
+        would make more than :data:`MAX_SWEEP_PLAN_BYTES` of case text.
     """
     path = Path(path)
     text = read_text_file(path, what="sweep")
@@ -95,7 +117,8 @@ def load_sweep(path: str | Path) -> Sweep:
     for key in ("title", "description"):
         if key in top and not isinstance(top[key], str):
             raise r.fail(key, top[key], "expected a string")
-    title = top.get("title", path.stem)
+    # A file name's bytes that are not UTF-8 as \xNN: the default title is shown and written as text.
+    title = top.get("title", os.fsencode(path.stem).decode("utf-8", "backslashreplace"))
     if len(title) > 200 or not title.isprintable():
         raise r.fail("title", title, "expected one line of at most 200 printable characters")
 
@@ -107,10 +130,8 @@ def load_sweep(path: str | Path) -> Sweep:
     base = path.parent / reference
     try:
         base_text = read_text_file(base)
-        base_case = parse_case(base_text, source=base)
     except CaseError as error:
         raise CaseError(f"{r.filename}: case: {error}") from None
-    base_data = load_yaml(base_text, shortened(base.name))
 
     if ("grid" in top) == ("points" in top):
         raise CaseError(f"{r.filename}: grid, points: {'both are' if 'grid' in top else 'neither is'} given; "
@@ -127,8 +148,22 @@ def load_sweep(path: str | Path) -> Sweep:
     if problem is not None:
         raise r.fail("output.directory", directory, f"the path {problem}")
 
+    # Bounded before the base case is even validated (which takes seconds for a large one): the
+    # file's size stands for its text, then its YAML as dumped (aliases expanded) once it is read.
+    values_bytes = sum(_value_bytes(value) for values in assignments for value in values.values())
+    _refuse_large_plan(r, kind, top[kind], len(assignments), base, len(base_text.encode("utf-8")), values_bytes)
+    try:
+        base_case = parse_case(base_text, source=base)
+    except CaseError as error:
+        raise CaseError(f"{r.filename}: case: {error}") from None
+    texts = _PointTexts(load_yaml(base_text, shortened(base.name)), base.parent)
+    planned = len(assignments) * texts.base_bytes + values_bytes
+    _refuse_large_plan(r, kind, top[kind], len(assignments), base, texts.base_bytes, values_bytes)
+    if progress is not None and planned > PLAN_NOTE_BYTES:
+        progress(f"planning {len(assignments)} points: {_size(planned)} of case text to build and validate")
+
     name = shortened(path.name, 80)
-    points = tuple(_point(base, base_data, values, index, f"{name} point {index}")
+    points = tuple(_point(base, texts, values, index, f"{name} point {index}")
                    for index, values in enumerate(assignments, start=1))
     if all(point.problem is not None for point in points):
         # A mistyped key or a value outside the format refuses every point: the sweep file is wrong.
@@ -136,7 +171,40 @@ def load_sweep(path: str | Path) -> Sweep:
                         f"{'the point' if len(points) == 1 else 'point 1'}: {points[0].problem}")
     return Sweep(source=path, digest=hashlib.sha256(text.encode("utf-8")).hexdigest(), title=title, base=base,
                  base_title=base_case.title, base_digest=base_case.digest, kind=kind, keys=keys, points=points,
-                 directory=Path(directory))
+                 directory=Path(directory), units=base_case.units.to_dict())
+
+
+def _value_bytes(value: Any) -> int:
+    """About the bytes ``value`` adds to a point's case text (its JSON; YAML is no longer)."""
+    if isinstance(value, (dict, list)):
+        return len(json.dumps(value, ensure_ascii=False).encode("utf-8"))
+    return len(str(value).encode("utf-8")) + 2
+
+
+def _refuse_large_plan(r: Reader, kind: str, spec: Any, count: int, base: Path, base_bytes: int,
+                       values_bytes: int) -> None:
+    """Refuse (CaseError) a sweep whose points would make more than MAX_SWEEP_PLAN_BYTES of case text."""
+    total = count * base_bytes + values_bytes
+    if total <= MAX_SWEEP_PLAN_BYTES:
+        return
+    if kind == "grid":
+        shape = " x ".join(str(len(values)) for values in spec.values())
+        what = f"grid: {shape} = {count} points" if len(spec) > 1 else f"grid: {count} points"
+    else:
+        what = f"points: {count} points"
+    largest = MAX_SWEEP_PLAN_BYTES // max(base_bytes, 1)
+    raise CaseError(f"{r.filename}: {what} of a {_size(base_bytes)} base case ({shortened(base.name, 80)}) "
+                    f"make {_size(total)} of case text to build and validate before the first solve; "
+                    f"expected at most {MAX_SWEEP_PLAN_BYTES >> 20} MiB (at most {largest} points of this case): "
+                    "fewer points, or a smaller base case (a profile's heights, an outline or a mesh read from "
+                    "a file rather than written inline)")
+
+
+def _size(size: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if size >= 0.1 * scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size} bytes"
 
 
 def _grid(r: Reader, grid: Any) -> list[dict[str, Any]]:
@@ -198,18 +266,74 @@ def _check_value(r: Reader, value: Any, where: str) -> None:
         raise r.fail(where, str(value), "expected a number, a string, a boolean, null, a list or a mapping")
 
 
-def _point(base: Path, base_data: dict, values: dict[str, Any], index: int, name: str) -> SweepPoint:
+class _Dumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # libyaml's emitter when PyYAML has it
+    """YAML as ``yaml.safe_dump`` writes it (libyaml's emitter writes the same text, faster),
+    without anchors: a value used twice is written twice, as a point's copy of it would be."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True
+
+
+class _Section(dict):
+    """One top-level entry of a case, dumped as it is within the whole case's block mapping
+    (alone, a mapping of one scalar would be written in flow style, ``{title: x}``)."""
+
+
+_Dumper.add_representer(_Section, lambda dumper, data: dumper.represent_mapping(
+    "tag:yaml.org,2002:map", data, flow_style=False))
+
+
+def _dump(data: dict) -> str:
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True, default_flow_style=None,
+                     width=100)
+
+
+class _PointTexts:
+    """The case texts of a sweep's points, from the base case's YAML mapping: each top-level
+    section of the base dumped once (its data files made absolute), a point's own sections
+    copied, set and dumped anew. A point's text is the same as dumping its whole mapping."""
+
+    def __init__(self, base_data: dict, directory: Path) -> None:
+        self.directory = directory
+        self.base = dict(base_data)
+        if "geometry" in self.base:
+            # The text must say which files it reads wherever it is solved (a worker elsewhere).
+            self.base["geometry"] = _unshared(self.base["geometry"])
+            _absolute_data_paths(self.base["geometry"], directory)
+        self.sections = {key: _dump(_Section({key: value})) for key, value in self.base.items()}
+        self.base_text = _text_of(self.base, self.sections, set())
+        self.base_bytes = len(self.base_text.encode("utf-8"))
+
+    def text(self, values: dict[str, Any]) -> str:
+        """The case text with ``values`` set (raises _Unassignable)."""
+        data = dict(self.base)
+        changed: set[str] = set()
+        for key, value in values.items():
+            section = _STEP.match(key).group(1)
+            if section not in changed:
+                changed.add(section)
+                if section in data:
+                    data[section] = _unshared(data[section])
+            _assign(data, key, _unshared(value))
+        if "geometry" in changed:
+            _absolute_data_paths(data.get("geometry"), self.directory)
+        return _text_of(data, self.sections, changed)
+
+
+def _text_of(data: dict, sections: dict[str, str], changed: set[str]) -> str:
+    if not any(isinstance(value, (dict, list)) for value in data.values()):
+        return _dump(data)  # a mapping of scalars alone is dumped on one line, as {a: 1, b: 2}
+    return "".join(sections[key] if key not in changed else _dump(_Section({key: value}))
+                   for key, value in data.items())
+
+
+def _point(base: Path, texts: _PointTexts, values: dict[str, Any], index: int, name: str) -> SweepPoint:
     label = ", ".join(f"{key}={_shown_value(value)}" for key, value in values.items())
     source = str(base.parent / name)
-    data = _unshared(base_data)
     try:
-        for key, value in values.items():
-            _assign(data, key, _unshared(value))
+        text = texts.text(values)
     except _Unassignable as problem:
         return SweepPoint(index, values, label, source, None, None, f"{name}: {problem}")
-    # The text must say which files it reads wherever it is solved (a worker elsewhere).
-    _absolute_data_paths(data.get("geometry"), base.parent)
-    text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True, default_flow_style=None, width=100)
     try:
         case = parse_case(text, source=source)
     except CaseError as error:
@@ -217,7 +341,7 @@ def _point(base: Path, base_data: dict, values: dict[str, Any], index: int, name
                           str(error))
     # The case's own digest covers the data files it reads (a profile, an outline, a mesh):
     # a point whose surface file changed is another point, never a stored one reused.
-    return SweepPoint(index, values, label, source, text, case.digest)
+    return SweepPoint(index, values, label, source, text, case.digest, units=case.units.to_dict())
 
 
 def _absolute_data_paths(geometry: Any, directory: Path) -> None:

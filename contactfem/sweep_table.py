@@ -13,6 +13,9 @@ from contactfem.sweep_plan import SweepPoint, _shown_value
 
 #: The report's timings, in order; ``total`` (the point's wall time in its worker) follows.
 STAGES = ("mesh", "assemble", "solve", "postprocess", "report")
+#: The units of a row's figures (the point's case's), the last columns of sweep.csv.
+UNITS = ("length", "force", "stress")
+UNIT_COLUMNS = tuple(f"{name}_unit" for name in UNITS)
 ERROR_NORMS = ("displacement_l2", "displacement_h1_semi", "displacement_h1", "displacement_energy",
                "multiplier_l2", "multiplier_h_minus_half")
 
@@ -23,7 +26,7 @@ def _row(point: SweepPoint, record: dict, reused: bool) -> dict:
                                                 "certificate", "errors", "energy_norm")}
     return {"index": point.index, "values": point.values, "label": point.label, "digest": point.digest,
             "reused": reused, **figures, "seconds": dict(record.get("seconds") or {}),
-            "warnings": list(record.get("warnings") or []),
+            "warnings": list(record.get("warnings") or []), "units": point.units,
             "group": "", "error_kind": None, "error": None, "error_reference": None, "pareto": False}
 
 
@@ -69,7 +72,8 @@ def table_csv(table: dict) -> str:
     keys = table["keys"]
     header = ["index", "status", *keys, "unknowns", "iterations", *(f"seconds_{s}" for s in (*STAGES, "total")),
               "contact_force", "active_nodes", "contact_zone", "certificate", *ERROR_NORMS, "energy_norm",
-              "error_kind", "error", "error_reference", "pareto", "reused", "digest", "message"]
+              "error_kind", "error", "error_reference", "pareto", "reused", "digest", "message",
+              *UNIT_COLUMNS]
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
@@ -87,6 +91,7 @@ def table_csv(table: dict) -> str:
             _cell(row["energy_norm"]), _cell(row["error_kind"]), _cell(row["error"]),
             _cell(row["error_reference"]), _cell(row["pareto"]), _cell(row["reused"]), _cell(row["digest"]),
             _cell(row["message"]),
+            *(_cell((row["units"] or {}).get(name)) for name in UNITS),
         ])
     return buffer.getvalue()
 

@@ -205,3 +205,60 @@ def test_refine_quadruples_triangles(tmp_path):
     fine = json.loads((tmp_path / "fine" / "report.json").read_text(encoding="utf-8"))
     assert fine["mesh"]["triangles"] == 4 * coarse["mesh"]["triangles"]
     assert fine["solver"]["status"] == "converged"
+
+
+# --------------------------------------------------------------------------- which files a solve writes
+
+
+def test_the_default_outputs_are_one_list_everywhere(tmp_path):
+    """The case layer's default output formats are the registry's, the starter case's (written
+    from it) and the documentation's; the starter case solves to exactly those files."""
+    import yaml
+
+    from contactfem.case.names import DEFAULT_FORMATS
+    from contactfem.io import registry
+    from contactfem.starter import starter_case
+
+    assert registry.DEFAULT_FORMATS == DEFAULT_FORMATS and "csv" in DEFAULT_FORMATS
+    listed = f"[{', '.join(DEFAULT_FORMATS)}]"
+    assert yaml.safe_load(starter_case(Path("case.yaml")))["output"]["files"] == list(DEFAULT_FORMATS)
+    for page in ("docs/outputs.md", "docs/case-reference.md", "docs/tutorial.md", "docs/commands.md"):
+        text = (ROOT / page).read_text(encoding="utf-8")
+        assert listed in text, page
+        assert "files: [vtu, h5, json]" not in text, page  # the old, wrong, default
+    case = tmp_path / "case.yaml"
+    assert invoke("init", case).exit_code == 0
+    out = tmp_path / "out"
+    solve(case, out, "--quiet")
+    expected = [name for fmt in DEFAULT_FORMATS for name in registry.FORMATS[fmt].files]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == sorted(expected)
+
+
+@pytest.mark.parametrize("files, absent", [
+    (["vtu", "h5", "json", "xdmf"], ["contact.csv"]),
+    (["vtu", "h5", "csv", "json", "xdmf"], []),
+    (["h5", "json"], ["solution.vtu", "contact.vtu", "solution.pvd", "contact.csv"]),
+])
+def test_a_solve_writes_exactly_the_listed_formats_and_says_which(files, absent, tmp_path):
+    """output.files is the list written, no more and no less: xdmf added to a list without csv
+    writes no contact.csv; check prints that list before the solve, the summary after it."""
+    import yaml
+    from conftest import square_case_dict
+
+    from contactfem.io.registry import FORMATS
+
+    data = square_case_dict(divisions=4)
+    data["output"] = {"files": files}
+    case = tmp_path / "case.yaml"
+    case.write_text(yaml.safe_dump(data), encoding="utf-8")
+    expected = [name for fmt in FORMATS if fmt in files for name in FORMATS[fmt].files]
+    check = invoke("check", case, "--json")
+    assert check.exit_code == 0, check.stderr
+    assert json.loads(check.stdout)["output"]["files"] == expected
+    assert f"  output     results/case: {', '.join(expected)} (output.files: " in invoke("check", case).stdout
+    out = tmp_path / "out"
+    result = solve(case, out)
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == sorted(expected)
+    assert not any((out / name).exists() for name in absent)
+    wrote = next(line for line in result.stdout.splitlines() if line.startswith("  wrote"))
+    assert wrote.split(None, 1)[1].split(", ") == [str(out / name) for name in expected]

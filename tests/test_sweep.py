@@ -9,18 +9,23 @@ this process. Meshes are tiny (at most 64 divisions) so that the file runs in se
 from __future__ import annotations
 
 import copy
+import csv
 import json
 import os
 import signal
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from conftest import make_runner, square_case_dict
 
 from contactfem import sweep as sweeps
+from contactfem import sweep_plan
 from contactfem.cli import main
+from contactfem.errors import CaseError
 
 try:
     import distributed  # noqa: F401
@@ -30,6 +35,7 @@ except ImportError:
     HAVE_DASK = False
 
 needs_dask = pytest.mark.skipif(not HAVE_DASK, reason="Dask (distributed) is not installed: pip install -e '.[dask]'")
+ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = Path(sweeps.__file__).parent / "schemas" / "sweep.schema.json"
 #: 2 x 2 x 2 = 8 points, the last key varying fastest.
 GRID = {"mesh.divisions": [6, 8], "solver.method": ["positive", "standard"], "material.nu": [0.3, 0.45]}
@@ -248,12 +254,13 @@ def test_rerunning_does_not_solve_finished_points_again(tmp_path, no_dask, solve
     (out / "sweep.json").unlink()
     for row in first["points"][5:]:
         (out / "points" / f"{row['digest']}.json").unlink()
-    (out / "points" / ".tmp-123-abcd.x.json").write_text("{")  # a write cut short
+    (out / "points" / ".tmp-999999-abcdef01.x.json").write_text("{")  # a write cut short
+    (out / "points" / ".tmp-notes.txt").write_text("the user's")  # not the sweep's to delete
     assert invoke("sweep", path, "--out", out, "--quiet").exit_code == 0
     assert solves["n"] == 11
     third = json.loads((out / "sweep.json").read_text())
     assert [r["reused"] for r in third["points"]] == [True] * 5 + [False] * 3
-    assert not list((out / "points").glob(".tmp-*"))
+    assert [p.name for p in (out / "points").glob(".tmp-*")] == [".tmp-notes.txt"]
 
     # A larger grid reuses the points it shares with the finished one.
     bigger = write_sweep(tmp_path, {"grid": {**GRID, "mesh.divisions": [6, 8, 4]}}, name="bigger.yaml")
@@ -591,3 +598,129 @@ def test_a_point_too_large_for_its_worker_is_refused_against_the_workers_limit(t
     assert "more than this sweep worker's memory limit of 1 GiB" in big["message"]
     assert big["seconds"]["total"] < 30
     assert small["status"] == "ok", small
+
+
+# --- the plan's size ----------------------------------------------------------------------------------
+
+
+def _profile_case(heights: int, seed: int = 1) -> dict:
+    """A block on a rough base of ``heights`` inline heights (the bulk of a large case file)."""
+    rng = np.random.default_rng(seed)
+    return {
+        "title": "inline rough block",
+        "geometry": {"profile": {"heights": [round(float(h), 6) for h in rng.random(heights) * 1e-3],
+                                 "spacing": 1.0 / (heights - 1), "name": "base", "depth": 0.5,
+                                 "sides": ["left", "right"], "top": "top"}},
+        "mesh": {"size": 0.1},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"top": {"displacement": [0, -2.0e-4]}, "left": "free", "right": "free", "base": "contact"},
+        "obstacle": {"point": [0, 0], "normal": [0, -1]},
+    }
+
+
+def test_a_plan_too_large_is_refused_at_once_naming_the_grid_and_the_bound(tmp_path, no_dask):
+    """The issue's sweep scaled down: a base of 20 000 inline heights (about 0.2 MB) and a grid of
+    100 x 50 points would make about 1 GB of case text: refused in one line before anything is
+    built, in well under 2 s (the base case's own validation, seconds for a large one, included)."""
+    path = write_sweep(tmp_path, {"grid": {"material.nu": [0.3 + 1e-4 * i for i in range(100)],
+                                           "mesh.size": [0.1 + 1e-3 * i for i in range(50)]}},
+                       base=_profile_case(20_000), name="big-sweep.yaml")
+    clock = time.perf_counter()
+    result = invoke("sweep", path, "--out", tmp_path / "out")
+    seconds = time.perf_counter() - clock
+    assert result.exit_code == 2, result.stderr
+    message = result.stderr.strip()
+    assert len(message.splitlines()) == 1 and message.startswith("error: big-sweep.yaml: grid: 100 x 50 = 5000 points")
+    assert "base case (base.yaml)" in message and "expected at most 64 MiB" in message
+    assert f"{sweeps.MAX_SWEEP_PLAN_BYTES >> 20} MiB" in message and "GB of case text" in message
+    assert seconds < 2, seconds
+    assert not (tmp_path / "out").exists()
+    # The same as a list of points.
+    points = [{"material.nu": 0.3 + 1e-5 * i} for i in range(5000)]
+    result = invoke("sweep", write_sweep(tmp_path, {"points": points}, base=_profile_case(20_000)))
+    assert result.exit_code == 2 and "sweep.yaml: points: 5000 points of a" in result.stderr
+
+
+def test_the_bound_counts_the_case_as_dumped_when_that_is_larger(tmp_path, monkeypatch):
+    """A base case written compactly ([1,2,3]) dumps longer than its file: the bound is checked
+    again on the dumped text, still before the points are built."""
+    path = write_sweep(tmp_path, {"grid": {"material.nu": [0.3, 0.31, 0.32, 0.33]}})
+    base = tmp_path / "base.yaml"
+    base.write_text(json.dumps(_profile_case(2000), separators=(",", ":")))  # JSON is YAML
+    compact = len(base.read_bytes())
+    built = []
+    monkeypatch.setattr(sweep_plan, "_point", lambda *args: built.append(args))
+    monkeypatch.setattr(sweep_plan, "MAX_SWEEP_PLAN_BYTES", 4 * compact + 200)
+    with pytest.raises(CaseError, match=r"grid: 4 points of a .* make .* expected at most"):
+        sweeps.load_sweep(path)
+    assert built == []
+
+
+def test_planning_dumps_the_base_case_once(tmp_path, monkeypatch):
+    """Planning is linear in the plan's size: the base's sections are dumped once, and a point
+    dumps anew only the sections its values change (never the profile's heights again)."""
+    dumped = []
+    real = sweep_plan._dump
+    monkeypatch.setattr(sweep_plan, "_dump", lambda data: dumped.append(real(data)) or dumped[-1])
+    path = write_sweep(tmp_path, {"grid": {"material.nu": [0.3, 0.32, 0.34, 0.36, 0.38, 0.4],
+                                           "solver.method": ["positive", "standard"]}},
+                       base=_profile_case(5000))
+    plan = sweeps.load_sweep(path)
+    base_bytes = len(plan.points[0].text)
+    assert len(plan.points) == 12 and all(point.problem is None for point in plan.points)
+    assert sum(map(len, dumped)) < base_bytes + 12 * 200
+
+
+@pytest.mark.parametrize("case, grid", [
+    ("square", {"material.nu": [0.3, 0.35], "solver.method": ["standard"], "mesh.divisions": [[8, 4]]}),
+    ("rough", {"geometry.profile.depth": [0.4, 0.6], "output.files": [["vtu", "json"]]}),
+    ("hertz_platen", {"boundary.top.platen.force": [1000.0], "load_path.steps": [2], "title": ["a: b", "x"]}),
+    ("hole", {"geometry.polygon.holes[0].circle.center[0]": [0.9, 1.1], "units.length": ["mm"]}),
+])
+def test_a_points_text_is_its_whole_case_dumped(case, grid, tmp_path):
+    """Sections dumped apart and joined make the same text as the whole mapping dumped at once
+    (so a stored point keeps its name, the SHA-256 of its text, from one version to the next)."""
+    from contactfem.case.yaml_loader import load_yaml
+
+    source = ROOT / "cases" / f"{case}.yaml"
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"case": str(source), "grid": grid}, sort_keys=False))
+    plan = sweeps.load_sweep(path)
+    for point in plan.points:
+        data = sweep_plan._unshared(load_yaml(source.read_text(encoding="utf-8"), source.name))
+        for key, value in point.values.items():
+            sweep_plan._assign(data, key, value)
+        sweep_plan._absolute_data_paths(data.get("geometry"), source.parent)
+        assert point.text == yaml.safe_dump(data, sort_keys=False, allow_unicode=True, default_flow_style=None,
+                                            width=100), point.label
+
+
+def test_a_sweep_of_a_large_inline_case_within_the_bound_plans_and_runs(tmp_path, no_dask, monkeypatch):
+    """A base of 2 000 inline heights, 3 points: planned (a large plan says so first), solved, tabled."""
+    monkeypatch.setattr(sweep_plan, "PLAN_NOTE_BYTES", 1000)
+    path = write_sweep(tmp_path, {"grid": {"material.nu": [0.25, 0.3, 0.35]}}, base=_profile_case(2000))
+    result = invoke("sweep", path, "--out", tmp_path / "out")
+    assert result.exit_code == 0, result.stderr
+    assert result.stderr.startswith("planning 3 points: ") and "kB of case text" in result.stderr.splitlines()[0]
+    table = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    assert [row["status"] for row in table["points"]] == ["ok", "ok", "ok"]
+
+
+def test_sweep_json_and_csv_say_the_units_of_each_row(tmp_path, no_dask):
+    """The base case's units, and each row's, its case's: a sweep may set units.*, and a
+    refused point has none."""
+    base = square_case_dict(4)
+    base["units"] = {"length": "mm", "force": "N"}
+    path = write_sweep(tmp_path, {"points": [{"material.nu": 0.3}, {"units.length": "m"}, {"material.nu": 0.7}]},
+                       base=base)
+    result = invoke("sweep", path, "--out", tmp_path / "out", "--quiet")
+    assert result.exit_code == 1, result.stderr  # the third point is refused
+    table = json.loads((tmp_path / "out" / "sweep.json").read_text())
+    jsonschema = pytest.importorskip("jsonschema")
+    jsonschema.validate(table, json.loads(SCHEMA.read_text()), cls=jsonschema.Draft202012Validator)
+    assert table["units"] == {"length": "mm", "force": "N", "stress": "MPa"}
+    assert [row["units"] for row in table["points"]] == [
+        {"length": "mm", "force": "N", "stress": "MPa"}, {"length": "m", "force": "N", "stress": "Pa"}, None]
+    rows = list(csv.DictReader((tmp_path / "out" / "sweep.csv").read_text().splitlines()))
+    assert [(r["length_unit"], r["force_unit"], r["stress_unit"]) for r in rows] == [
+        ("mm", "N", "MPa"), ("m", "N", "Pa"), ("", "", "")]

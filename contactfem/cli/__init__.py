@@ -62,6 +62,23 @@ for _command in (solve, check, compare, converge, adapt, plot, init, sweep):
 
 def run() -> None:
     """The ``contactfem`` command: the process's heap kept for reuse (:mod:`contactfem.heap`;
-    a library caller's process is left as it is), then :func:`main`."""
+    a library caller's process is left as it is), text that stdout or stderr cannot encode
+    escaped rather than raised, then :func:`main`."""
     keep_freed_memory()
+    _escape_unencodable()
     main()
+
+
+def _escape_unencodable() -> None:
+    """Print what the streams' encoding cannot carry (a title on an ASCII stdout, a surrogate
+    that slipped past :func:`contactfem.cli.exits._printable`) as a backslash escape instead of
+    failing with a traceback. Paths are shown as text first (``\\xNN`` for a byte that is not
+    UTF-8); this is the net under that."""
+    import sys
+
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (OSError, ValueError):
+                pass

@@ -1,5 +1,5 @@
-"""``python -m contactfem.cli``: the ``contactfem`` command."""
+"""``python -m contactfem.cli``: the ``contactfem`` command, started as the script starts it."""
 
-from contactfem.cli import run
+from contactfem.__main__ import main
 
-run()
+main()

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _files_of, _load, _progress, _write_solution
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.common import _files_of, _load, _progress, _writable_by_vtk, _write_solution
+from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import (
     _CheckedPath,
     _FiniteFloatRange,
@@ -67,7 +67,8 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
             run = adaptive_loop(case, theta=theta, target=target, max_unknowns=max_unknowns,
                                 max_seconds=max_seconds, progress=progress)
             report = build_report(case, run.result, extras={"estimator": run.estimate.summary()})
-            with claim.stage(replaces=(*RESULT_FILES, ADAPT_JSON), last=ADAPT_JSON) as staging:
+            with (claim.stage(replaces=(*RESULT_FILES, ADAPT_JSON), last=ADAPT_JSON) as staged,
+                  _writable_by_vtk(staged) as staging):
                 _write_solution(staging, case, run.result, report, progress)
                 final = run.result.solution
                 plot_adapt(staging / ADAPT_PNG, final.mesh.points, final.mesh.triangles, run.estimate.indicators,
@@ -88,7 +89,7 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
         energy = (row["errors"] or {}).get("displacement_energy")
         cells = (f"{energy:>14.4e}{row['effectivity']:>12.3f}" if energy else f"{'-':>14}{'-':>12}")
         click.echo(f"  {row['step']:>4}{row['unknowns']:>10}{row['eta']:>12.4e}{cells}{row['seconds']:>9.2f}")
-    click.echo(f"  wrote {', '.join(str(p) for p in written)}")
+    click.echo(f"  wrote {', '.join(_shown(p) for p in written)}")
 
 
 def _refuse_unknowns_beyond_memory(case, max_unknowns: int) -> None:

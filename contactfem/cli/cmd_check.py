@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _load
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem import __version__
+from contactfem.cli.common import _files_of, _load
+from contactfem.cli.exits import _fail, _interruptible, _printable, _shown
 from contactfem.cli.options import case_argument, json_option, refine_option
 from contactfem.errors import ContactFemError
+from contactfem.io.registry import CHECK_SCHEMA_VERSION, shown_path, to_json
 
 
 @click.command()
@@ -38,7 +39,9 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     mesh = problem.mesh
     diameters = mesh.triangle_diameters()
     summary = {
-        "case": str(case_file),
+        "schema_version": CHECK_SCHEMA_VERSION,
+        "contactfem_version": __version__,
+        "case": shown_path(case_file),
         "title": case.title,
         "geometry": _geometry_figures(case),
         "material": {"E": case.material.young, "nu": case.material.poisson, "plane": case.material.plane},
@@ -51,14 +54,16 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         "method": case.solver.method,
         "estimate": _estimate(case, problem),
         "load_path": None if case.load_path is None else list(case.load_path.factors),
+        "units": case.units.to_dict(),
+        "output": _output_figures(case),
     }
     if as_json:
-        click.echo(json.dumps(summary, indent=2, sort_keys=True))
+        click.echo(to_json(summary), nl=False)
         return
     if quiet:
         return
-    click.echo(f"{case_file}: valid — {case.title}")
-    click.echo(f"  geometry   {_geometry_text(summary['geometry'])}")
+    click.echo(f"{_shown(case_file)}: valid — {case.title}")
+    click.echo(_printable(f"  geometry   {_geometry_text(summary['geometry'])}"))
     click.echo(f"  material   E = {case.material.young:g}, nu = {case.material.poisson:g}, plane {case.material.plane}")
     for part in case.parts:
         click.echo(f"  boundary   {part.name}: {part.label}")
@@ -70,9 +75,21 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
         factors = case.load_path.factors
         click.echo(f"  load path  {len(factors)} steps, load factors {factors[0]:g} to {factors[-1]:g} "
                    "(every load, prescribed displacement and platen drive times each factor)")
+    output = summary["output"]
+    click.echo(_printable(f"  output     {output['directory']}: {', '.join(output['files'])} "
+                          f"(output.files: {', '.join(output['formats'])})"))
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
                f"{cost['backend']} (measured on 2 cores; ±50%), of {cost['limit']}")
+
+
+def _output_figures(case) -> dict:
+    """Where a solve of the case writes, and exactly which files: those of output.files (a load
+    path adds its own format and path.png)."""
+    from contactfem.io.registry import PATH_PNG
+
+    files = _files_of(case.output.files) + ([PATH_PNG] if case.load_path is not None else [])
+    return {"directory": shown_path(case.output.directory), "formats": list(case.output.files), "files": files}
 
 
 def _estimate(case, problem) -> dict:
@@ -90,7 +107,7 @@ def _geometry_figures(case) -> dict:
     from contactfem.case import PolygonGeometry, RectangleGeometry
 
     geometry = case.geometry
-    figures: dict = {"files": [str(path) for path in case.data_files]}  # a mesh file among them
+    figures: dict = {"files": [shown_path(path) for path in case.data_files]}  # a mesh file among them
     if isinstance(geometry, RectangleGeometry):
         figures.update(kind="rectangle", lower=list(geometry.lower), upper=list(geometry.upper))
     elif isinstance(geometry, PolygonGeometry):

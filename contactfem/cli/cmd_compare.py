@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _end_progress, _load, _progress, _write_series
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.common import _end_progress, _load, _progress, _writable_by_vtk, _write_series
+from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import (
     _CheckedPath,
     case_argument,
@@ -52,7 +52,7 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-compare")
         with claimed_directory(directory, markers=(COMPARE_JSON,), overwrite=overwrite) as claim:
             figures, outcomes = compare_methods(case, refine=refine, progress=_progress(quiet))
-            with claim.stage(last=COMPARE_JSON) as staging:
+            with claim.stage(last=COMPARE_JSON) as staged, _writable_by_vtk(staged) as staging:
                 atomic_write_text(staging / COMPARE_JSON, to_json(figures))
                 # Drawn from the figures just written, not from the file read back.
                 plot_compare(staging / COMPARE_PNG, figures, title=case.title)
@@ -82,5 +82,5 @@ def compare(case_file: Path, out_dir: Path | None, refine: int | None, quiet: bo
     click.echo(f"  negative θ nodes             {figures['negative_theta_nodes']} (min θ {figures['min_theta']:.4g})")
     click.echo(f"  total variation in lift-off  θ {figures['theta_total_variation_in_lift_off']:.4g}, "
                f"λ {figures['lambda_total_variation_in_lift_off']:.4g}")
-    click.echo(f"  wrote {directory / COMPARE_JSON}, {directory / COMPARE_PNG}, "
-               f"{directory / 'compare.pvd'} (ParaView: one time step per method)")
+    click.echo(f"  wrote {_shown(directory / COMPARE_JSON)}, {_shown(directory / COMPARE_PNG)}, "
+               f"{_shown(directory / 'compare.pvd')} (ParaView: one time step per method)")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _end_progress, _load, _progress, _write_series
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.common import _end_progress, _load, _progress, _writable_by_vtk, _write_series
+from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import _CheckedPath, case_argument, json_option, overwrite_option, quiet_option
 from contactfem.errors import ContactFemError
 from contactfem.io.registry import CONVERGENCE_CSV, CONVERGENCE_JSON, CONVERGENCE_PNGS, to_json
@@ -53,7 +53,7 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
             study = convergence_study(case, levels, extra=extra, methods=methods or METHOD_NAMES,
                                       progress=_progress(quiet),
                                       on_outcome=lambda level, name, o: kept.append((level, name, o.solution)))
-            with claim.stage(last=CONVERGENCE_JSON) as staging:
+            with claim.stage(last=CONVERGENCE_JSON) as staged, _writable_by_vtk(staged) as staging:
                 atomic_write_text(staging / CONVERGENCE_JSON, to_json(study))
                 atomic_write_text(staging / CONVERGENCE_CSV, _csv(study["rows"]))
                 plot_convergence(staging, study)
@@ -87,7 +87,7 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
                    f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells))
     click.echo("  (observed rates between consecutive levels in parentheses; the paper predicts "
                "h^(1/2+ν), ν ≤ 1/2, for the H1 and H-1/2 errors)")
-    click.echo(f"  wrote {directory}/{CONVERGENCE_JSON}, {CONVERGENCE_CSV}, {', '.join(CONVERGENCE_PNGS)}, "
+    click.echo(f"  wrote {_shown(directory)}/{CONVERGENCE_JSON}, {CONVERGENCE_CSV}, {', '.join(CONVERGENCE_PNGS)}, "
                f"convergence-<method>.pvd (ParaView: one time step per level)")
 
 

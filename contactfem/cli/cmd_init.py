@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.exits import _fail
+from contactfem.cli.exits import _fail, _shown
 from contactfem.cli.options import _CheckedPath, quiet_option
 from contactfem.errors import ContactFemError
 
@@ -34,4 +34,4 @@ def init(path: Path, quiet: bool) -> None:
         _fail(error)
         return
     if not quiet:
-        click.echo(f"wrote {written}; next: contactfem check {written}")
+        click.echo(f"wrote {_shown(written)}; next: contactfem check {_shown(written)}")

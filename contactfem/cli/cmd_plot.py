@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
+from contactfem import __version__
 from contactfem.cli.common import _end_progress, _progress
-from contactfem.cli.exits import _fail, _interruptible
+from contactfem.cli.exits import _fail, _interruptible, _shown
 from contactfem.cli.options import _CheckedPath, quiet_option
 from contactfem.errors import ContactFemError
+from contactfem.io.registry import PLOT_SCHEMA_VERSION, to_json
 
 
 @click.command()
@@ -65,15 +66,18 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
                     progress("rendering pictures")
                 made = _draw(result_dir, loaded, staging, pixels, factor, window)
         made["files"] = [str(Path(directory) / Path(name).name) for name in made["files"]]
+        made = {"schema_version": PLOT_SCHEMA_VERSION, "contactfem_version": __version__,
+                "result_dir": str(result_dir), **made}
     except ContactFemError as error:
         _fail(error)
         return
     _end_progress()
     if as_json:
-        click.echo(json.dumps(made, indent=2, sort_keys=True))
+        click.echo(to_json(made), nl=False)
     elif not quiet:
         magnified = f", displacement x {made['scale']:.3g}" if made["scale"] is not None else ""
-        click.echo(f"wrote {', '.join(made['files'])} ({made['size'][0]}x{made['size'][1]}{magnified})")
+        files = ", ".join(_shown(f) for f in made["files"])
+        click.echo(f"wrote {files} ({made['size'][0]}x{made['size'][1]}{magnified})")
 
 
 def _draw(result_dir: Path, loaded, out: Path, size: tuple[int, int], scale: float | None,

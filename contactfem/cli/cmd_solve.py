@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _end_progress, _files_of, _load, _progress, _write_solution
+from contactfem.cli.common import _end_progress, _files_of, _load, _progress, _writable_by_vtk, _write_solution
 from contactfem.cli.exits import _exit_code, _fail, _interruptible
 from contactfem.cli.options import (
     _CheckedPath,
@@ -19,7 +19,7 @@ from contactfem.cli.options import (
 )
 from contactfem.cli.summary import _summary
 from contactfem.errors import CaseError, ContactFemError
-from contactfem.io.registry import REPORT_JSON, RESULT_FILES, RESULT_MARKERS, to_json
+from contactfem.io.registry import REPORT_JSON, RESULT_FILES, RESULT_MARKERS, shown_path, to_json
 from contactfem.linalg import BACKEND_CHOICES, DISTRIBUTED_BACKENDS
 from contactfem.methods import METHOD_NAMES
 
@@ -73,7 +73,8 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
                                progress)
             return
         with claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite) as claim:
-            with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+            with (claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staged,
+                  _writable_by_vtk(staged) as staging):
                 writer = None
                 if case.load_path is not None:
                     # Each step's files go into the staging area as it is solved: a path
@@ -158,7 +159,7 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
         if not root:
             return
         result = outcome.result
-        with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staging:
+        with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staged, _writable_by_vtk(staged) as staging:
             report = _write_solution(staging, case, result, distributed_report(case, outcome), progress)
             names = _files_of(case.output.files)
             if make_plot:
@@ -174,7 +175,8 @@ def _refuse_uncertified(case, result, directory: Path) -> None:
 
     if result.kernel.status is Status.NOT_CERTIFIED:
         _fail(SolverError(f"{case.source.name}: method {result.method}: not certified, "
-                          f"{result.kernel.message}; the files in {directory} say so (report.json: solver.certificate)"))
+                          f"{result.kernel.message}; the files in {shown_path(directory)} say so "
+                          "(report.json: solver.certificate)"))
 
 
 def _pictures(result_dir: Path, out_dir: Path, progress, **options) -> list[str]:

@@ -10,7 +10,7 @@ from contactfem.cli.exits import _fail, _interruptible, _printable
 from contactfem.cli.options import _CheckedPath, overwrite_option, quiet_option
 from contactfem.cli.sweep_report import _plot_sweep, _sweep_summary
 from contactfem.errors import CaseError, ContactFemError
-from contactfem.io.registry import to_json
+from contactfem.io.registry import shown_data, to_json
 
 
 @click.command()
@@ -48,10 +48,10 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
     from contactfem import sweep as sweeps
     from contactfem.errors import SolverError
     from contactfem.io.atomic import (
-        TEMP_PREFIX,
         atomic_write_text,
         claimed_directory,
         ensure_directory,
+        remove_leftover_temporaries,
     )
     from contactfem.io.readback import read_point_record
 
@@ -72,7 +72,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
         if scheduler is not None and workers is not None:
             raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
                             "(the cluster's own workers run the points)")
-        plan = sweeps.load_sweep(sweep_file)
+        plan = sweeps.load_sweep(sweep_file, progress=say)
         directory = Path(out_dir if out_dir is not None else plan.directory)
         with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
             points = directory / sweeps.POINTS_DIR
@@ -90,12 +90,12 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
                     where = f"the cluster at {scheduler}" if scheduler else "a local cluster"
                     say(f"solving {len(pending)} points on {engine.workers} Dask workers of {where}")
                 ensure_directory(points)
-                for leftover in points.glob(f"{TEMP_PREFIX}*"):  # a killed run's unfinished write
-                    leftover.unlink(missing_ok=True)
-                table = sweeps.run_sweep(
+                remove_leftover_temporaries(points)  # a killed run's unfinished writes, only those
+                # Messages naming a file whose name is not UTF-8 are stored and shown as text.
+                table = shown_data(sweeps.run_sweep(
                     plan, engine, finished=done, progress=finished,
                     store=lambda record: atomic_write_text(points / sweeps.point_file(record["digest"]),
-                                                           sweeps.point_json(record)))
+                                                           sweeps.point_json(shown_data(record)))))
             with claim.stage(replaces=sweeps.SWEEP_FILES, last=sweeps.SWEEP_JSON) as staging:
                 atomic_write_text(staging / sweeps.SWEEP_CSV, sweeps.table_csv(table))
                 _plot_sweep(staging / sweeps.SWEEP_PNG, table)

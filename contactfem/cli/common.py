@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
 
-from contactfem.errors import CaseError
-from contactfem.io.registry import to_json
+from contactfem.errors import CaseError, OutputError
+from contactfem.io.registry import shown_path, shown_text, to_json
 from contactfem.linalg import DISTRIBUTED_BACKENDS
 
 
@@ -43,6 +47,11 @@ def _load(case_file: Path, backend: str | None = None, distributed: bool = False
     from contactfem.linalg import resolve_backend
 
     case = load_case(case_file)
+    title = shown_text(case.title)
+    if title != case.title:
+        # The default title is the file's name: a byte of it that is not UTF-8 is drawn, printed
+        # and stored as \xNN (matplotlib, HDF5 and VTK take only encodable text).
+        case = dataclasses.replace(case, title=title)
     if backend is not None:
         case = case.with_solver(backend=backend)
     key = "--backend" if backend is not None else "solver.backend"
@@ -58,9 +67,10 @@ def _load(case_file: Path, backend: str | None = None, distributed: bool = False
 
 
 def _files_of(formats: tuple[str, ...]) -> list[str]:
+    """The files the ``formats`` write, in the order they are written (the report last)."""
     from contactfem.io.registry import FORMATS
 
-    return [name for format in formats for name in FORMATS[format].files]
+    return [name for format, output in FORMATS.items() if format in formats for name in output.files]
 
 
 def _write_solution(staging: Path, case, result, report: dict, progress, path_writer=None) -> dict:
@@ -102,3 +112,31 @@ def _write_series(directory: Path, stem: str, entries: list) -> list[Path]:
     from contactfem.io.series import write_series
 
     return write_series(directory, stem, entries)
+
+
+@contextmanager
+def _writable_by_vtk(directory: Path) -> Iterator[Path]:
+    """``directory`` under a name VTK's writers can open. They take the path as UTF-8 text, so a
+    path with bytes that are not UTF-8 (``--out $'\\xfe'``, a case file whose name or directory
+    has such bytes) would fail to encode; such a directory is reached through the link of an
+    open descriptor of it, ``/proc/self/fd/N``, whose name is ASCII. Where there is no /proc,
+    the path is refused (OutputError) rather than written through a traceback."""
+    name = os.fsdecode(directory)
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        pass
+    else:
+        yield Path(directory)
+        return
+    if not os.path.isdir("/proc/self/fd"):
+        raise OutputError(f"cannot write {shown_path(directory)}: the path is not UTF-8 and VTK, which writes "
+                          "the VTU files, opens only UTF-8 paths; choose another output directory (--out)")
+    try:
+        descriptor = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError as exc:
+        raise OutputError(f"cannot write {shown_path(directory)}: {exc.strerror or exc}") from None
+    try:
+        yield Path(f"/proc/self/fd/{descriptor}")
+    finally:
+        os.close(descriptor)

@@ -34,8 +34,18 @@ def _fail(error: ContactFemError) -> None:
 
 def _printable(text: str) -> str:
     """Escape control and separator characters a case file may carry into a message
-    (a key with a record separator would otherwise split the one-line error)."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    (a key with a record separator would otherwise split the one-line error), and show a
+    byte of a file name that is not UTF-8 (a surrogate U+DC80..U+DCFF) as ``\\xNN``, the
+    byte, as :func:`contactfem.io.registry.shown_text` does."""
+    return "".join(c if c.isprintable() else f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
+                   else repr(c)[1:-1] for c in text)
+
+
+def _shown(path) -> str:
+    """A path for a line on stdout or stderr (see :func:`_printable`)."""
+    import os
+
+    return _printable(os.fsdecode(path))
 
 
 def _interruptible(command):
@@ -120,9 +130,28 @@ def _interruption_behind(error: BaseException) -> BaseException | None:
     return None
 
 
+class _Stopped(BaseException):
+    """Ctrl-C outside a command's own handling, carried past click's handler (which would
+    print an empty line on stderr before its Abort) to :meth:`_OneLineErrors.main`."""
+
+
 class _OneLineErrors(click.Group):
     """Usage errors (an unknown option, a bad value, a missing argument) as one ``error:`` line and
-    exit 2, like every other bad input; Ctrl-C outside a command's own handling as exit 130."""
+    exit 2, like every other bad input; Ctrl-C outside a command's own handling (while the
+    options are parsed and their values checked, which imports the case reader) as one line
+    and exit 130."""
+
+    def make_context(self, *args, **kwargs):
+        try:
+            return super().make_context(*args, **kwargs)
+        except KeyboardInterrupt:
+            raise _Stopped() from None
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Stopped() from None
 
     def main(self, *args, **kwargs):
         kwargs["standalone_mode"] = False
@@ -138,7 +167,7 @@ class _OneLineErrors(click.Group):
         except click.ClickException as error:
             click.echo(f"error: {_printable(error.format_message())}", err=True)
             sys.exit(error.exit_code)
-        except (click.Abort, KeyboardInterrupt):
+        except (click.Abort, KeyboardInterrupt, _Stopped):
             click.echo("error: interrupted (SIGINT); no result was switched in, earlier results are unchanged",
                        err=True)
             sys.exit(EXIT_INTERRUPTED)

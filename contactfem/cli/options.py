@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.exits import _printable
+from contactfem.cli.exits import _printable, _shown
 
 
 class _CheckedPath(click.Path):
@@ -31,7 +31,16 @@ class _CheckedPath(click.Path):
         if problem is not None:
             text = value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
             self.fail(f"{_printable(shortened(text))}: the path {problem}", param, ctx)
-        return super().convert(value, param, ctx)
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter as error:
+            # click shows a byte of the name that is not UTF-8 as U+FFFD; the other messages show
+            # it as \xNN, the byte.
+            from click.utils import format_filename
+
+            if isinstance(value, (str, Path)):
+                error.message = error.message.replace(format_filename(value), _shown(value))
+            raise
 
 
 class _FiniteFloatRange(click.FloatRange):

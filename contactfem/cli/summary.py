@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from contactfem.cli.exits import _printable, _shown
+
 
 def _summary(report: dict, written: list[Path]) -> str:
     from contactfem.plots import zone_text
@@ -38,8 +40,8 @@ def _summary(report: dict, written: list[Path]) -> str:
                                             ("multiplier L2", "multiplier_l2")))
         lines.append(f"  exact error  {shown}")
     if written:
-        lines.append(f"  wrote        {', '.join(str(p) for p in written)}")
-    return "\n".join(lines)
+        lines.append(f"  wrote        {', '.join(_shown(p) for p in written)}")
+    return "\n".join(_printable(line) for line in lines)
 
 
 def _force_lines(forces: dict | None) -> list[str]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from contactfem.cli.exits import _printable, _shown
+
 
 def _sweep_summary(table: dict, directory: Path) -> str:
     engine = table["engine"]
@@ -27,8 +29,9 @@ def _sweep_summary(table: dict, directory: Path) -> str:
                      f"  {'*' if r['pareto'] else ''}")
     lines.append("  (error: energy norm against the exact solution, or |‖u_h‖ - ‖u_finest‖| in the energy norm "
                  "within each group; * = on its group's Pareto front of error against seconds)")
-    lines.append(f"  wrote {directory}/sweep.csv, sweep.json, sweep.png; each point in {directory}/points/")
-    return "\n".join(lines)
+    shown = _shown(directory)
+    lines.append(f"  wrote {shown}/sweep.csv, sweep.json, sweep.png; each point in {shown}/points/")
+    return "\n".join(_printable(line) for line in lines)
 
 
 def _plot_sweep(path: Path, table: dict) -> None:

@@ -10,6 +10,7 @@ when called, so that reading the names costs nothing.
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,13 +45,46 @@ CONVERGENCE_PNGS = ("convergence_h.png", "convergence_time.png")
 ADAPT_JSON = "adapt.json"
 #: The final mesh of `adapt` coloured by the error indicator η_T, and η step by step.
 ADAPT_PNG = "adapt.png"
-#: The JSON Schema of each JSON file the commands write, shipped in contactfem/schemas/.
+SWEEP_JSON = "sweep.json"
+#: The JSON the commands print on stdout that is no file's copy: check's and plot's --json.
+CHECK_OUTPUT = "check --json"
+PLOT_OUTPUT = "plot --json"
+#: The version of each of them (their "schema_version").
+CHECK_SCHEMA_VERSION = 1
+PLOT_SCHEMA_VERSION = 1
+#: The JSON Schema of each JSON file the commands write, and of the JSON they print that is no
+#: file's copy, shipped in contactfem/schemas/.
 JSON_SCHEMAS = {REPORT_JSON: "report.schema.json", COMPARE_JSON: "compare.schema.json",
-                CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json"}
+                CONVERGENCE_JSON: "convergence.schema.json", ADAPT_JSON: "adapt.schema.json",
+                SWEEP_JSON: "sweep.schema.json", CHECK_OUTPUT: "check.schema.json",
+                PLOT_OUTPUT: "plot.schema.json"}
+
+
+def shown_text(text: str) -> str:
+    """``text`` with every lone surrogate spelled out, so that it can be printed and written as
+    UTF-8 (a message, JSON, an HDF5 or VTU attribute): a byte of a file name that is not UTF-8,
+    which Python reads as a surrogate U+DC80..U+DCFF, as ``\\xNN`` (the byte), any other as
+    ``\\udNNN``. Text without one is returned as it is."""
+    if text.isascii():
+        return text
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        pass
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF
+                   else f"\\u{ord(c):04x}" if 0xD800 <= ord(c) <= 0xDFFF else c for c in text)
+
+
+def shown_path(path: str | bytes | os.PathLike) -> str:
+    """A path as messages, summaries and files show it: :func:`shown_text` of its name, the
+    bytes that are not UTF-8 as ``\\xNN``."""
+    return shown_text(os.fsdecode(path))
 
 
 def schema_path(file_name: str) -> Path:
-    """The JSON Schema (a file inside the installed package) of ``file_name``, e.g. ``report.json``."""
+    """The JSON Schema (a file inside the installed package) of ``file_name``, e.g. ``report.json``,
+    or of a command's printed JSON, ``check --json`` or ``plot --json``."""
     return Path(__file__).resolve().parents[1] / "schemas" / JSON_SCHEMAS[file_name]
 
 
@@ -100,7 +134,7 @@ def result_data(case, result, report: dict, path: PathData | None = None) -> Res
     from contactfem import __version__
 
     units = case.units
-    attributes = {"contactfem_version": __version__, "title": case.title, "case_file": str(case.source),
+    attributes = {"contactfem_version": __version__, "title": case.title, "case_file": shown_path(case.source),
                   "case_hash": case.digest, "method": result.method, "plane": case.material.plane,
                   "backend": result.backend, "length_unit": units.length, "force_unit": units.force,
                   "stress_unit": units.stress}
@@ -115,8 +149,21 @@ def result_data(case, result, report: dict, path: PathData | None = None) -> Res
 
 
 def to_json(data: dict) -> str:
-    """Deterministic JSON: sorted keys, two-space indents, no NaN (a report with NaN is a bug)."""
-    return json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
+    """Deterministic JSON: sorted keys, two-space indents, no NaN (a report with NaN is a bug),
+    text as :func:`shown_text` (a path with bytes that are not UTF-8 would otherwise become a
+    lone surrogate, which strict JSON readers refuse)."""
+    return json.dumps(shown_data(data), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def shown_data(value):
+    """JSON-ready ``value`` with every text (keys too) as :func:`shown_text`."""
+    if isinstance(value, str):
+        return shown_text(value)
+    if isinstance(value, dict):
+        return {shown_text(k) if isinstance(k, str) else k: shown_data(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [shown_data(v) for v in value]
+    return value
 
 
 def _write_vtu(data: ResultData, directory: Path) -> list[Path]:

@@ -117,8 +117,9 @@ def _body_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
     )
 
 
-def _contact_grid(solution: Solution) -> Grid:
-    """ΓC as line cells over its own, renumbered nodes, with the contact fields."""
+def _contact_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
+    """ΓC as line cells over its own, renumbered nodes, with the contact fields and the same
+    metadata as the body (a contact.vtu opened alone still says its case, method and units)."""
     contact = solution.contact
     edges = np.asarray(contact.edges, dtype=np.int64).reshape(-1, 2)
     nodes = np.asarray(contact.nodes, dtype=np.int64)
@@ -154,13 +155,14 @@ def _contact_grid(solution: Solution) -> Grid:
         cells=local_edges,
         cell_type=VTK_LINE,
         point_data=point_data,
+        field_data=dict(metadata),
     )
 
 
 def solution_grids(solution: Solution, metadata: Mapping[str, str] | None = None) -> tuple[Grid, Grid]:
     """The body and the contact boundary of ``solution``, as :func:`write_vtu` writes them.
 
-    ``metadata`` becomes the field data of the body grid.
+    ``metadata`` becomes the field data of both grids.
 
     Raises
     ------
@@ -170,7 +172,7 @@ def solution_grids(solution: Solution, metadata: Mapping[str, str] | None = None
         If a cell field has the wrong length or the name of a built-in array, or a
         metadata value is not a string.
     """
-    return _body_grid(solution, metadata or {}), _contact_grid(solution)
+    return _body_grid(solution, metadata or {}), _contact_grid(solution, metadata or {})
 
 
 def _collection_xml(parts: list[tuple[str, str]]) -> str:
@@ -405,7 +407,8 @@ def write_vtu(solution: Solution, directory: Path | str, metadata: dict[str, str
         ``normal_displacement``, ``gap``, ``active`` (uint8 0/1), ``contact_node``
         (uint8, 1 at contact nodes) and ``displacement`` (3 columns, z = 0). Nodes of
         ΓC that are not contact nodes (Dirichlet corners, clamped) carry 0 in every
-        contact array, including ``gap`` and ``active``; no NaN is written.
+        contact array, including ``gap`` and ``active``; no NaN is written. Field data:
+        the same ``metadata`` as ``solution.vtu``.
     ``solution.pvd``
         A collection with both files as parts 0 (``body``) and 1 (``contact``) of
         time step 0, so that ParaView opens them together.
@@ -416,8 +419,8 @@ def write_vtu(solution: Solution, directory: Path | str, metadata: dict[str, str
     directory : Path or str
         Where to write the three files.
     metadata : dict of str to str, optional
-        Written as field data of ``solution.vtu``, e.g. method, case title, case
-        hash, units, package version.
+        Written as field data of ``solution.vtu`` and ``contact.vtu``, e.g. method,
+        case title, case hash, units, package version.
 
     Returns
     -------
