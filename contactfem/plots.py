@@ -8,12 +8,11 @@ contact zone is shaded over exactly those intervals.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from contactfem.io.registry import COMPARE_JSON, CONVERGENCE_PNGS
+from contactfem.io.registry import CONVERGENCE_PNGS
 from contactfem.norms import NORM_NAMES
 from contactfem.picture_text import chars_across, heading, save_png, shown
 
@@ -397,40 +396,6 @@ def plot_load_path(path: Path, curves: dict, units: dict | None = None, title: s
 
 
 # --------------------------------------------------------------------------- compare
-
-
-def compare_profiles(outcomes: dict) -> dict:
-    """compare.json's ``profiles`` and ``units``-less figures from the two solves (as :func:`plot_compare` reads)."""
-    positive = outcomes["positive"]
-    contact = positive.problem.contact
-    points = positive.problem.mesh.points[contact.nodes]
-    profiles = {
-        "abscissa": contact.abscissa.tolist(), "x": points[:, 0].tolist(), "y": points[:, 1].tolist(),
-        "lambda": positive.solution.contact.multiplier.tolist(),
-        "gap": (contact.gap - positive.solution.contact.normal_displacement).tolist(),
-        "active": {name: o.solution.contact.active.astype(bool).tolist() for name, o in outcomes.items()},
-    }
-    if "standard" in outcomes:
-        profiles["theta"] = outcomes["standard"].solution.contact.multiplier.tolist()
-    intervals = [list(i) for i in zone_intervals(contact.abscissa, positive.solution.contact.active,
-                                                 contact.edges, contact.nodes)]
-    return {"profiles": profiles,
-            "methods": {"positive": {"contact_zone": {"intervals": [{"abscissa": i} for i in intervals]}}}}
-
-
-def plot_contact_profiles(path: Path, outcomes: dict, title: str = "") -> Path:
-    """compare.png of the two solves: drawn from the compare.json beside ``path`` when it is
-    there (the file a later ``contactfem plot`` redraws from), from ``outcomes`` otherwise."""
-    beside = Path(path).parent / COMPARE_JSON
-    figures = None
-    if beside.is_file():
-        try:
-            figures = json.loads(beside.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            figures = None
-    if not figures or "profiles" not in figures:
-        figures = {**compare_profiles(outcomes), "case": {"title": title}}
-    return plot_compare(path, figures, title=title)
 
 
 def plot_compare(path: Path, figures: dict, title: str = "", window: tuple[float, float] | None = None) -> Path:

@@ -28,7 +28,6 @@ What ``deformed.png`` draws (its caption says it too):
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ from contactfem.io.registry import (
 )
 from contactfem.picture_text import chars_across, heading, save_png, shown
 
-__all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "check_directory", "draw_directory", "drawn_positions",
+__all__ = ["DEFORMED_PNG", "PROFILE_PNG", "auto_scale", "drawn_positions",
            "load_result", "make_pictures", "parse_size", "parse_zoom", "pictures_of", "render_deformed",
            "units_of"]
 
@@ -645,51 +644,3 @@ def pictures_of(result_dir: Path | str) -> tuple[str, ...]:
         raise CaseError(f"{result_dir}: no solution.h5, compare.json or convergence.json here; run "
                         "`contactfem solve` (with h5 in output.files), `compare` or `converge` first")
     return names
-
-
-def _study(path: Path, needed: str) -> dict:
-    try:
-        content = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as error:
-        raise CaseError(f"{path}: cannot read it as JSON ({error})") from None
-    if not isinstance(content, dict) or needed not in content:
-        raise CaseError(f"{path}: has no {needed!r} (written by an earlier contactfem?); run the command again")
-    return content
-
-
-def check_directory(result_dir: Path | str) -> tuple[str, ...]:
-    """:func:`pictures_of`, after reading what they are drawn from (refused as bad input if unreadable)."""
-    names = pictures_of(result_dir)
-    directory = Path(result_dir)
-    if DEFORMED_PNG in names:
-        load_result(directory)
-    if COMPARE_PNG in names:
-        _study(directory / COMPARE_JSON, "profiles")
-    if CONVERGENCE_PNGS[0] in names:
-        _study(directory / CONVERGENCE_JSON, "rows")
-    return names
-
-
-def draw_directory(result_dir: Path | str, out_dir: Path | str | None = None, size: tuple[int, int] = (1200, 900),
-                   scale: float | None = None, window: tuple[float, float] | None = None) -> dict:
-    """Every picture of ``result_dir`` (:func:`pictures_of`) into ``out_dir`` (default: the same);
-    ``window`` is the zoom window of contact_profile.png and compare.png.
-
-    Returns ``{"files": [...], "scale": f or None, "zoom_scale": f or None, "size": [w, h]}``;
-    the factors are those of deformed.png, None without a solve.
-    """
-    from contactfem.plots import plot_compare, plot_convergence
-
-    directory = Path(result_dir)
-    out = ensure_directory(Path(out_dir) if out_dir is not None else directory)
-    names = pictures_of(directory)
-    made = {"files": [], "scale": None, "zoom_scale": None, "size": list(size)}
-    if DEFORMED_PNG in names:
-        made.update(make_pictures(directory, out, size=size, scale=scale, window=window))
-    if COMPARE_PNG in names:
-        plot_compare(out / COMPARE_PNG, _study(directory / COMPARE_JSON, "profiles"), window=window)
-        made["files"].append(str(out / COMPARE_PNG))
-    if CONVERGENCE_PNGS[0] in names:
-        made["files"] += [str(p) for p in plot_convergence(out, _study(directory / CONVERGENCE_JSON, "rows"))]
-    return made
-

@@ -82,8 +82,8 @@ def plot(result_dir: Path, size: str, scale: str, out_dir: Path | None, quiet: b
 
 def _draw(result_dir: Path, loaded, out: Path, size: tuple[int, int], scale: float | None,
           window: tuple[float, float] | None) -> dict:
-    """The pictures of what :func:`~contactfem.io.readback.read_results` read, into ``out``
-    (as :func:`contactfem.render.draw_directory` draws them, from the files already read):
+    """The pictures of what :func:`~contactfem.io.readback.read_results` read, into ``out``,
+    drawn from the files already read and checked:
     ``{"files": [...], "scale": f or None, "zoom_scale": f or None, "size": [w, h]}``."""
     from contactfem.io.registry import COMPARE_PNG
     from contactfem.plots import plot_compare, plot_convergence
