@@ -318,12 +318,37 @@ def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
             f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
-            f"{limit.source}; use fewer divisions, a larger mesh.size or fewer refinements"
+            f"{limit.source}; {_knobs(shape, refine)}"
         )
     refusal = backend_refusal(unknowns, backend)
     if refusal is not None:
         raise CaseError(f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the "
-                        f"refinements): {refusal}")
+                        f"refinements): {refusal}; {_knobs(shape, refine)}")
+
+
+def _knobs(shape: MeshRequest, refine: int | None) -> str:
+    """Which mesh settings make the request smaller, the one that weighs most first."""
+    settings = shape.mesh
+    times = settings.refine if refine is None else refine
+    knobs = []
+    if isinstance(shape.geometry, RectangleGeometry):
+        knobs.append("fewer mesh.divisions (or a larger mesh.size)")
+    elif isinstance(shape.geometry, PolygonGeometry):
+        uniform = TRIANGLES_PER_AREA * abs(loop_signed_area(shape.geometry.outer)) / (np.sqrt(3) / 4 * settings.size**2)
+        graded = settings.contact_size is not None and settings.contact_size < settings.size
+        if graded and estimate_triangles(shape, 0) > 2 * uniform:
+            knobs.append(f"a larger mesh.contact_size (now {settings.contact_size:g})")
+            knobs.append(f"a larger mesh.grading (now {settings.grading:.3g})")
+            knobs.append(f"a larger mesh.size (now {settings.size:g})")
+        else:
+            knobs.append(f"a larger mesh.size (now {settings.size:g})")
+            if graded:
+                knobs.append(f"a larger mesh.contact_size (now {settings.contact_size:g})")
+    if times:
+        knobs.append(f"fewer refinements (--refine or mesh.refine, now {times}; each multiplies the "
+                     "triangles by four)")
+    return "use " + ", ".join(knobs[:-1]) + (" or " if len(knobs) > 1 else "") + knobs[-1] if knobs else \
+        "use a coarser mesh"
 
 
 def _mesh_geometry(case: Case, shape: MeshRequest, limit: MemoryLimit) -> Mesh:
