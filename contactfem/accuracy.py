@@ -272,7 +272,7 @@ def _solve_level(case: Case, result: "SolveResult", request, refine: int, base_s
         return None, None
     if budget is not None and coarse_problem.n_unknowns > budget:
         return None, None
-    if coarse_problem.n_unknowns >= problem_unknowns(result):
+    if coarse_problem.n_unknowns >= result.problem.n_unknowns:
         return None, None
     if load_factor is not None:
         coarse_problem = coarse_problem.scaled(load_factor)
@@ -287,10 +287,6 @@ def _solve_level(case: Case, result: "SolveResult", request, refine: int, base_s
     # Its own sequencing level was solved at the full load: of no use on a load path.
     below = None if load_factor is not None else _kept_level(kept, result.method, base_size, FURTHEST_RATIO)
     return level, below
-
-
-def problem_unknowns(result: "SolveResult") -> int:
-    return result.problem.n_unknowns
 
 
 def _contact_edge_size(problem: DiscreteProblem) -> float:

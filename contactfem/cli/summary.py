@@ -49,8 +49,8 @@ def _accuracy_lines(accuracy: dict | None) -> list[str]:
     if not accuracy:
         return []
     energy = accuracy["energy"]
-    shown = [f"energy {energy['estimate']:.3g}" + (f" ({100 * energy['relative']:.2g}%)" if energy.get("relative") else "")
-             if energy["estimate"] is not None else "energy n/a"]
+    relative = f" ({100 * energy['relative']:.2g}%)" if energy.get("relative") else ""
+    shown = [f"energy {energy['estimate']:.3g}{relative}" if energy["estimate"] is not None else "energy n/a"]
     for name, label in (("contact_force", "force"), ("contact_width", "width"), ("peak_pressure", "peak pressure")):
         entry = accuracy["quantities"][name]
         if entry["estimate"] is not None:
