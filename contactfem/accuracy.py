@@ -18,12 +18,20 @@ Two kinds of figure, neither a guaranteed bound:
   within :data:`PLAUSIBLE_ORDERS` of the method's expected order, :data:`EXPECTED_ORDERS`);
   otherwise the expected order is assumed. Each estimate says which.
 
-Cost. The levels are the coarse level that mesh sequencing already solved (reused, when
-solved with the same method), else the case on a mesh with h doubled (a quarter of the
-unknowns; its own sequencing level, an eighth of h, then serves as the third level for
-nothing), and a third level h quadrupled (a sixteenth) when none came for free: at most
-5/16 of the solve's unknowns, in practice a quarter or less for problems large enough
-to matter (sequencing's levels are reused) — ``cost`` in the report counts them.
+No figure here is a guaranteed bound: the energy estimate is an upper bound only up to the
+unknown constant C, and a Richardson estimate only once the levels are in the asymptotic
+range (their differences falling as h^p). Each entry says ``"guaranteed": false``.
+
+Cost. By default the estimates are free: the estimator is one pass over the mesh (a few
+per cent of the solve), and the quantities compare with the coarse level that mesh
+sequencing solved anyway (problems from :data:`contactfem.sequencing.SEQUENCING_THRESHOLD`
+unknowns solved with method (4)); without one they are not estimated, and say so. On
+request (``solver.accuracy.levels: solve``, ``--accuracy-levels solve``) coarser levels are
+solved for the purpose: the case on a mesh with h doubled (a quarter of the unknowns; its
+own sequencing level then serves as the third level for nothing), and a third level h
+quadrupled when none came for free: at most :data:`MAX_EXTRA_SHARE` of the solve's
+unknowns — ``cost`` in the report counts them. A run refined towards a target
+(:mod:`contactfem.accuracy_target`) compares with its own earlier meshes, for nothing.
 """
 
 from __future__ import annotations
@@ -61,6 +69,10 @@ NEAREST_SHARE = 0.28
 #: The coarsest level that serves as the nearest one (h times this), and as the furthest.
 NEAREST_RATIO = 4.0
 FURTHEST_RATIO = 8.0
+#: The coarsest sequencing level a plain solve's estimates reuse: a polygon's is up to 16
+#: times coarser (:func:`contactfem.sequencing.coarser`), less reliable than one 4 times
+#: coarser but free; its ratio is reported.
+REUSED_RATIO = 16.0
 #: The method sequencing solves its levels with (:data:`contactfem.solve.SEQUENCING_METHOD`).
 SEQUENCING_METHOD = "positive"
 #: The energy estimate's label in the report.
@@ -85,10 +97,12 @@ class Level:
 
 def quantities(problem: DiscreteProblem, contact: ContactFields) -> dict:
     """The total contact force, the contact width along ΓC and the peak pressure of a solve."""
-    from contactfem.report import contact_zone
+    from contactfem.discretize.contact import contact_patches
 
-    zone = contact_zone(problem, contact.active)
-    width = float(sum(i["abscissa"][1] - i["abscissa"][0] for i in zone["intervals"]))
+    # The intervals of report.json's contact_zone (contactfem.report.contact_zone).
+    boundary = problem.contact
+    first, last, _ = contact_patches(boundary.abscissa, contact.active, boundary.node_edges())
+    width = float(sum(boundary.abscissa[b] - boundary.abscissa[a] for a, b in zip(first, last)))
     return {"contact_force": float(contact.nodal_force.sum()), "contact_width": width,
             "peak_pressure": float(contact.multiplier.max(initial=0.0))}
 
@@ -155,23 +169,49 @@ def observed_order(values: list[float], ratios: list[float]) -> float | None:
 
 
 def accuracy_figures(case: Case, result: "SolveResult", load_factor: float | None = None,
-                     levels: bool = True) -> dict:
+                     levels: str = "reuse", history: list[Level] | None = None) -> dict:
     """report.json's ``accuracy``: the energy estimate and the quantities' estimates, the
     coarser levels they came from and what those cost. ``load_factor``: the load path's
-    factor of ``result`` (its coarser levels are solved at that factor). Without ``levels``
-    (a mesh that is not the case's own, as ``adapt`` makes) the quantities get no estimate."""
+    factor of ``result`` (its coarser levels are solved at that factor). ``levels``: "reuse"
+    (sequencing's level only, free), "solve" (coarser levels solved for the purpose, see
+    :func:`coarser_levels`) or "none" (a mesh that is not the case's own, as ``adapt`` makes:
+    the quantities get no estimate). ``history``: the coarser levels to compare with instead
+    (the earlier meshes of a refinement towards a target, finest first)."""
     clock = time.perf_counter()
     fine = quantities(result.problem, result.solution.contact)
     figures: dict = {"energy": energy_estimate(result)}
-    if not levels:
+    if history is not None:
+        found, reason = list(history), "no earlier mesh to compare with"
+    elif levels == "none":
         found, reason = [], "the mesh was adapted: no coarser mesh of the same kind to compare with"
+    elif levels == "reuse":
+        kept = _kept_level(result.coarse_levels, result.method, _contact_edge_size(result.problem), REUSED_RATIO)
+        found = [] if kept is None or load_factor is not None else [kept]
+        reason = ("no coarser level was solved on the way (mesh sequencing runs from "
+                  f"{_sequencing_threshold():,} unknowns, with method positive); solver.accuracy.levels: solve "
+                  "(--accuracy-levels solve) solves some for the purpose")
     else:
         try:
             found = coarser_levels(case, result, load_factor)
             reason = None if found else "no coarser mesh of this case could be made and solved within the budget"
         except ContactFemError as error:
             found, reason = [], str(error)
-    levels = found
+    figures["quantities"] = quantity_estimates(fine, found, reason)
+    extra = sum(level.unknowns for level in found if level.source == "solved")
+    fine_unknowns = result.problem.n_unknowns
+    solve_seconds = float(sum(result.timings.values()))  # meshing and assembly too, as the levels'
+
+    figures["levels"] = [level.record() for level in found]
+    seconds = time.perf_counter() - clock
+    figures["cost"] = {"unknowns": extra, "share_of_unknowns": extra / fine_unknowns if fine_unknowns else 0.0,
+                       "seconds": seconds,
+                       "share_of_seconds": seconds / solve_seconds if solve_seconds > 0 else None}
+    return figures
+
+
+def quantity_estimates(fine: dict, levels: list[Level], reason: str | None) -> dict:
+    """Each quantity's value on the solve's mesh and its Richardson estimate from ``levels``
+    (finest first), or no estimate and ``reason`` without any."""
     estimates = {}
     for name, value in fine.items():
         entry: dict = {"value": value}
@@ -183,17 +223,13 @@ def accuracy_figures(case: Case, result: "SolveResult", load_factor: float | Non
             entry.update({"estimate": None, "method": None, "guaranteed": False, "reason": reason})
         entry["expected_order"] = EXPECTED_ORDERS[name]
         estimates[name] = entry
-    figures["quantities"] = estimates
-    extra = sum(level.unknowns for level in levels if level.source == "solved")
-    fine_unknowns = result.problem.n_unknowns
-    solve_seconds = float(sum(result.timings.values()))  # meshing and assembly too, as the levels'
+    return estimates
 
-    figures["levels"] = [level.record() for level in levels]
-    seconds = time.perf_counter() - clock
-    figures["cost"] = {"unknowns": extra, "share_of_unknowns": extra / fine_unknowns if fine_unknowns else 0.0,
-                       "seconds": seconds,
-                       "share_of_seconds": seconds / solve_seconds if solve_seconds > 0 else None}
-    return figures
+
+def _sequencing_threshold() -> int:
+    from contactfem.sequencing import SEQUENCING_THRESHOLD
+
+    return SEQUENCING_THRESHOLD
 
 
 def coarser_levels(case: Case, result: "SolveResult", load_factor: float | None = None) -> list[Level]:

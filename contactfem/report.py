@@ -124,13 +124,15 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
 
 def accuracy_section(case: Case, result: "SolveResult", adapted: bool = False) -> dict:
     """report.json's ``accuracy`` (:func:`contactfem.accuracy.accuracy_figures`): the energy
-    error estimate and the contact quantities' estimates from coarser solutions. The last
-    step of a load path is compared with coarser meshes at its factor; an ``adapted`` mesh
+    error estimate and the contact quantities' estimates from coarser solutions, those that
+    sequencing solved (free) unless the case's ``solver.accuracy.levels`` asks for more. The
+    last step of a load path is compared with coarser meshes at its factor; an ``adapted`` mesh
     (``contactfem adapt``) has no coarser level of its own, so it gets the energy estimate only."""
     from contactfem.accuracy import accuracy_figures
 
     factor = case.load_path.factors[-1] if case.load_path is not None else None
-    return accuracy_figures(case, result, load_factor=factor, levels=not adapted)
+    levels = "none" if adapted else case.solver.accuracy.levels
+    return accuracy_figures(case, result, load_factor=factor, levels=levels)
 
 
 def exact_errors(problem: DiscreteProblem, solution: Solution) -> dict | None:
