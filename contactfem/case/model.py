@@ -249,6 +249,29 @@ class Accelerators:
     schur_updates: bool = True
 
 
+#: What ``solver.accuracy.quantity`` may name: the energy norm of the displacement error
+#: (the residual estimator's), or a contact quantity (its Richardson estimate).
+ACCURACY_QUANTITIES = ("energy", "contact_width", "peak_pressure", "contact_force")
+#: What ``solver.accuracy.levels`` may name: the coarser solutions the contact quantities'
+#: estimates of a plain solve compare with: only those sequencing solved anyway (free), or
+#: also ones solved for the purpose (up to a third of the solve's unknowns more).
+ACCURACY_LEVELS = ("reuse", "solve")
+
+
+@dataclass(frozen=True)
+class AccuracySettings:
+    """``solver.accuracy``: a relative ``target`` for the estimated error of ``quantity``
+    (None: solve the case's mesh once and only report the estimates), the budget the
+    refinement towards it may spend (``max_unknowns``: None, what memory allows;
+    ``max_steps`` refinements), and where a plain solve's quantity estimates come from."""
+
+    target: float | None = None
+    quantity: str = "energy"
+    max_unknowns: int | None = None
+    max_steps: int = 30
+    levels: str = "reuse"
+
+
 @dataclass(frozen=True)
 class SolverSettings:
     method: str
@@ -257,6 +280,7 @@ class SolverSettings:
     c: float | None
     backend: str
     accelerators: Accelerators = Accelerators()
+    accuracy: AccuracySettings = AccuracySettings()
 
 
 @dataclass(frozen=True)

@@ -59,8 +59,16 @@ def _accuracy_lines(accuracy: dict | None) -> list[str]:
             relative = f" ({100 * entry['relative']:.2g}%)" if entry.get("relative") is not None else ""
             shown.append(f"{label} ±{entry['estimate']:.2g}{relative}")
     levels = len(accuracy["levels"])
-    return [f"  accuracy     estimated, not bounds: {', '.join(shown)}; from {levels} coarser "
-            f"level{'' if levels == 1 else 's'}, +{accuracy['cost']['share_of_unknowns']:.0%} unknowns"]
+    lines = [f"  accuracy     estimated, not bounds: {', '.join(shown)}; from {levels} coarser "
+             f"level{'' if levels == 1 else 's'}, +{accuracy['cost']['share_of_unknowns']:.0%} unknowns"]
+    target = accuracy.get("target")
+    if target:
+        reached = "n/a" if target["reached"] is None else f"{100 * target['reached']:.3g}%"
+        verdict = "met" if target["met"] else f"not met: {target['stop_reason'].replace('_', ' ')}"
+        lines.append(f"  target       {target['quantity'].replace('_', ' ')} {100 * target['target']:.3g}%: "
+                     f"reached {reached} ({verdict}) in {len(target['steps'])} solves, "
+                     f"{target['unknowns']:,} unknowns, {target['seconds']:.3g} s")
+    return lines
 
 
 def _force_lines(forces: dict | None) -> list[str]:
