@@ -179,7 +179,8 @@ def quantity_marks(problem, solution, quantity: str) -> np.ndarray:
     return marked
 
 
-def _richardson_estimate(value: float, unknowns: int, history: list[Level], name: str) -> tuple[float | None, float | None]:
+def _richardson_estimate(value: float, unknowns: int, history: list[Level],
+                         name: str) -> tuple[float | None, float | None]:
     """The relative Richardson estimate of ``value`` on ``unknowns`` from the earlier steps
     (``history``, latest first), and the order used; None before there is one."""
     levels = _levels_below(history, unknowns)

@@ -111,7 +111,8 @@ def _estimates(case: Case, outcome, earlier: list) -> dict:
               for j, (unknowns, values) in reversed(list(enumerate(earlier)))][:2]
     figures = accuracy_figures(case, outcome, history=levels)
     earlier.append((outcome.problem.n_unknowns, quantities(outcome.problem, outcome.solution.contact)))
-    return {"estimated_energy": figures["energy"]["estimate"], "estimated_energy_relative": figures["energy"].get("relative"),
+    energy = figures["energy"]
+    return {"estimated_energy": energy["estimate"], "estimated_energy_relative": energy.get("relative"),
             **{f"estimated_{name}": entry["estimate"] for name, entry in figures["quantities"].items()}}
 
 
