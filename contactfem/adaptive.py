@@ -83,6 +83,9 @@ def adapt(
     mesh: Mesh | None = None,
     error_of: ErrorFunction | None = None,
     on_step: Callable[[dict, DiscreteProblem, Solution], None] | None = None,
+    converged: Callable[[dict], bool] | None = None,
+    also_mark: Callable[[DiscreteProblem, Solution], np.ndarray] | None = None,
+    theta_of: Callable[[dict], float] | None = None,
     progress: Progress | None = None,
 ) -> AdaptiveRun:
     """Adaptive refinement of ``case`` from ``mesh`` (default: the case's own mesh).
@@ -134,7 +137,7 @@ def adapt(
         say(f"step {step}: {row['unknowns']} unknowns, eta {estimated.total:.4g}"
             + (f", energy error {energy:.4g} (effectivity {row['effectivity']:.3g})" if energy else "")
             + f", {seconds:.2f} s")
-        if target is not None and estimated.total <= target:
+        if (target is not None and estimated.total <= target) or (converged is not None and converged(row)):
             stop = "target"
             break
         if max_seconds is not None and time.perf_counter() - started >= max_seconds:
@@ -143,7 +146,11 @@ def adapt(
         if step == max_steps - 1:
             break
         clock = time.perf_counter()
-        marked = dorfler_mark(estimated.indicators**2, theta)
+        # A run towards another quantity's target may mark a share of η² that depends on
+        # where it stands (its row, after on_step): ``theta_of``.
+        marked = dorfler_mark(estimated.indicators**2, theta if theta_of is None else theta_of(row))
+        if also_mark is not None:
+            marked = marked | also_mark(problem, outcome.solution)
         refined = bisect(mesh_now, marked)
         next_problem = build_problem(case, refined)
         if max_unknowns is not None and next_problem.n_unknowns > max_unknowns:

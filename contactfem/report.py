@@ -44,8 +44,12 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     """The report.json content: deterministic but for the timings and the machine.
 
     ``extras`` are further top-level entries (e.g. ``estimator``). The seconds spent here,
-    the exact error norms included, are the ``report`` timing.
+    the exact error norms included, are the ``report`` timing; the ``accuracy`` section
+    (:func:`accuracy_section`), unless ``extras`` gives one, has its own.
     """
+    extras = dict(extras or {})
+    if "accuracy" not in extras:
+        extras["accuracy"] = accuracy_section(case, result, adapted="estimator" in extras)
     clock = time.perf_counter()
     problem, solution, kernel = result.problem, result.solution, result.kernel
     mesh = problem.mesh
@@ -110,10 +114,25 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         "errors": exact_errors(problem, solution),
         "warnings": material_warnings(case.material) + contact_warnings(problem, contact),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
-        **(extras or {}),
+        **extras,
     }
-    report["timings"] = {**result.timings, "report": time.perf_counter() - clock}
+    accuracy_seconds = (extras["accuracy"] or {}).get("cost", {}).get("seconds")
+    report["timings"] = {**result.timings, **({} if accuracy_seconds is None else {"accuracy": accuracy_seconds}),
+                         "report": time.perf_counter() - clock}
     return report
+
+
+def accuracy_section(case: Case, result: "SolveResult", adapted: bool = False) -> dict:
+    """report.json's ``accuracy`` (:func:`contactfem.accuracy.accuracy_figures`): the energy
+    error estimate and the contact quantities' estimates from coarser solutions, those that
+    sequencing solved (free) unless the case's ``solver.accuracy.levels`` asks for more. The
+    last step of a load path is compared with coarser meshes at its factor; an ``adapted`` mesh
+    (``contactfem adapt``) has no coarser level of its own, so it gets the energy estimate only."""
+    from contactfem.accuracy import accuracy_figures
+
+    factor = case.load_path.factors[-1] if case.load_path is not None else None
+    levels = "none" if adapted else case.solver.accuracy.levels
+    return accuracy_figures(case, result, load_factor=factor, levels=levels)
 
 
 def exact_errors(problem: DiscreteProblem, solution: Solution) -> dict | None:

@@ -89,6 +89,10 @@ class SolveResult:
     sequencing : mapping
         What predicting the active set from coarser meshes cost (empty without it):
         coarse unknowns and iterations, predicted active nodes, levels, seconds.
+    coarse_levels : mapping
+        What sequencing meshed and solved on the way (``problem``, ``solve``: a
+        :class:`CoarseSolve`, ``coarser``: the request), for whatever reads a coarser
+        solution of the same case afterwards (:mod:`contactfem.accuracy`); empty without it.
     """
 
     method: str
@@ -98,6 +102,7 @@ class SolveResult:
     backend: str
     timings: Mapping[str, float] = field(default_factory=dict)
     sequencing: Mapping = field(default_factory=dict)
+    coarse_levels: Mapping = field(default_factory=dict, repr=False)
 
 
 def prepare(
@@ -180,13 +185,13 @@ def solve_case(
     contact_method = get_method(method_name)
     backend = _serial_backend(case)
     timings: dict[str, float] = {}
+    kept = {} if coarse_levels is None else coarse_levels
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, coarse_levels,
-                                                 accelerators)
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -196,7 +201,7 @@ def solve_case(
     solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
     timings["postprocess"] = time.perf_counter() - clock
     return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
-                       timings=timings, sequencing=sequencing)
+                       timings=timings, sequencing=sequencing, coarse_levels=kept)
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,

@@ -101,6 +101,21 @@ def _total_variation(values: np.ndarray, mask: np.ndarray) -> float:
     return float(np.abs(np.diff(values))[both].sum()) if len(values) > 1 else 0.0
 
 
+def _estimates(case: Case, outcome, earlier: list) -> dict:
+    """A level's estimated errors, as a solve's report.json gives them (none a bound): η and
+    η / ‖u_h‖_a, and each contact quantity's Richardson estimate from the study's previous
+    two levels (h twice and four times as large, for nothing); ``earlier`` gains this level."""
+    from contactfem.accuracy import Level, accuracy_figures, quantities
+
+    levels = [Level(ratio=2.0 ** (len(earlier) - j), unknowns=unknowns, source="earlier step", quantities=values)
+              for j, (unknowns, values) in reversed(list(enumerate(earlier)))][:2]
+    figures = accuracy_figures(case, outcome, history=levels)
+    earlier.append((outcome.problem.n_unknowns, quantities(outcome.problem, outcome.solution.contact)))
+    energy = figures["energy"]
+    return {"estimated_energy": energy["estimate"], "estimated_energy_relative": energy.get("relative"),
+            **{f"estimated_{name}": entry["estimate"] for name, entry in figures["quantities"].items()}}
+
+
 def convergence_study(
     case: Case,
     levels: int,
@@ -135,6 +150,7 @@ def convergence_study(
             (reference.get("positive") or solve_case(case, method="positive", problem=reference_problem)).solution
         )
     rows = []
+    earlier: dict[str, list] = {name: [] for name in methods}  # (unknowns, quantities) per level
     for level in range(levels):
         timings: dict[str, float] = {}
         started = time.perf_counter()
@@ -164,6 +180,7 @@ def convergence_study(
                 "solve_seconds": outcome.timings["solve"],
                 "total_seconds": setup + outcome.timings["solve"] + outcome.timings["postprocess"],
                 **errors,
+                **_estimates(case, outcome, earlier[name]),
             }
             rows.append(row)
             detail(f"level {level} {name}: h = {row['h']:.4g}, {row['unknowns']} unknowns, "

@@ -26,10 +26,13 @@ writes or prints: :func:`run_sweep` hands every finished point to the caller's c
 (the command line stores it at once and prints a line) and returns the table.
 
 The error of a point is the energy norm of u − u_h when the case has an exact solution
-(report.json's ``errors.displacement_energy``); without one it is |‖u_h‖_a − ‖u_ref‖_a|,
-u_ref the point with the most unknowns among those that share every swept value outside
-``mesh.*`` (its group): a lower bound of the energy norm of u_h − u_ref that needs no
-interpolation between meshes. The Pareto front (no other point of the group is both faster
+(report.json's ``errors.displacement_energy``); without one, the residual estimator's η
+(report.json's ``accuracy.energy.estimate``, the estimate every solve reports: reliable up
+to a constant, so that the points of a group compare honestly, and falling with h where the
+difference to the finest point did not), for every point of a group solved with method (4);
+else |‖u_h‖_a − ‖u_ref‖_a|, u_ref the point with the most unknowns among those that share
+every swept value outside ``mesh.*`` (its group): a lower bound of the energy norm of
+u_h − u_ref that needs no interpolation between meshes. The Pareto front (no other point of the group is both faster
 and more accurate) is marked per group.
 """
 
@@ -75,7 +78,7 @@ from contactfem.sweep_table import (  # noqa: F401
 
 SCHEMA_VERSION = 1
 #: The version of one stored point's JSON (points/<sha256>.json).
-POINT_SCHEMA_VERSION = 1
+POINT_SCHEMA_VERSION = 2
 SWEEP_JSON = "sweep.json"
 SWEEP_CSV = "sweep.csv"
 SWEEP_PNG = "sweep.png"
@@ -172,7 +175,8 @@ def failure(status: str, message: str) -> dict:
     """The figures of a point that has none: its status and message."""
     return {"status": status, "message": " ".join(message.split()), "method": None, "backend": None,
             "unknowns": None, "contact_nodes": None, "iterations": None, "seconds": {}, "contact_force": None,
-            "contact_zone": None, "certificate": None, "errors": None, "energy_norm": None, "warnings": []}
+            "contact_zone": None, "certificate": None, "errors": None, "energy_norm": None, "accuracy": None,
+            "warnings": []}
 
 
 def _figures(case, result, report: dict) -> dict:
@@ -202,8 +206,19 @@ def _figures(case, result, report: dict) -> dict:
         "certificate": None if certificate is None else ("passed" if certificate["passed"] else "failed"),
         "errors": report["errors"],
         "energy_norm": energy if math.isfinite(energy) else None,
+        "accuracy": accuracy_record(report.get("accuracy")),
         "warnings": list(report.get("warnings", [])),
     }
+
+
+def accuracy_record(accuracy: dict | None) -> dict | None:
+    """A point's estimated errors, as report.json's ``accuracy`` gives them (none a bound): the
+    energy norm's (η) and each contact quantity's, absolute, None where there is none."""
+    if not accuracy:
+        return None
+    energy = accuracy["energy"]
+    return {"energy": energy.get("estimate"), "energy_relative": energy.get("relative"),
+            **{name: entry.get("estimate") for name, entry in accuracy["quantities"].items()}}
 
 
 def point_json(record: dict) -> str:
@@ -461,6 +476,8 @@ def run_sweep(
             "finest": "|energy norm of u_h - energy norm of u_ref|, u_ref the point with the most unknowns of "
                       "the same group (every swept value outside mesh.* equal); a lower bound of the energy "
                       "norm of u_h - u_ref",
+            "estimated": "the residual estimator's eta (report.json accuracy.energy.estimate), an estimate of "
+                         "the energy norm of u - u_h reliable up to an unknown constant, not a bound",
         },
         "engine": {"kind": engine.kind, "scheduler": engine.scheduler, "workers": engine.workers,
                    "startup_seconds": engine.startup_seconds},

@@ -23,7 +23,7 @@ ERROR_NORMS = ("displacement_l2", "displacement_h1_semi", "displacement_h1", "di
 def _row(point: SweepPoint, record: dict, reused: bool) -> dict:
     figures = {key: record.get(key) for key in ("status", "message", "method", "backend", "unknowns",
                                                 "contact_nodes", "iterations", "contact_force", "contact_zone",
-                                                "certificate", "errors", "energy_norm")}
+                                                "certificate", "errors", "energy_norm", "accuracy")}
     return {"index": point.index, "values": point.values, "label": point.label, "digest": point.digest,
             "reused": reused, **figures, "seconds": dict(record.get("seconds") or {}),
             "warnings": list(record.get("warnings") or []), "units": point.units,
@@ -42,10 +42,15 @@ def _rank(rows: list[dict], keys: tuple[str, ...]) -> None:
         solved = [row for row in members if row["status"] == "ok"]
         reference = max((row for row in solved if row["energy_norm"] is not None and not row["errors"]),
                         key=lambda row: row["unknowns"], default=None)
+        # The estimate only where every point of the group has one: one measure per front.
+        estimated = all((row["accuracy"] or {}).get("energy") is not None for row in solved)
         for row in solved:
             if row["errors"]:
                 row["error_kind"] = "exact"
                 row["error"] = row["errors"].get("displacement_energy")
+            elif estimated:
+                row["error_kind"] = "estimated"
+                row["error"] = row["accuracy"]["energy"]
             elif reference is not None and row["energy_norm"] is not None:
                 row["error_kind"] = "finest"
                 row["error_reference"] = reference["index"]

@@ -139,12 +139,12 @@ def test_the_shipped_rough_case():
     assert mesh.n_triangles <= estimate_triangles(case) <= 2 * mesh.n_triangles
 
 
-def test_the_size_guard_bounds_a_long_body_by_its_area():
-    """The guard's triangle estimate, taken before meshing, is an upper bound on every
-    shipped polygon case and on a long strip under a rough profile (8 x 0.5, 8 000 points),
-    and within twice the count where no contact_size grades the mesh: from the bounding
-    box's square it was 16 times the strip's triangles (a 64-long strip's was refused as
-    needing 33 GiB)."""
+def test_the_size_guard_counts_every_polygon_case_within_half_again():
+    """The guard's triangle estimate, taken before meshing from the size field the mesh is
+    made with, is within 1.5 times the meshed count on every shipped polygon case and on a
+    long strip under a rough profile (8 x 0.5, 8 000 points): from the bounding box's
+    square it was 16 times the strip's triangles (a 64-long strip's was refused as needing
+    33 GiB), and from a graded band π · extent long, 20 to 50 times a graded block's."""
     from fragmented import long_case
 
     cases = [case_module.load_case(path) for path in sorted((ROOT / "cases").glob("*.yaml"))]
@@ -152,9 +152,7 @@ def test_the_size_guard_bounds_a_long_body_by_its_area():
     for case in cases:
         triangles = build_mesh(case).n_triangles
         estimate = estimate_triangles(case)
-        assert triangles <= estimate, case.source
-        if case.mesh.contact_size is None:
-            assert estimate <= 2 * triangles, (case.source, estimate, triangles)
+        assert triangles / 1.5 <= estimate <= 1.5 * triangles, (case.source, estimate, triangles)
 
 
 # --------------------------------------------------------------------------- refusals

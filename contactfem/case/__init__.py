@@ -58,7 +58,10 @@ from contactfem.case.limits import (
 from contactfem.case.loops import Arc, Loop
 from contactfem.case.messages import shortened
 from contactfem.case.model import (
+    ACCURACY_LEVELS,
+    ACCURACY_QUANTITIES,
     DIRICHLET_KINDS,
+    AccuracySettings,
     SUPPORT_KINDS,
     Accelerators,
     BoundaryPart,
@@ -82,11 +85,11 @@ from contactfem.case.model import (
 from contactfem.case.outline import ARC_END_TOLERANCE, OUTLINE_EXPECTED
 from contactfem.case.parse import load_case, parse_case
 from contactfem.case.profile import PROFILE_SOURCES
-from contactfem.case.sections import ACCELERATORS, EXACT, PART_KINDS, PART_LOADS, PLATEN_CONTROLS
+from contactfem.case.sections import ACCELERATORS, EXACT, PART_KINDS, PART_LOADS, PLATEN_CONTROLS, relative_target
 from contactfem.case.tables import is_number
 
 __all__ = [
-    "ACCELERATORS", "ARC_END_TOLERANCE", "DIAGONALS", "DIRICHLET_KINDS", "EXACT", "MAX_CASE_BYTES", "MAX_DATA_FILE_BYTES", "MAX_DIVISIONS",
+    "ACCELERATORS", "ACCURACY_LEVELS", "ACCURACY_QUANTITIES", "AccuracySettings", "relative_target", "ARC_END_TOLERANCE", "DIAGONALS", "DIRICHLET_KINDS", "EXACT", "MAX_CASE_BYTES", "MAX_DATA_FILE_BYTES", "MAX_DIVISIONS",
     "MAX_LAME_RATIO", "MAX_LOAD_STEPS", "MAX_POLYGON_VERTICES", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "NAME_MAX",
     "OUTLINE_EXPECTED", "OUTPUT_NAME_RESERVE", "OUTPUT_PATH_RESERVE", "PART_KINDS", "PART_LOADS", "PATH_MAX",
     "PLATEN_CONTROLS", "PROFILE_SOURCES", "SCALE_LIMIT", "SIDES", "SUPPORT_KINDS",

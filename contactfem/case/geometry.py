@@ -170,6 +170,10 @@ def _points_inside(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
     return crossings % 2 == 1
 
 
+#: The least mesh.contact_size, relative to the body's extent: what round-off imposes.
+CONTACT_SIZE_ROUNDOFF = 1e-12
+
+
 def read_mesh_settings(r: Reader, data: Any, geometry: Geometry) -> MeshSettings:
     data = r.mapping(data if data is not None else {}, "mesh",
                      ("divisions", "size", "diagonal", "refine", "min_angle", "contact_size", "grading"))
@@ -212,15 +216,21 @@ def read_mesh_settings(r: Reader, data: Any, geometry: Geometry) -> MeshSettings
         if not isinstance(geometry, PolygonGeometry):
             raise r.fail("mesh.contact_size", data["contact_size"],
                          "graded meshes need a polygon geometry (Triangle); a rectangle can be given as a polygon")
-        least = _extent(geometry) / limits.MAX_DIVISIONS
+        # Only round-off bounds it below (coordinates of nodes contact_size apart on a body
+        # of this extent keep about 4 digits of their difference); memory bounds it through
+        # the size guard, which counts the graded mesh's triangles before meshing.
+        least = CONTACT_SIZE_ROUNDOFF * _extent(geometry)
         contact_size = r.number(data["contact_size"], "mesh.contact_size", low=least, high=size,
-                                expected=f"must be in [extent / {limits.MAX_DIVISIONS} = {least:g}, mesh.size = {size:g}]")
+                                expected=f"must be in [extent × {CONTACT_SIZE_ROUNDOFF:g} = {least:g}, "
+                                         f"mesh.size = {size:g}]")
     elif "grading" in data:
         raise r.fail("mesh.grading", data["grading"], "only meaningful with mesh.contact_size")
-    grading = r.number(data.get("grading", 0.25), "mesh.grading", low=0.01, high=10.0,
-                       expected="must be in [0.01, 10] (growth of h per unit distance from the contact parts)")
+    grading = None
+    if "grading" in data:
+        grading = r.number(data["grading"], "mesh.grading", low=0.01, high=10.0,
+                           expected="must be in [0.01, 10] (growth of h per unit distance from the contact parts)")
     return MeshSettings(divisions=divisions, size=size, diagonal=diagonal, refine=refine, min_angle=min_angle,
-                        contact_size=contact_size, grading=grading)
+                        contact_size=contact_size, grading_key=grading)
 
 
 def _extent(geometry: Geometry) -> float | None:

@@ -32,10 +32,39 @@ class MeshFileGeometry:
 Geometry = RectangleGeometry | PolygonGeometry | MeshFileGeometry
 
 
+#: The grading rule's constant G0: without a ``mesh.grading`` key the grading is
+#: G0 · sqrt(contact_size / size) (:func:`grading_of`). On the quarter Hertz disk
+#: (cases/hertz_quarter.yaml, no grading key) the half-width error against Hertz fell to
+#: 0.03% at contact_size 0.00025 with it, and stayed near 0.16% with G0 = 0.85 or 1
+#: (benchmarks/mesh_knob.py).
+GRADING_CONSTANT = 0.7
+#: The range the rule's grading is clipped to: at most the former fixed default (a
+#: contact mesh as coarse as the bulk grades no faster than before), at least a growth
+#: that still doubles h within 50 contact elements.
+GRADING_RANGE = (0.02, 0.25)
+
+
+def grading_of(contact_size: float, size: float) -> float:
+    """The grading that follows the contact mesh: G0 · sqrt(contact_size / size), clipped to
+    :data:`GRADING_RANGE`.
+
+    The error of the transition from contact_size to size behaves like grading² (the
+    quarter Hertz disk's half-width at contact_size 0.001: +0.4% at 0.25, -0.17% at
+    0.125), and the contact mesh's own like contact_size: with grading² ∝ contact_size
+    both fall together when contact_size is halved, and the graded band's triangles,
+    ∝ 1 / (grading · contact_size), grow 2.8 times per halving instead of 2."""
+    low, high = GRADING_RANGE
+    return float(min(max(GRADING_CONSTANT * (contact_size / size) ** 0.5, low), high))
+
+
 @dataclass(frozen=True)
 class MeshSettings:
     """How to mesh. ``contact_size`` and ``grading`` grade a polygon mesh towards ΓC:
-    h(x) = min(size, contact_size + grading · distance(x, ΓC))."""
+    h(x) = min(size, contact_size + grading · distance(x, ΓC)).
+
+    ``grading_key`` is the case's ``mesh.grading`` (None: not given); :attr:`grading` is the
+    grading used, that key or the rule of :func:`grading_of`, which follows contact_size
+    (so that a copy with another contact_size, :func:`dataclasses.replace`, follows too)."""
 
     divisions: tuple[int, int] | None
     size: float | None
@@ -43,7 +72,15 @@ class MeshSettings:
     refine: int
     min_angle: float
     contact_size: float | None = None
-    grading: float = 0.25
+    grading_key: float | None = None
+
+    @property
+    def grading(self) -> float:
+        if self.grading_key is not None:
+            return self.grading_key
+        if self.contact_size is None or not self.size:
+            return GRADING_RANGE[1]
+        return grading_of(self.contact_size, self.size)
 
 
 @dataclass(frozen=True)
@@ -212,6 +249,29 @@ class Accelerators:
     schur_updates: bool = True
 
 
+#: What ``solver.accuracy.quantity`` may name: the energy norm of the displacement error
+#: (the residual estimator's), or a contact quantity (its Richardson estimate).
+ACCURACY_QUANTITIES = ("energy", "contact_width", "peak_pressure", "contact_force")
+#: What ``solver.accuracy.levels`` may name: the coarser solutions the contact quantities'
+#: estimates of a plain solve compare with: only those sequencing solved anyway (free), or
+#: also ones solved for the purpose (up to a third of the solve's unknowns more).
+ACCURACY_LEVELS = ("reuse", "solve")
+
+
+@dataclass(frozen=True)
+class AccuracySettings:
+    """``solver.accuracy``: a relative ``target`` for the estimated error of ``quantity``
+    (None: solve the case's mesh once and only report the estimates), the budget the
+    refinement towards it may spend (``max_unknowns``: None, what memory allows;
+    ``max_steps`` refinements), and where a plain solve's quantity estimates come from."""
+
+    target: float | None = None
+    quantity: str = "energy"
+    max_unknowns: int | None = None
+    max_steps: int = 30
+    levels: str = "reuse"
+
+
 @dataclass(frozen=True)
 class SolverSettings:
     method: str
@@ -220,6 +280,7 @@ class SolverSettings:
     c: float | None
     backend: str
     accelerators: Accelerators = Accelerators()
+    accuracy: AccuracySettings = AccuracySettings()
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,9 @@ from contactfem.case import limits
 from contactfem.case.files import path_problem
 from contactfem.case.messages import CANNOT_DERIVE
 from contactfem.case.model import (
+    ACCURACY_LEVELS,
+    ACCURACY_QUANTITIES,
+    AccuracySettings,
     Accelerators,
     BoundaryPart,
     LoadPath,
@@ -242,7 +245,7 @@ ACCELERATORS = tuple(accelerator.name for accelerator in fields(Accelerators))
 
 def read_solver(r: Reader, data: Any) -> SolverSettings:
     data = r.mapping(data if data is not None else {}, "solver",
-                     ("method", "tolerance", "max_iterations", "c", "backend", "accelerators"))
+                     ("method", "tolerance", "max_iterations", "c", "backend", "accelerators", "accuracy"))
     method = r.choice(data.get("method", "positive"), "solver.method", METHOD_NAMES)
     tolerance = r.number(data.get("tolerance", 1e-10), "solver.tolerance", low=1e-15, high=1e-2,
                          expected="must be in [1e-15, 1e-2]")
@@ -259,7 +262,48 @@ def read_solver(r: Reader, data: Any) -> SolverSettings:
     backend = r.choice(data.get("backend", "auto"), "solver.backend", BACKEND_CHOICES)
     accelerators = _accelerators(r, data.get("accelerators"))
     return SolverSettings(method=method, tolerance=tolerance, max_iterations=max_iterations, c=c, backend=backend,
-                          accelerators=accelerators)
+                          accelerators=accelerators, accuracy=_accuracy(r, data.get("accuracy")))
+
+
+#: The relative accuracy targets a case may ask for: from 1e-6 (round-off in the quantities
+#: read) to one half.
+ACCURACY_TARGET_RANGE = (1e-6, 0.5)
+
+
+def relative_target(value: Any) -> float | None:
+    """A relative accuracy as a fraction: ``0.5%`` (a string) or ``0.005`` (a number); None
+    when it is neither or lies outside :data:`ACCURACY_TARGET_RANGE`."""
+    if isinstance(value, str):
+        text = value.strip()
+        scale = 0.01 if text.endswith("%") else 1.0
+        try:
+            value = float(text[:-1] if scale != 1.0 else text) * scale
+        except ValueError:
+            return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    low, high = ACCURACY_TARGET_RANGE
+    return float(value) if low <= value <= high else None
+
+
+def _accuracy(r: Reader, data: Any) -> AccuracySettings:
+    """``solver.accuracy``: target, quantity, budget (unknowns, steps) and levels."""
+    data = r.mapping(data if data is not None else {}, "solver.accuracy", ("target", "quantity", "budget", "levels"))
+    target = None
+    if "target" in data:
+        target = relative_target(data["target"])
+        if target is None:
+            low, high = ACCURACY_TARGET_RANGE
+            raise r.fail("solver.accuracy.target", data["target"],
+                         f"expected a relative error in [{low:g}, {high:g}], e.g. 0.5% or 0.005")
+    quantity = r.choice(data.get("quantity", "energy"), "solver.accuracy.quantity", ACCURACY_QUANTITIES)
+    budget = r.mapping(data.get("budget") or {}, "solver.accuracy.budget", ("unknowns", "steps"))
+    unknowns = budget.get("unknowns")
+    if unknowns is not None:
+        unknowns = r.integer(unknowns, "solver.accuracy.budget.unknowns", low=10, high=10**9)
+    steps = r.integer(budget.get("steps", 30), "solver.accuracy.budget.steps", low=1, high=200)
+    levels = r.choice(data.get("levels", "reuse"), "solver.accuracy.levels", ACCURACY_LEVELS)
+    return AccuracySettings(target=target, quantity=quantity, max_unknowns=unknowns, max_steps=steps, levels=levels)
 
 
 def _accelerators(r: Reader, data: Any) -> Accelerators:

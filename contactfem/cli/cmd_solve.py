@@ -11,6 +11,7 @@ from contactfem.cli.common import _end_progress, _files_of, _load, _progress, _w
 from contactfem.cli.exits import _exit_code, _fail, _interruptible
 from contactfem.cli.options import (
     _CheckedPath,
+    _RelativeTarget,
     case_argument,
     json_option,
     overwrite_option,
@@ -18,6 +19,7 @@ from contactfem.cli.options import (
     refine_option,
 )
 from contactfem.cli.summary import _summary
+from contactfem.case import ACCURACY_LEVELS, ACCURACY_QUANTITIES
 from contactfem.errors import CaseError, ContactFemError
 from contactfem.io.registry import REPORT_JSON, RESULT_FILES, RESULT_MARKERS, shown_path, to_json
 from contactfem.linalg import BACKEND_CHOICES, DISTRIBUTED_BACKENDS
@@ -41,10 +43,23 @@ from contactfem.methods import METHOD_NAMES
 @click.option("--petsc-solver", type=click.Choice(("mumps", "gamg")), default="mumps", show_default=True,
               help="With --backend petsc (under mpiexec): MUMPS, distributed direct, or CG with GAMG "
                    "(the least memory per rank).")
+@click.option("--accuracy", "accuracy", type=_RelativeTarget(), default=None,
+              help="Refine (where the error estimator says) until the estimated relative error of "
+                   "--accuracy-quantity is at most this, e.g. 0.5%. Default: the case's solver.accuracy.target.")
+@click.option("--accuracy-quantity", type=click.Choice(ACCURACY_QUANTITIES), default=None,
+              help="What --accuracy bounds: the energy norm (default), the contact width, the peak pressure "
+                   "or the contact force.")
+@click.option("--max-unknowns", type=click.IntRange(10, 10**9), default=None,
+              help="With --accuracy: stop before a mesh of more unknowns. Default: the case's "
+                   "solver.accuracy.budget.unknowns, else what memory holds.")
+@click.option("--accuracy-levels", type=click.Choice(ACCURACY_LEVELS), default=None,
+              help="The contact quantities' error estimates of a plain solve: reuse the coarser level "
+                   "sequencing solved (free; the default) or solve coarser levels for them.")
 @_interruptible
 def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int | None,
           backend: str | None, quiet: bool, as_json: bool, overwrite: bool, make_plot: bool = False,
-          petsc_solver: str = "mumps") -> None:
+          petsc_solver: str = "mumps", accuracy: float | None = None, accuracy_quantity: str | None = None,
+          max_unknowns: int | None = None, accuracy_levels: str | None = None) -> None:
     """Solve CASE and write solution.vtu/.pvd, solution.h5 and report.json.
 
     \b
@@ -54,6 +69,7 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
       contactfem solve cases/square.yaml --overwrite      # replace results/square
       contactfem solve cases/square.yaml --plot           # and deformed.png, contact_profile.png
       mpiexec -n 4 contactfem solve cases/square.yaml --backend petsc   # across 4 MPI ranks
+      contactfem solve cases/hertz_quarter.yaml --accuracy 0.5% --accuracy-quantity contact_width
     """
     from contactfem.io.atomic import claimed_directory
     from contactfem.io.path import PathWriter
@@ -64,7 +80,11 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
 
     progress = _progress(quiet)
     try:
-        case = _load(case_file, backend, distributed=True)
+        case = _with_accuracy(_load(case_file, backend, distributed=True), accuracy, accuracy_quantity, max_unknowns,
+                              accuracy_levels)
+        targeted = case.solver.accuracy.target is not None
+        if targeted:
+            _refuse_target(case, method)
         if make_plot and "h5" not in case.output.files:
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
@@ -93,6 +113,8 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
                         writer.close()  # its half-written files go with the staging area
                         raise
                     result, extras = path.final, {"load_path": load_path_figures(path, steps)}
+                elif targeted:
+                    result, extras = _solve_to_target(case, refine, progress)
                 else:
                     result = solve_case(case, method=method, refine=refine, progress=progress,
                                         accept_uncertified=True)
@@ -109,6 +131,44 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
         _fail(error)
         return
     _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
+
+
+def _with_accuracy(case, target: float | None, quantity: str | None, max_unknowns: int | None,
+                   levels: str | None):
+    """The case with the command line's accuracy options in place of its solver.accuracy keys."""
+    from dataclasses import replace
+
+    settings = case.solver.accuracy
+    changes = {key: value for key, value in (("target", target), ("quantity", quantity),
+                                             ("max_unknowns", max_unknowns), ("levels", levels)) if value is not None}
+    if not changes:
+        return case
+    return replace(case, solver=replace(case.solver, accuracy=replace(settings, **changes)))
+
+
+def _refuse_target(case, method: str | None) -> None:
+    """A run towards a target refines with the residual estimator of method (4), one load."""
+    name = case.source.name
+    if (method or case.solver.method) != "positive":
+        raise CaseError(f"{name}: solver.accuracy.target: refining to a target uses the residual estimator, "
+                        "defined for method positive; drop --method standard (or solver.method) or the target")
+    if case.load_path is not None:
+        raise CaseError(f"{name}: solver.accuracy.target: a load path is solved on one mesh; drop the target "
+                        "(each step still reports its estimates) or the load_path")
+    if case.solver.backend in DISTRIBUTED_BACKENDS:
+        raise CaseError(f"{name}: solver.accuracy.target: refining to a target runs in one process; "
+                        "use a serial backend (auto, cholmod, pardiso or superlu)")
+
+
+def _solve_to_target(case, refine: int | None, progress):
+    """The solve refined to the case's accuracy target, and report.json's accuracy section."""
+    from contactfem.accuracy_target import DEFAULT_STEPS, solve_to_accuracy
+
+    settings = case.solver.accuracy
+    run = solve_to_accuracy(case, target=settings.target, quantity=settings.quantity,
+                            max_unknowns=settings.max_unknowns, max_steps=settings.max_steps or DEFAULT_STEPS,
+                            refine=refine, progress=progress)
+    return run.result, {"accuracy": {**run.accuracy, "target": run.record()}}
 
 
 def _report_solve(case, result, report: dict, written: list[Path], directory: Path, quiet: bool,

@@ -62,3 +62,22 @@ quiet_option = click.option("--quiet", "-q", is_flag=True, help="Print nothing b
 json_option = click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
 overwrite_option = click.option("--overwrite", is_flag=True,
                                 help="Replace the results already in the output directory (refused otherwise).")
+
+
+class _RelativeTarget(click.ParamType):
+    """A relative accuracy: 0.5% or 0.005 (see :func:`contactfem.case.relative_target`)."""
+
+    name = "TARGET"
+
+    def convert(self, value, param, ctx):
+        from contactfem.case import relative_target
+        from contactfem.case.sections import ACCURACY_TARGET_RANGE
+
+        if isinstance(value, float):
+            return value
+        target = relative_target(value)
+        if target is None:
+            low, high = ACCURACY_TARGET_RANGE
+            self.fail(f"{_printable(str(value))!r} is not a relative error in [{low:g}, {high:g}] "
+                      "(e.g. 0.5% or 0.005)", param, ctx)
+        return target

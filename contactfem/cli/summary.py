@@ -25,6 +25,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         f"max u_n - g {signs['max_normal_displacement_minus_gap']:.3g}",
         f"  equilibrium  relative residual {report['equilibrium']['relative_force_residual']:.1e}",
         _certificate_line(report["solver"].get("certificate")),
+        *_accuracy_lines(report.get("accuracy")),
         *_force_lines(report.get("boundary_forces")),
         *_platen_lines(report.get("platens")),
         *_path_lines(report.get("load_path")),
@@ -42,6 +43,32 @@ def _summary(report: dict, written: list[Path]) -> str:
     if written:
         lines.append(f"  wrote        {', '.join(_shown(p) for p in written)}")
     return "\n".join(_printable(line) for line in lines)
+
+
+def _accuracy_lines(accuracy: dict | None) -> list[str]:
+    """The estimated errors in one line: the energy norm's, then each contact quantity's
+    (relative), how many coarser levels they came from; none is a guaranteed bound."""
+    if not accuracy:
+        return []
+    energy = accuracy["energy"]
+    relative = f" ({100 * energy['relative']:.2g}%)" if energy.get("relative") else ""
+    shown = [f"energy {energy['estimate']:.3g}{relative}" if energy["estimate"] is not None else "energy n/a"]
+    for name, label in (("contact_force", "force"), ("contact_width", "width"), ("peak_pressure", "peak pressure")):
+        entry = accuracy["quantities"][name]
+        if entry["estimate"] is not None:
+            relative = f" ({100 * entry['relative']:.2g}%)" if entry.get("relative") is not None else ""
+            shown.append(f"{label} ±{entry['estimate']:.2g}{relative}")
+    levels = len(accuracy["levels"])
+    lines = [f"  accuracy     estimated, not bounds: {', '.join(shown)}; from {levels} coarser "
+             f"level{'' if levels == 1 else 's'}, +{accuracy['cost']['share_of_unknowns']:.0%} unknowns"]
+    target = accuracy.get("target")
+    if target:
+        reached = "n/a" if target["reached"] is None else f"{100 * target['reached']:.3g}%"
+        verdict = "met" if target["met"] else f"not met: {target['stop_reason'].replace('_', ' ')}"
+        lines.append(f"  target       {target['quantity'].replace('_', ' ')} {100 * target['target']:.3g}%: "
+                     f"reached {reached} ({verdict}) in {len(target['steps'])} solves, "
+                     f"{target['unknowns']:,} unknowns, {target['seconds']:.3g} s")
+    return lines
 
 
 def _force_lines(forces: dict | None) -> list[str]:

@@ -27,8 +27,9 @@ def _sweep_summary(table: dict, directory: Path) -> str:
                      f"{number(r['iterations'], 'd'):>7}{number(r['seconds'].get('total'), '.2f'):>9}"
                      f"{number(r['contact_force'], '.6g'):>15}{number(r['error'], '.3e'):>11}"
                      f"  {'*' if r['pareto'] else ''}")
-    lines.append("  (error: energy norm against the exact solution, or |‖u_h‖ - ‖u_finest‖| in the energy norm "
-                 "within each group; * = on its group's Pareto front of error against seconds)")
+    lines.append("  (error: energy norm against the exact solution, else the estimator's eta (an estimate, not a "
+                 "bound), else |‖u_h‖ - ‖u_finest‖| in the energy norm within each group; * = on its group's "
+                 "Pareto front of error against seconds)")
     shown = _shown(directory)
     lines.append(f"  wrote {shown}/sweep.csv, sweep.json, sweep.png; each point in {shown}/points/")
     return "\n".join(_printable(line) for line in lines)

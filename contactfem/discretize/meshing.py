@@ -95,49 +95,129 @@ def _capped_message(case: Case, shape: MeshRequest, limit: MemoryLimit, error: M
     )
 
 
+#: Triangles Triangle makes per area of an equilateral triangle of side h under its size
+#: bound h (uniform bodies: 1.5-1.6, a plate with a hole, a 3 x 1 block; graded ones, whose
+#: triangles Triangle accepts up to 1.5 times the target area, alike: measured in
+#: tests/test_sizes.py and benchmarks/mesh_knob.py).
+TRIANGLES_PER_AREA = 1.7
+#: Triangles Triangle adds around an input vertex whose shorter edge is much shorter than
+#: the size there: it keeps every input edge and grades from its length to the size (measured
+#: 5.5-6 per edge of a rough profile, 1k-64k edges, size 10-800 times the edge).
+TRIANGLES_PER_SHORT_EDGE = 6.0
+#: Most cells of the background quadtree on which :func:`estimate_triangles` integrates a
+#: graded size field; past it (a band of more than some 10^8 triangles, which no machine
+#: here solves) the band is counted as the contact length over grading · contact_size.
+_ESTIMATE_CELLS = 2_000_000
+
+
 def estimate_triangles(shape: Case | MeshRequest, refine: int | None = None) -> int:
     """Triangles a case (or a :class:`MeshRequest`) will be meshed into, estimated before
-    meshing (0 for mesh files)."""
+    meshing (0 for mesh files); each refinement multiplies them by four.
+
+    A polygon's count is the integral over the body of the density of its size field,
+    TRIANGLES_PER_AREA / (√3/4 · h(x)²), h the field the mesh is made with
+    (:func:`_contact_grading`: graded towards ΓC and finer still at a punch's ends), plus
+    the triangles Triangle adds around input vertices closer together than h (a rough
+    profile's). The uniform part is the body's exact area over that of size; the graded
+    band's excess is integrated on a quadtree of cells, split until h varies by at most a
+    fifth across each (vectorised: a few thousand cells on the shipped cases)."""
     geometry, settings = shape.geometry, shape.mesh
     times = settings.refine if refine is None else refine
     if isinstance(geometry, RectangleGeometry):
         nx, ny = settings.divisions
         base = (4 if settings.diagonal == "crossed" else 2) * nx * ny
-    elif isinstance(geometry, PolygonGeometry):
-        v = geometry.outer.vertices
-        span = coordinate_span(v)
-        extent = max(span.max(), 1e-300)
-        # The body's area (its outer loop's, arcs included) over the area of an equilateral
-        # triangle of side h, twice: Triangle makes 1.5-1.6 triangles per such area under
-        # the size bound (a plate with a hole, a 3 x 1 block). The square of the bounding
-        # box served before, 128 times the area of a 64 x 0.5 strip under a long profile,
-        # whose 119 000 triangles at 16 000 points it took for a million.
-        area = abs(loop_signed_area(geometry.outer))
-        base = int(2.0 * area / (np.sqrt(3) / 4 * settings.size**2)) + 1
-        # Every input edge is kept, and Triangle grades from its length to the mesh size:
-        # measured 5.5-6 triangles per edge of a rough profile (1k-64k edges, size 10-800
-        # times the edge), whatever the size.
-        base += 7 * sum(len(loop.vertices) for loop in (geometry.outer, *geometry.holes))
-        if settings.contact_size is not None:
-            # The graded band: ∫ L dd / area(h(d)) with h = hc + g d is L / (√3/4 · g · hc),
-            # with L bounded by π times the extent.
-            band = np.pi * extent / (np.sqrt(3) / 4 * settings.grading * settings.contact_size)
-            base += int(band)
-    else:
+        return int(base * 4**times)
+    if not isinstance(geometry, PolygonGeometry):
         return 0
-    return int(base * 4**times)
+    loops = (geometry.outer, *geometry.holes)
+    area = abs(loop_signed_area(geometry.outer)) - sum(abs(loop_signed_area(hole)) for hole in geometry.holes)
+    unit = np.sqrt(3) / 4
+    count = TRIANGLES_PER_AREA * area / (unit * settings.size**2)
+    field = None
+    if settings.contact_size is not None and settings.contact_size < settings.size:
+        band, field = _graded_band(shape)
+        count += TRIANGLES_PER_AREA * band
+    # Input vertices with an edge shorter than h: Triangle keeps them, and grades away from
+    # them. The shorter edge counts: a tooth narrower than h is meshed at its width (a tread's
+    # level 8x coarser: 0.82 of the meshed count from the mean edge, 1.33 from the shorter).
+    for loop in loops:
+        v = loop.vertices
+        edge = np.hypot(*(np.roll(v, -1, axis=0) - v).T)
+        length = np.minimum(edge, np.roll(edge, 1))
+        h = np.full(len(v), settings.size) if field is None else field(v)
+        count += TRIANGLES_PER_SHORT_EDGE * float(np.clip(1.0 - length / h, 0.0, None).sum())
+    return int(count * 4**times) + 1
 
 
-def _contact_grading(shape: MeshRequest):
+def _graded_band(shape: MeshRequest) -> tuple[float, object]:
+    """∫ (1/h(x)² − 1/size²) dx / (√3/4) over the body: the graded band's triangles beyond the
+    uniform count, per TRIANGLES_PER_AREA; and the size field it integrated.
+
+    The distance to ΓC is taken to samples spaced finer than the cells near ΓC (not the
+    mesh's quarter of contact_size: a request whose band no machine could mesh is counted
+    without sampling ΓC that finely)."""
+    from contactfem.case.geometry import _points_inside
+    from contactfem.case.loops import loop_outline
+
+    settings = shape.mesh
+    hc, size, g = settings.contact_size, settings.size, settings.grading
+    unit = np.sqrt(3) / 4
+    outlines = [loop_outline(loop) for loop in (shape.geometry.outer, *shape.geometry.holes)]
+    # The contact length facing the obstacle, from samples 4 · contact_size apart (at most
+    # two too many per edge: a little long on a profile of thousands of edges).
+    step = 4 * hc
+    perimeter = sum(float(np.hypot(*(np.roll(o, -1, axis=0) - o).T).sum()) for o in outlines)
+    if perimeter / step > 1e7:
+        contact_length = perimeter
+    else:
+        contact_length = min(len(_contact_samples(shape, spacing=step)[0]) * step, perimeter)
+    # One-sided band of a straight ΓC: ∫ dd / (hc + g d)² from 0 to where h reaches size.
+    analytic = contact_length * (1 / hc - 1 / size) / g / unit
+    if analytic > 50 * _ESTIMATE_CELLS:
+        return analytic, None
+    field = _contact_grading(shape, spacing=hc)
+    everything = np.concatenate(outlines)
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    cell = max(float((high - low).max()) / 16, 1e-300)
+    nx, ny = (np.ceil((high - low) / cell).astype(int) + 1).tolist()
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    centers = low + (np.stack([ix.ravel(), iy.ravel()], axis=1) + 0.5) * cell
+    total = 0.0
+    while len(centers):
+        if len(centers) > _ESTIMATE_CELLS:
+            return analytic, field
+        h = field(centers)
+        # Keep the cells that reach into the band; of those, accept the ones across which h
+        # varies by at most a fifth, and split the others into four.
+        near = h < size + g * cell * 0.7072
+        centers, h = centers[near], h[near]
+        done = g * cell <= 0.2 * h
+        accepted = centers[done]
+        if len(accepted):
+            inside = _points_inside(outlines[0], accepted)
+            for hole in outlines[1:]:
+                inside &= ~_points_inside(hole, accepted)
+            excess = 1 / h[done][inside] ** 2 - 1 / size**2
+            total += float(excess.sum()) * cell**2
+        split = centers[~done]
+        cell /= 2
+        offsets = np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]]) * cell
+        centers = (split[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    return total / unit, field
+
+
+def _contact_grading(shape: MeshRequest, spacing: float | None = None):
     """The size field h(x) = min(size, contact_size + grading · distance(x, ΓC)).
 
     The distance is to points sampled on the contact edges of the geometry at a quarter
-    of contact_size (:func:`_contact_samples`), so it is exact to that spacing.
+    of contact_size (:func:`_contact_samples`; ``spacing`` if given), so it is exact to
+    that spacing. ``mesh.grading`` is the case's, or without one the rule of
+    :func:`contactfem.case.model.grading_of`, which follows contact_size.
     """
     from scipy.spatial import cKDTree
 
     settings = shape.mesh
-    samples, ends = _contact_samples(shape)
+    samples, ends = _contact_samples(shape, spacing)
     # Sliding-midpoint splits: the samples lie along curves, and the queries, most of them
     # near ΓC on a graded mesh, ran 1.4x faster than in the default median-split tree.
     tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
@@ -165,11 +245,12 @@ def _contact_grading(shape: MeshRequest):
     return size
 
 
-def _contact_samples(shape: MeshRequest) -> tuple[np.ndarray, np.ndarray]:
+def _contact_samples(shape: MeshRequest, spacing: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Points on ΓC's edges, a quarter of ``mesh.contact_size`` apart (only those in front
     of a finite obstacle, which alone can touch it), and the points of ΓC facing the ends
     of a finite obstacle (:func:`_segment_ends_on_body`)."""
     settings = shape.mesh
+    step = settings.contact_size / 4 if spacing is None else spacing
     samples = []
     contact = set(shape.contact_parts)
     for loop in (shape.geometry.outer, *shape.geometry.holes):
@@ -178,7 +259,7 @@ def _contact_samples(shape: MeshRequest) -> tuple[np.ndarray, np.ndarray]:
         straight = on_contact & loop.straight_edges
         # All straight contact edges at once: a rough profile has thousands.
         start, end = loop.vertices[straight], np.roll(loop.vertices, -1, axis=0)[straight]
-        counts = np.maximum(2, (4 * np.hypot(*(end - start).T) / settings.contact_size).astype(np.int64) + 2)
+        counts = np.maximum(2, (np.hypot(*(end - start).T) / step).astype(np.int64) + 2)
         edge = np.repeat(np.arange(len(start)), counts)
         t = (np.arange(len(edge)) - np.repeat(np.cumsum(counts) - counts, counts)) / (counts[edge] - 1)
         samples.append(start[edge] + t[:, None] * (end - start)[edge])
@@ -190,7 +271,7 @@ def _contact_samples(shape: MeshRequest) -> tuple[np.ndarray, np.ndarray]:
             a0 = np.arctan2(*(start - center)[::-1])
             a1 = np.arctan2(*(end - center)[::-1])
             sweep = (a1 - a0) % (2 * np.pi) if arc.ccw else -((a0 - a1) % (2 * np.pi))
-            n = max(2, int(4 * radius * abs(sweep) / settings.contact_size) + 2)
+            n = max(2, int(radius * abs(sweep) / step) + 2)
             angle = a0 + sweep * np.linspace(0.0, 1.0, n)
             samples.append(center + radius * np.stack([np.cos(angle), np.sin(angle)], axis=1))
     samples = np.concatenate(samples)
@@ -259,12 +340,37 @@ def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
             f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
-            f"{limit.source}; use fewer divisions, a larger mesh.size or fewer refinements"
+            f"{limit.source}; {_knobs(shape, refine)}"
         )
     refusal = backend_refusal(unknowns, backend)
     if refusal is not None:
         raise CaseError(f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the "
-                        f"refinements): {refusal}")
+                        f"refinements): {refusal}; {_knobs(shape, refine)}")
+
+
+def _knobs(shape: MeshRequest, refine: int | None) -> str:
+    """Which mesh settings make the request smaller, the one that weighs most first."""
+    settings = shape.mesh
+    times = settings.refine if refine is None else refine
+    knobs = []
+    if isinstance(shape.geometry, RectangleGeometry):
+        knobs.append("fewer mesh.divisions (or a larger mesh.size)")
+    elif isinstance(shape.geometry, PolygonGeometry):
+        uniform = TRIANGLES_PER_AREA * abs(loop_signed_area(shape.geometry.outer)) / (np.sqrt(3) / 4 * settings.size**2)
+        graded = settings.contact_size is not None and settings.contact_size < settings.size
+        if graded and estimate_triangles(shape, 0) > 2 * uniform:
+            knobs.append(f"a larger mesh.contact_size (now {settings.contact_size:g})")
+            knobs.append(f"a larger mesh.grading (now {settings.grading:.3g})")
+            knobs.append(f"a larger mesh.size (now {settings.size:g})")
+        else:
+            knobs.append(f"a larger mesh.size (now {settings.size:g})")
+            if graded:
+                knobs.append(f"a larger mesh.contact_size (now {settings.contact_size:g})")
+    if times:
+        knobs.append(f"fewer refinements (--refine or mesh.refine, now {times}; each multiplies the "
+                     "triangles by four)")
+    return "use " + ", ".join(knobs[:-1]) + (" or " if len(knobs) > 1 else "") + knobs[-1] if knobs else \
+        "use a coarser mesh"
 
 
 def _mesh_geometry(case: Case, shape: MeshRequest, limit: MemoryLimit) -> Mesh:

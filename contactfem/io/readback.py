@@ -138,6 +138,7 @@ def point_layout() -> Node:
             "certificate": Choice(("passed", "failed"), nullable=True),
             "errors": Mapping(Number(nullable=True), nullable=True),
             "energy_norm": Number(minimum=0, nullable=True),
+            "accuracy": Mapping(Number(nullable=True), nullable=True),
             "seconds": Mapping(Number(minimum=0, nullable=True)),
             "warnings": Items(Text(max_bytes=_MAX_MESSAGE_BYTES), max_items=1000),
         },
