@@ -27,8 +27,12 @@ solve per changed node). The first active set (predicted from a coarser mesh, so
 across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
 safeguards and certificate are the serial kernel's.
 
-Not handled yet, refused with one line: platens, and bodies held only by contact (free
-rigid motions).
+Platens are assembled into the rotated unknowns as the serial
+:class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
+:mod:`contactfem.distributed_assembly`); a body held only by contact gives the kernel its
+free rigid motions at the contact normals (every active set must hold them, as serially);
+load paths run in :mod:`contactfem.distributed_path`, one distributed solver (its MUMPS
+analysis, or GAMG's coarse spaces) carried across the steps.
 """
 
 from __future__ import annotations
@@ -52,10 +56,12 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
-from contactfem.errors import CaseError, SolverError
+from contactfem.errors import SolverError
 from contactfem.kernel import (
     EPS,
     REFINEMENT_STEPS,
+    FORCE_RESOLUTION_LIMIT,
+    ZERO_FORCE_STRAIN,
     Certificate,
     ContactSystem,
     Iteration,
@@ -169,9 +175,6 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     Raises
     ------
-    CaseError
-        For platens or a body held only by contact (not handled yet: input this backend
-        cannot take, as a load path is).
     SolverError
         Without petsc4py/mpi4py, for an unknown ``solver``, and as
         :func:`~contactfem.solve.solve_case` does when the kernel does not converge.
@@ -227,7 +230,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     kernel.displacement = layout.to_mesh(slots)
     displacement = system.mesh_vector(kernel.displacement)
-    force = system.mesh_vector(layout.to_mesh(internal))
+    force = system.mesh_force(layout.to_mesh(internal))
     problem = _with_stiffness(problem, SolutionProduct(displacement, force))
     solution = _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
     timings["postprocess"] = time.perf_counter() - clock
@@ -330,18 +333,10 @@ def _peak_rss() -> int:
 
 def _problem_without_stiffness(case: Case, mesh, refinements: int, request: MeshRequest | None = None) -> DiscreteProblem:
     """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
-    is None until rank 0 gets a :class:`SolutionProduct`); refuses what this backend does
-    not handle yet as bad input for it (:class:`CaseError`, exit code 2, as a load path is)."""
+    is None until rank 0 gets a :class:`SolutionProduct`)."""
     from contactfem.discretize import build_problem
 
-    problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
-    if problem.platens:
-        raise CaseError(f"{case.source.name}: the petsc backend does not handle platens yet "
-                        f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")
-    if problem.free_modes is not None:
-        raise CaseError(f"{case.source.name}: the body is held only by contact along {problem.free_modes.shape[1]} "
-                        "rigid motion(s); the petsc backend does not handle that yet, solve without it")
-    return problem
+    return build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
 
 
 def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:
@@ -364,7 +359,9 @@ class _DistributedSolver:
         self.solver_name = solver
         self.normal_dofs = system.normal_dofs
         self.gap = system.gap
-        self.load_local = system.load_local
+        self.load_local = self.unit_load = system.load_local
+        self.support_values_local = self.unit_support_values = system.support_values_local
+        self._u: np.ndarray | None = None
         layout = system.layout
         self.first, self.last = layout.first, layout.last
         owned = (self.normal_dofs >= self.first) & (self.normal_dofs < self.last)
@@ -495,7 +492,7 @@ class _DistributedSolver:
         fixed = self.system.supported_local.copy()
         active_owned = active[self.owned_contact]
         fixed[self.owned_normal_local[active_owned]] = True
-        values = self.system.support_values_local.copy()
+        values = self.support_values_local.copy()
         values[self.owned_normal_local[active_owned]] = self.gap[self.owned_contact[active_owned]]
         self.free = ~fixed
         self.system.stiffness.copy(self.work, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
@@ -599,12 +596,24 @@ class _DistributedSolver:
             terms = np.where(equations, self.multiply(system.absolute, np.abs(u)) + np.abs(load) + np.abs(contact),
                              0.0)
             force = self.maximum(load) + self.maximum(internal) + float(np.abs(nodal_force).max(initial=0.0))
+            roundoff = system.gamma * self.maximum(terms)
+            if self.maximum(load) == 0.0 and force * FORCE_RESOLUTION_LIMIT < roundoff:
+                # Nothing loads the body and its forces are round-off (as the serial solver measures).
+                force = max(force, ZERO_FORCE_STRAIN * system.force_unit)
             force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
             displacement = max(self.maximum(u), float(np.abs(self.gap).max(initial=0.0)))
             displacement = max(displacement, np.finfo(float).tiny) if np.isfinite(displacement) else np.inf
             return Scales(force=float(force), displacement=float(displacement),
-                          roundoff=float(system.gamma * self.maximum(terms) / force),
+                          roundoff=float(roundoff / force),
                           equilibrium=float(self.maximum(residual) / force))
+
+    def set_load_factor(self, factor: float) -> None:
+        """:meth:`contactfem.kernel.ActiveSetSolver.set_load_factor`: the load and prescribed
+        values times ``factor`` (a step of a load path); the solver's set-up (MUMPS's ordering
+        and analysis, GAMG's coarse spaces) carries over, the next set is factorised anew."""
+        self.load_local = float(factor) * self.unit_load
+        self.support_values_local = float(factor) * self.unit_support_values
+        self._u = None
 
     def non_finite(self, u: np.ndarray) -> int:
         return int(self.mpi.allreduce(int(np.count_nonzero(~np.isfinite(u))), op=self.MPI.SUM))
@@ -653,10 +662,25 @@ def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: fl
     result is this rank's part (PETSc order); the whole iterate is kept in
     ``linear.solution``. Also returns the normal displacement at the contact nodes (m,), on
     every rank."""
-    system = ContactSystem(stiffness=None, load=None, normal_dofs=np.arange(len(linear.gap)), gap=linear.gap,
-                           multiplier_mass=linear.system.multiplier_mass, contact_edges=linear.system.contact_edges)
-    kernel = solve_contact(system, c=c, tolerance=tolerance, max_iterations=max_iterations,
+    kernel = solve_contact(kernel_system(linear), c=c, tolerance=tolerance, max_iterations=max_iterations,
                            initial_active=initial_active, on_iteration=on_iteration, linear=linear,
                            second_guess=second_guess)
     linear.keep(kernel.displacement)
     return kernel, linear.normals(kernel.displacement)
+
+
+def kernel_system(linear: _DistributedSolver) -> ContactSystem:
+    """The :class:`ContactSystem` the kernel is handed with the distributed solver: only its
+    contact arrays (whole on every rank) are read, the rest being the solver's. A body held
+    only by contact adds its free rigid motions at the contact normals, followed by a unit
+    block, with a load whose work along them is the body's (all that
+    :class:`contactfem.kernel.modes.ModeHolder` reads)."""
+    system = linear.system
+    m = len(linear.gap)
+    modes, load = None, np.zeros(m)
+    if system.free_modes_normal is not None:
+        j = system.free_modes_normal.shape[1]
+        modes = np.vstack([system.free_modes_normal, np.eye(j)])
+        load = np.concatenate([np.zeros(m), system.free_modes_load])
+    return ContactSystem(stiffness=None, load=load, normal_dofs=np.arange(m), gap=linear.gap,
+                         multiplier_mass=system.multiplier_mass, contact_edges=system.contact_edges, free_modes=modes)
