@@ -201,42 +201,67 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
-    kernel, linear, layout, system = level.kernel, level.linear, level.layout, level.system
+    kernel, linear, system = level.kernel, level.linear, level.system
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
         linear.destroy()
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    gathered = gather_iterate(linear)
+    timings["gather"] = time.perf_counter() - clock
+    parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
+    linear.destroy()
+    if rank != 0:
+        return DistributedResult(result=None, parallel=parallel, rank=rank)
+
+    clock = time.perf_counter()
+    from contactfem.solve import SolveResult
+
+    problem, solution = step_solution(gathered, system, problem, method_name, kernel)
+    timings["postprocess"] = time.perf_counter() - clock
+    result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
+                         backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
+    return DistributedResult(result=result, parallel=parallel, rank=rank)
+
+
+def gather_iterate(linear: "_DistributedSolver") -> tuple[np.ndarray, np.ndarray] | None:
+    """The kept iterate and its K u (see :meth:`_DistributedSolver.keep`), whole on rank 0 in
+    PETSc order (None elsewhere); every rank calls it."""
     slots = linear.gather_to_zero(linear.solution)
     internal = linear.gather_to_zero(linear.internal_force)
-    timings["gather"] = time.perf_counter() - clock
-    per_rank = mpi.gather({"rank": rank, "owned_unknowns": (layout.last - layout.first),
+    return None if slots is None else (slots, internal)
+
+
+def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, factorizations: int) -> dict:
+    """The run's figures, the same on every rank (a collective step): per rank its owned
+    unknowns and triangles, factorisations, linear iterations, peak memory and seconds."""
+    mpi, system = linear.mpi, linear.system
+    per_rank = mpi.gather({"rank": mpi.Get_rank(), "owned_unknowns": (linear.last - linear.first),
                            "owned_triangles": system.owned_triangles,
                            "factor_seconds": linear.factor_seconds, "linear_iterations": linear.linear_iterations,
                            "factor": linear.factor_figures,
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    parallel = {"ranks": ranks, "solver": solver, "per_rank": per_rank,
-                "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
-                "factorizations": kernel.factorizations}
-    linear.destroy()
-    if rank != 0:
-        return DistributedResult(result=None, parallel=parallel, rank=rank)
+    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+            "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
+            "factorizations": factorizations}
 
-    clock = time.perf_counter()
-    from contactfem.solve import SolveResult, _solution
 
+def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_DistributedSystem", problem: DiscreteProblem,
+                  method_name: str, kernel: KernelResult):
+    """On rank 0: ``problem`` with its :class:`SolutionProduct` and the solution's fields,
+    from the gathered iterate; ``kernel.displacement`` becomes the whole rotated unknowns."""
+    from contactfem.solve import _solution
+
+    slots, internal = gathered
+    layout = system.layout
     kernel.displacement = layout.to_mesh(slots)
     displacement = system.mesh_vector(kernel.displacement)
     force = system.mesh_force(layout.to_mesh(internal))
     problem = _with_stiffness(problem, SolutionProduct(displacement, force))
-    solution = _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
-    timings["postprocess"] = time.perf_counter() - clock
-    result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
-                         backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
-    return DistributedResult(result=result, parallel=parallel, rank=rank)
+    return problem, _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
 
 
 @dataclass(eq=False)
@@ -362,6 +387,8 @@ class _DistributedSolver:
         self.load_local = self.unit_load = system.load_local
         self.support_values_local = self.unit_support_values = system.support_values_local
         self._u: np.ndarray | None = None
+        #: The active set of the current factorisation (None before the first).
+        self._factorized: np.ndarray | None = None
         layout = system.layout
         self.first, self.last = layout.first, layout.last
         owned = (self.normal_dofs >= self.first) & (self.normal_dofs < self.last)
@@ -488,6 +515,10 @@ class _DistributedSolver:
         return self.checks[-1].condition if self.checks else 1.0
 
     def _factorize(self, active: np.ndarray) -> None:
+        """Factorise the work matrix of ``active`` and solve for its base solution. The matrix
+        depends on the set alone: a set factorised last (a load path's next step starting
+        where the last settled) keeps its factorisation and check, and only its right-hand
+        side, the load less the prescribed values' columns, is made anew."""
         PETSc = self.PETSc
         fixed = self.system.supported_local.copy()
         active_owned = active[self.owned_contact]
@@ -495,6 +526,11 @@ class _DistributedSolver:
         values = self.support_values_local.copy()
         values[self.owned_normal_local[active_owned]] = self.gap[self.owned_contact[active_owned]]
         self.free = ~fixed
+        if self._factorized is not None and np.array_equal(active, self._factorized):
+            prescribed = np.where(fixed, values, 0.0)
+            self.base = self.linear_solve(
+                np.where(fixed, values, self.load_local - self.multiply(self.system.stiffness, prescribed)))
+            return
         self.system.stiffness.copy(self.work, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         rows = (self.first + np.flatnonzero(fixed)).astype(PETSc.IntType)
         self.scratch.setArray(values)
@@ -511,6 +547,7 @@ class _DistributedSolver:
             self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
         self.base = self.linear_solve(base_rhs)
         self.checks.append(self._probe(active))
+        self._factorized = active.copy()
 
     def _probe(self, active: np.ndarray) -> FactorCheck:
         """:func:`contactfem.linalg.check_factorization` of the factorised work matrix: the same
@@ -606,6 +643,11 @@ class _DistributedSolver:
             return Scales(force=float(force), displacement=float(displacement),
                           roundoff=float(roundoff / force),
                           equilibrium=float(self.maximum(residual) / force))
+
+    def analyse(self) -> None:
+        """:meth:`contactfem.kernel.ActiveSetSolver.analyse`: nothing ahead of the first set
+        (PETSc orders and analyses the pattern at the first factorisation, then keeps it)."""
+        return None
 
     def set_load_factor(self, factor: float) -> None:
         """:meth:`contactfem.kernel.ActiveSetSolver.set_load_factor`: the load and prescribed

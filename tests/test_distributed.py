@@ -207,13 +207,77 @@ def test_other_commands_refuse_the_petsc_backend(tmp_path):
     assert "solver.backend = petsc" in result.output and not (tmp_path / "out").exists()
 
 
-def test_a_load_path_on_the_petsc_backend_is_refused_as_bad_input_too():
-    """The load path's refusal, before any MPI is needed: the same exit code 2."""
-    from contactfem.cli.cmd_solve import _solve_distributed
-    from contactfem.cli.exits import EXIT_BAD_INPUT, _exit_code
-    from contactfem.errors import CaseError
+@needs_mpi
+def test_the_solve_command_runs_a_load_path_under_mpiexec(tmp_path):
+    """A load path under `mpiexec -n 2 contactfem solve CASE --backend petsc` (it was refused):
+    rank 0 writes each step as it is solved, and report.json has the path and the ranks."""
+    import json
 
-    case = load_case(CASES / "hertz_platen.yaml")
-    with pytest.raises(CaseError, match="load_path") as refused:
-        _solve_distributed(case, None, None, "mumps", Path("unused"), True, False, False, False, None)
-    assert _exit_code(refused.value) == EXIT_BAD_INPUT
+    import yaml
+
+    data = yaml.safe_load((CASES / "hertz_platen.yaml").read_text(encoding="utf-8"))
+    data.update(SMALL_HERTZ)
+    data["load_path"] = {"steps": 3}
+    case_file = tmp_path / "hertz_platen.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, "-m", "contactfem.cli", "solve", str(case_file),
+               "--backend", "petsc", "--out", str(out), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["parallel"]["ranks"] == RANKS and report["solver"]["status"] == "converged"
+    assert len(report["load_path"]["steps"]) == 3
+    assert report["platens"]["top"]["force"] == pytest.approx(2000, rel=1e-10)
+    assert {"path.h5", "path.csv", "path.pvd", "path-3.vtu", "report.json"} <= {p.name for p in out.iterdir()}
+
+PATH_SCRIPT = """
+import sys
+import numpy as np
+from contactfem.case import load_case
+from contactfem.distributed_path import solve_distributed_path
+
+out, path, solver = sys.argv[1:4]
+outcome = solve_distributed_path(load_case(path), solver=solver)
+if outcome.result is not None:
+    steps = outcome.result.steps
+    np.savez(out, u=np.stack([s.solution.displacement for s in steps]),
+             mu=np.stack([s.solution.contact.multiplier for s in steps]),
+             active=np.stack([s.solution.contact.active for s in steps]),
+             status=np.array([s.kernel.status.value for s in steps]),
+             factorizations=np.array(outcome.result.factorizations),
+             iterations=np.array(sum(s.kernel.iterations for s in steps)))
+"""
+
+
+@needs_mpi
+@pytest.mark.parametrize("solver", ["mumps", "gamg"])
+def test_a_load_path_on_two_ranks_agrees_with_the_serial_path(tmp_path, case_files, solver):
+    """cases/hertz_platen.yaml's 10 steps of platen force on a small mesh: every step's
+    displacement and multiplier agree with the serial path to 1e-10, with the same active
+    sets; one distributed solver carries over the steps, and a step that starts from the
+    set factorised last (the one the step before settled on) keeps its factorisation."""
+    from contactfem.solve import solve_load_path
+
+    import yaml
+
+    data = yaml.safe_load((CASES / "hertz_platen.yaml").read_text(encoding="utf-8"))
+    data.update(SMALL_HERTZ)
+    case_file = tmp_path / "hertz_platen.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    script, out = tmp_path / "path.py", tmp_path / "path.npz"
+    script.write_text(PATH_SCRIPT)
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), str(case_file), solver],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    serial = solve_load_path(load_case(case_file)).steps
+    with np.load(out) as distributed:
+        assert len(serial) == len(distributed["u"]) == 10
+        assert (distributed["status"] == "converged").all()
+        # Fewer factorisations than Newton steps: the steps that start from the last set reuse it.
+        assert int(distributed["factorizations"]) < int(distributed["iterations"])
+        for index, step in enumerate(serial):
+            np.testing.assert_array_equal(distributed["active"][index], step.solution.contact.active)
+            u, mu = step.solution.displacement, step.solution.contact.multiplier
+            assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
+            assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()
