@@ -129,6 +129,7 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
                                   f"{len(factors)} (factor {factor:g}): {kernel.message}")
             linear.keep(kernel.displacement)
             gathered = gather_iterate(linear)
+            failure = None
             if rank == 0:
                 post = time.perf_counter()
                 scaled, solution = step_solution(gathered, system, problem.scaled(factor), method_name, kernel)
@@ -136,11 +137,17 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
                                    backend=f"petsc-{solver}",
                                    timings={"solve": seconds, "postprocess": time.perf_counter() - post})
                 postprocess += step.timings["postprocess"]
-                if on_step is not None:
-                    handed = time.perf_counter()
-                    on_step(index, factor, step)
-                    handed_over += time.perf_counter() - handed
+                handed = time.perf_counter()
+                try:
+                    if on_step is not None:
+                        on_step(index, factor, step)
+                except Exception as error:  # (writing a step) shared below, so that no rank waits for the next
+                    failure = error
+                handed_over += time.perf_counter() - handed
                 steps = [*steps, step] if keep_steps else [step]
+            failure = mpi.bcast(failure, root=0)
+            if failure is not None:
+                raise failure
             started = time.perf_counter()
         seconds = time.perf_counter() - clock - handed_over
         timings.update({"solve": seconds - postprocess, "postprocess": postprocess,
