@@ -23,7 +23,8 @@ analysis across Newton steps and only refactorises.
 
 The difference from the serial kernel, by design: every Newton step factorises its own
 active set (no Schur updates from a reference set, which would need a distributed column
-solve per changed node). The first active set (predicted from a coarser mesh, solved
+solve per changed node; only a set equal to the one factorised last, a load path's step
+starting where the last settled, keeps its factorisation). The first active set (predicted from a coarser mesh, solved
 across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
 safeguards and certificate are the serial kernel's.
 
