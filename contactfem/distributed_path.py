@@ -4,9 +4,11 @@ One distributed system is assembled and one distributed solver carries over the 
 (:class:`contactfem.kernel.PathSolver` given it as its linear solver): the stiffness and
 the constraints do not change along a path, so MUMPS keeps its ordering and symbolic
 analysis and GAMG its coarse spaces, and a step's new load factor scales the load and
-the prescribed values only. Each step starts from the active sets of the steps before,
-extrapolated in the factor, as the serial path does without coarser levels; every rank
-takes the same decisions from the contact arrays it holds whole.
+the prescribed values only. Each step starts, as in the serial path, from the set a
+coarser level's own path predicts at its factor (solved across the ranks too, where a
+coarser level pays) or from the sets of the steps before extrapolated in the factor,
+whichever predicted better; every rank takes the same decisions from the contact arrays
+it holds whole.
 
 Rank 0 receives a :class:`contactfem.solve.PathResult`, its steps the solutions the
 serial :func:`contactfem.solve.solve_load_path` would give.
@@ -38,6 +40,7 @@ from contactfem.distributed_assembly import _DistributedSystem
 from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import Iteration, PathSolver, Status
 from contactfem.methods import get_method
+from contactfem.sequencing import PredictedStarts, predict_active_set
 
 if TYPE_CHECKING:
     from contactfem.solve import PathResult, SolveResult
@@ -93,13 +96,10 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
     timings["mesh"] = time.perf_counter() - clock
     clock = time.perf_counter()
     problem = _problem_without_stiffness(case, mesh, case.mesh.refine if refine is None else refine)
-    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), rank)
-    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    linear, c = _assembled(PETSc, MPI, comm, case, problem, method_name, solver)
+    system = linear.system
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes ({timings['assemble']:.2f} s)")
-
-    linear = _DistributedSolver(PETSc, MPI, comm, system, solver, tolerance=case.solver.tolerance)
-    c = case.solver.c if case.solver.c is not None else system.default_c()
     numbers = itertools.count(1)
 
     def on_iteration(record: Iteration) -> None:
@@ -107,9 +107,15 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
 
     # No Schur updates across the ranks: every Newton step factorises its own set.
     accelerators = dataclasses.replace(case_accelerators(case), schur_updates=False)
+    coarse = (_coarse_path(PETSc, MPI, comm, case, problem, c, solver, accelerators)
+              if accelerators.sequencing else None)
+    starts = None if coarse is None else PredictedStarts(coarse.predict)
+    if coarse is not None:
+        say(f"  each step starts from the same path on {coarse.problem.n_unknowns} unknowns (solved across "
+            "the ranks) or from the last steps extrapolated, whichever predicted the step before better")
     path = PathSolver(kernel_system(linear), linear=linear, c=c, tolerance=case.solver.tolerance,
                       max_iterations=case.solver.max_iterations, accelerators=accelerators,
-                      on_iteration=on_iteration)
+                      on_iteration=on_iteration, starts=starts)
     say(f"solving {len(factors)} load steps with method {contact_method.equation} ({method_name}), petsc {solver}")
     steps: list[SolveResult] = []
     factorizations = 0
@@ -155,6 +161,91 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
         parallel = parallel_figures(linear, solver, timings, factorizations)
     finally:
         linear.destroy()
+        if coarse is not None:
+            coarse.destroy()
+    sequencing = {} if coarse is None else {**coarse.record(), "started_from": dict(starts.started)}
     result = (PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds, factorizations=factorizations,
-                         timings=dict(timings)) if rank == 0 else None)
+                         timings=dict(timings), sequencing=sequencing) if rank == 0 else None)
     return DistributedPathResult(result=result, parallel=parallel, rank=rank)
+
+
+def _assembled(PETSc, MPI, comm, case: Case, problem, method_name: str, solver: str) -> tuple[_DistributedSolver, float]:
+    """``problem`` assembled across the ranks, its distributed solver and the indicator's c."""
+    mpi = comm.tompi4py()
+    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+    system = _DistributedSystem.assemble(PETSc, comm, problem, get_method(method_name), layout)
+    linear = _DistributedSolver(PETSc, MPI, comm, system, solver, tolerance=case.solver.tolerance)
+    return linear, case.solver.c if case.solver.c is not None else system.default_c()
+
+
+class _CoarsePath:
+    """:class:`contactfem.solve.CoarsePath` solved across the ranks: the case on a coarser
+    mesh, its own path solver, asked at whichever factors the finer path asks for; every
+    rank takes the same decisions from the contact arrays it holds whole."""
+
+    def __init__(self, fine, problem, linear: _DistributedSolver, path: PathSolver, c: float,
+                 below: "_CoarsePath | None", seconds: float) -> None:
+        self.fine, self.problem, self.linear, self.path, self.c, self.below = fine, problem, linear, path, c, below
+        self.failed = False
+        self.iterations = self.factorizations = self.steps = 0
+        #: This level's preparation and steps, the levels below included (reported only).
+        self.seconds = seconds
+
+    def predict(self, factor: float):
+        """The finer level's active set predicted from this level solved at ``factor``; None
+        once a step of this level has failed (the finer path then extrapolates)."""
+        from contactfem.result import ContactFields
+
+        if self.failed:
+            return None
+        started = time.perf_counter()
+        try:
+            kernel = self.path.step(factor)
+        except SolverError:
+            kernel = None
+        self.failed = kernel is None or kernel.status is not Status.CONVERGED
+        active = None
+        if not self.failed:
+            self.steps += 1
+            self.iterations += kernel.iterations
+            self.factorizations += kernel.factorizations
+            contact = self.problem.contact
+            fields = ContactFields(
+                nodes=contact.nodes, edges=contact.edges, multiplier=kernel.multiplier,
+                nodal_force=kernel.nodal_force, normal_displacement=self.linear.normals(kernel.displacement),
+                gap=contact.gap, active=kernel.active, abscissa=contact.abscissa,
+                obstacle_point=contact.obstacle.point, obstacle_normal=contact.obstacle.normal,
+                obstacle_ends=contact.obstacle.ends)
+            active = predict_active_set(self.fine.contact, fields, self.c, self.fine.law)
+        self.seconds += time.perf_counter() - started
+        return active
+
+    def record(self) -> dict:
+        """What the coarser levels cost along the path, as :meth:`contactfem.solve.CoarsePath.record`."""
+        return {"coarse_unknowns": self.problem.n_unknowns,
+                "levels": 1 + (self.below.record()["levels"] if self.below is not None else 0),
+                "coarse_steps": self.steps, "coarse_iterations": self.iterations,
+                "coarse_factorizations": self.factorizations, "seconds": self.seconds}
+
+    def destroy(self) -> None:
+        self.linear.destroy()
+        if self.below is not None:
+            self.below.destroy()
+
+
+def _coarse_path(PETSc, MPI, comm, case: Case, problem, c: float, solver: str, accelerators) -> _CoarsePath | None:
+    """The coarser levels of a distributed load path on ``problem`` (its indicator weighted
+    by ``c``), as :func:`contactfem.solve._coarse_path` chooses them, or None."""
+    from contactfem.solve import SEQUENCING_METHOD, coarser_level
+
+    started = time.perf_counter()
+    coarse_problem = coarser_level(problem, lambda request, refine: _problem_without_stiffness(
+        case, build_mesh(case, refine=refine, request=request), refine, request))
+    if coarse_problem is None:
+        return None
+    linear, coarse_c = _assembled(PETSc, MPI, comm, case, coarse_problem, SEQUENCING_METHOD, solver)
+    below = _coarse_path(PETSc, MPI, comm, case, coarse_problem, coarse_c, solver, accelerators)
+    path = PathSolver(kernel_system(linear), linear=linear, c=coarse_c, tolerance=case.solver.tolerance,
+                      max_iterations=case.solver.max_iterations, accelerators=accelerators,
+                      starts=None if below is None else PredictedStarts(below.predict))
+    return _CoarsePath(problem, coarse_problem, linear, path, c, below, time.perf_counter() - started)
