@@ -96,6 +96,8 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
     timings["mesh"] = time.perf_counter() - clock
     clock = time.perf_counter()
     problem = _problem_without_stiffness(case, mesh, case.mesh.refine if refine is None else refine)
+    if keep_steps:
+        _refuse_oversized_path(mpi, case, problem)
     linear, c = _assembled(PETSc, MPI, comm, case, problem, method_name, solver)
     system = linear.system
     timings["assemble"] = time.perf_counter() - clock
@@ -167,6 +169,22 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
     result = (PathResult(factors=tuple(factors), steps=tuple(steps), seconds=seconds, factorizations=factorizations,
                          timings=dict(timings), sequencing=sequencing) if rank == 0 else None)
     return DistributedPathResult(result=result, parallel=parallel, rank=rank)
+
+
+def _refuse_oversized_path(mpi, case: Case, problem) -> None:
+    """:func:`contactfem.solve._refuse_oversized_path` for rank 0, which keeps the steps:
+    decided there (the memory of its machine) and raised on every rank alike."""
+    from contactfem.solve import _refuse_oversized_path as refuse
+
+    refusal = None
+    if mpi.Get_rank() == 0:
+        try:
+            refuse(case, problem)
+        except CaseError as error:
+            refusal = error
+    refusal = mpi.bcast(refusal, root=0)
+    if refusal is not None:
+        raise refusal
 
 
 def _assembled(PETSc, MPI, comm, case: Case, problem, method_name: str, solver: str) -> tuple[_DistributedSolver, float]:
