@@ -176,7 +176,7 @@ def _distributed_files(case, method: str | None, refine: int | None, petsc_solve
 
     if case.load_path is None:
         outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver, progress=progress,
-                                    accept_uncertified=True)
+                                    accept_uncertified=True, sequencing=case.solver.accelerators.sequencing)
         if staging is None:
             return None
         report = _write_solution(staging, case, outcome.result, distributed_report(case, outcome), progress)
