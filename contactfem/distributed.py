@@ -23,12 +23,17 @@ analysis across Newton steps and only refactorises.
 
 The difference from the serial kernel, by design: every Newton step factorises its own
 active set (no Schur updates from a reference set, which would need a distributed column
-solve per changed node). The first active set (predicted from a coarser mesh, solved
+solve per changed node; only a set equal to the one factorised last, a load path's step
+starting where the last settled, keeps its factorisation). The first active set (predicted from a coarser mesh, solved
 across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
 safeguards and certificate are the serial kernel's.
 
-Not handled yet, refused with one line: platens, and bodies held only by contact (free
-rigid motions).
+Platens are assembled into the rotated unknowns as the serial
+:class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
+:mod:`contactfem.distributed_assembly`); a body held only by contact gives the kernel its
+free rigid motions at the contact normals (every active set must hold them, as serially);
+load paths run in :mod:`contactfem.distributed_path`, one distributed solver (its MUMPS
+analysis, or GAMG's coarse spaces) carried across the steps.
 """
 
 from __future__ import annotations
@@ -52,10 +57,12 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
-from contactfem.errors import CaseError, SolverError
+from contactfem.errors import SolverError
 from contactfem.kernel import (
     EPS,
     REFINEMENT_STEPS,
+    FORCE_RESOLUTION_LIMIT,
+    ZERO_FORCE_STRAIN,
     Certificate,
     ContactSystem,
     Iteration,
@@ -169,9 +176,6 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     Raises
     ------
-    CaseError
-        For platens or a body held only by contact (not handled yet: input this backend
-        cannot take, as a load path is).
     SolverError
         Without petsc4py/mpi4py, for an unknown ``solver``, and as
         :func:`~contactfem.solve.solve_case` does when the kernel does not converge.
@@ -198,42 +202,67 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
-    kernel, linear, layout, system = level.kernel, level.linear, level.layout, level.system
+    kernel, linear, system = level.kernel, level.linear, level.system
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
         linear.destroy()
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    gathered = gather_iterate(linear)
+    timings["gather"] = time.perf_counter() - clock
+    parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
+    linear.destroy()
+    if rank != 0:
+        return DistributedResult(result=None, parallel=parallel, rank=rank)
+
+    clock = time.perf_counter()
+    from contactfem.solve import SolveResult
+
+    problem, solution = step_solution(gathered, system, problem, method_name, kernel)
+    timings["postprocess"] = time.perf_counter() - clock
+    result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
+                         backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
+    return DistributedResult(result=result, parallel=parallel, rank=rank)
+
+
+def gather_iterate(linear: "_DistributedSolver") -> tuple[np.ndarray, np.ndarray] | None:
+    """The kept iterate and its K u (see :meth:`_DistributedSolver.keep`), whole on rank 0 in
+    PETSc order (None elsewhere); every rank calls it."""
     slots = linear.gather_to_zero(linear.solution)
     internal = linear.gather_to_zero(linear.internal_force)
-    timings["gather"] = time.perf_counter() - clock
-    per_rank = mpi.gather({"rank": rank, "owned_unknowns": (layout.last - layout.first),
+    return None if slots is None else (slots, internal)
+
+
+def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, factorizations: int) -> dict:
+    """The run's figures, the same on every rank (a collective step): per rank its owned
+    unknowns and triangles, factorisations, linear iterations, peak memory and seconds."""
+    mpi, system = linear.mpi, linear.system
+    per_rank = mpi.gather({"rank": mpi.Get_rank(), "owned_unknowns": (linear.last - linear.first),
                            "owned_triangles": system.owned_triangles,
                            "factor_seconds": linear.factor_seconds, "linear_iterations": linear.linear_iterations,
                            "factor": linear.factor_figures,
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    parallel = {"ranks": ranks, "solver": solver, "per_rank": per_rank,
-                "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
-                "factorizations": kernel.factorizations}
-    linear.destroy()
-    if rank != 0:
-        return DistributedResult(result=None, parallel=parallel, rank=rank)
+    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+            "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
+            "factorizations": factorizations}
 
-    clock = time.perf_counter()
-    from contactfem.solve import SolveResult, _solution
 
+def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_DistributedSystem", problem: DiscreteProblem,
+                  method_name: str, kernel: KernelResult):
+    """On rank 0: ``problem`` with its :class:`SolutionProduct` and the solution's fields,
+    from the gathered iterate; ``kernel.displacement`` becomes the whole rotated unknowns."""
+    from contactfem.solve import _solution
+
+    slots, internal = gathered
+    layout = system.layout
     kernel.displacement = layout.to_mesh(slots)
     displacement = system.mesh_vector(kernel.displacement)
-    force = system.mesh_vector(layout.to_mesh(internal))
+    force = system.mesh_force(layout.to_mesh(internal))
     problem = _with_stiffness(problem, SolutionProduct(displacement, force))
-    solution = _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
-    timings["postprocess"] = time.perf_counter() - clock
-    result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
-                         backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
-    return DistributedResult(result=result, parallel=parallel, rank=rank)
+    return problem, _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
 
 
 @dataclass(eq=False)
@@ -330,18 +359,10 @@ def _peak_rss() -> int:
 
 def _problem_without_stiffness(case: Case, mesh, refinements: int, request: MeshRequest | None = None) -> DiscreteProblem:
     """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
-    is None until rank 0 gets a :class:`SolutionProduct`); refuses what this backend does
-    not handle yet as bad input for it (:class:`CaseError`, exit code 2, as a load path is)."""
+    is None until rank 0 gets a :class:`SolutionProduct`)."""
     from contactfem.discretize import build_problem
 
-    problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
-    if problem.platens:
-        raise CaseError(f"{case.source.name}: the petsc backend does not handle platens yet "
-                        f"({', '.join(p.name for p in problem.platens)}); solve without --backend petsc")
-    if problem.free_modes is not None:
-        raise CaseError(f"{case.source.name}: the body is held only by contact along {problem.free_modes.shape[1]} "
-                        "rigid motion(s); the petsc backend does not handle that yet, solve without it")
-    return problem
+    return build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
 
 
 def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:
@@ -364,7 +385,11 @@ class _DistributedSolver:
         self.solver_name = solver
         self.normal_dofs = system.normal_dofs
         self.gap = system.gap
-        self.load_local = system.load_local
+        self.load_local = self.unit_load = system.load_local
+        self.support_values_local = self.unit_support_values = system.support_values_local
+        self._u: np.ndarray | None = None
+        #: The active set of the current factorisation (None before the first).
+        self._factorized: np.ndarray | None = None
         layout = system.layout
         self.first, self.last = layout.first, layout.last
         owned = (self.normal_dofs >= self.first) & (self.normal_dofs < self.last)
@@ -491,13 +516,22 @@ class _DistributedSolver:
         return self.checks[-1].condition if self.checks else 1.0
 
     def _factorize(self, active: np.ndarray) -> None:
+        """Factorise the work matrix of ``active`` and solve for its base solution. The matrix
+        depends on the set alone: a set factorised last (a load path's next step starting
+        where the last settled) keeps its factorisation and check, and only its right-hand
+        side, the load less the prescribed values' columns, is made anew."""
         PETSc = self.PETSc
         fixed = self.system.supported_local.copy()
         active_owned = active[self.owned_contact]
         fixed[self.owned_normal_local[active_owned]] = True
-        values = self.system.support_values_local.copy()
+        values = self.support_values_local.copy()
         values[self.owned_normal_local[active_owned]] = self.gap[self.owned_contact[active_owned]]
         self.free = ~fixed
+        if self._factorized is not None and np.array_equal(active, self._factorized):
+            prescribed = np.where(fixed, values, 0.0)
+            self.base = self.linear_solve(
+                np.where(fixed, values, self.load_local - self.multiply(self.system.stiffness, prescribed)))
+            return
         self.system.stiffness.copy(self.work, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         rows = (self.first + np.flatnonzero(fixed)).astype(PETSc.IntType)
         self.scratch.setArray(values)
@@ -514,6 +548,7 @@ class _DistributedSolver:
             self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
         self.base = self.linear_solve(base_rhs)
         self.checks.append(self._probe(active))
+        self._factorized = active.copy()
 
     def _probe(self, active: np.ndarray) -> FactorCheck:
         """:func:`contactfem.linalg.check_factorization` of the factorised work matrix: the same
@@ -599,12 +634,29 @@ class _DistributedSolver:
             terms = np.where(equations, self.multiply(system.absolute, np.abs(u)) + np.abs(load) + np.abs(contact),
                              0.0)
             force = self.maximum(load) + self.maximum(internal) + float(np.abs(nodal_force).max(initial=0.0))
+            roundoff = system.gamma * self.maximum(terms)
+            if self.maximum(load) == 0.0 and force * FORCE_RESOLUTION_LIMIT < roundoff:
+                # Nothing loads the body and its forces are round-off (as the serial solver measures).
+                force = max(force, ZERO_FORCE_STRAIN * system.force_unit)
             force = max(force, np.finfo(float).tiny) if np.isfinite(force) else np.inf
             displacement = max(self.maximum(u), float(np.abs(self.gap).max(initial=0.0)))
             displacement = max(displacement, np.finfo(float).tiny) if np.isfinite(displacement) else np.inf
             return Scales(force=float(force), displacement=float(displacement),
-                          roundoff=float(system.gamma * self.maximum(terms) / force),
+                          roundoff=float(roundoff / force),
                           equilibrium=float(self.maximum(residual) / force))
+
+    def analyse(self) -> None:
+        """:meth:`contactfem.kernel.ActiveSetSolver.analyse`: nothing ahead of the first set
+        (PETSc orders and analyses the pattern at the first factorisation, then keeps it)."""
+        return None
+
+    def set_load_factor(self, factor: float) -> None:
+        """:meth:`contactfem.kernel.ActiveSetSolver.set_load_factor`: the load and prescribed
+        values times ``factor`` (a step of a load path); the solver's set-up (MUMPS's ordering
+        and analysis, GAMG's coarse spaces) carries over, the next set is factorised anew."""
+        self.load_local = float(factor) * self.unit_load
+        self.support_values_local = float(factor) * self.unit_support_values
+        self._u = None
 
     def non_finite(self, u: np.ndarray) -> int:
         return int(self.mpi.allreduce(int(np.count_nonzero(~np.isfinite(u))), op=self.MPI.SUM))
@@ -653,10 +705,25 @@ def _active_set_iteration(linear: _DistributedSolver, *, c: float, tolerance: fl
     result is this rank's part (PETSc order); the whole iterate is kept in
     ``linear.solution``. Also returns the normal displacement at the contact nodes (m,), on
     every rank."""
-    system = ContactSystem(stiffness=None, load=None, normal_dofs=np.arange(len(linear.gap)), gap=linear.gap,
-                           multiplier_mass=linear.system.multiplier_mass, contact_edges=linear.system.contact_edges)
-    kernel = solve_contact(system, c=c, tolerance=tolerance, max_iterations=max_iterations,
+    kernel = solve_contact(kernel_system(linear), c=c, tolerance=tolerance, max_iterations=max_iterations,
                            initial_active=initial_active, on_iteration=on_iteration, linear=linear,
                            second_guess=second_guess)
     linear.keep(kernel.displacement)
     return kernel, linear.normals(kernel.displacement)
+
+
+def kernel_system(linear: _DistributedSolver) -> ContactSystem:
+    """The :class:`ContactSystem` the kernel is handed with the distributed solver: only its
+    contact arrays (whole on every rank) are read, the rest being the solver's. A body held
+    only by contact adds its free rigid motions at the contact normals, followed by a unit
+    block, with a load whose work along them is the body's (all that
+    :class:`contactfem.kernel.modes.ModeHolder` reads)."""
+    system = linear.system
+    m = len(linear.gap)
+    modes, load = None, np.zeros(m)
+    if system.free_modes_normal is not None:
+        j = system.free_modes_normal.shape[1]
+        modes = np.vstack([system.free_modes_normal, np.eye(j)])
+        load = np.concatenate([np.zeros(m), system.free_modes_load])
+    return ContactSystem(stiffness=None, load=load, normal_dofs=np.arange(m), gap=linear.gap,
+                         multiplier_mass=system.multiplier_mass, contact_edges=system.contact_edges, free_modes=modes)

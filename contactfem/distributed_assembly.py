@@ -106,55 +106,47 @@ class _DistributedSystem:
     owned_triangles: int
     n_dof: int
     rigid_motions_local: np.ndarray  # (3, local) in rotated unknowns: GAMG's near-null space
+    masters: np.ndarray  # (k,) each framed node's platen master (−1 off platens)
+    #: The rigid motions only contact holds, at the contact normals (m, j), and the load's
+    #: work along each (j,): what :class:`contactfem.kernel.modes.ModeHolder` reads. None
+    #: when the supports hold the body.
+    free_modes_normal: np.ndarray | None
+    free_modes_load: np.ndarray | None
+    #: The force that strains the body by its whole size (largest diagonal entry of K times
+    #: the body's size), as :class:`contactfem.kernel.ActiveSetSolver` measures it.
+    force_unit: float
 
     @classmethod
     def assemble(cls, PETSc, comm, problem: DiscreteProblem, method, layout: _Layout) -> "_DistributedSystem":
-        from contactfem.discretize.frames import _frames
+        from contactfem.discretize.frames import _frames, _reduce
 
         mesh = problem.mesh
-        n_points = mesh.n_points
-        n_dof = 2 * n_points
+        n_dof = 2 * mesh.n_points
         supported = np.zeros(n_dof, dtype=bool)
         supported[problem.dirichlet_dofs] = True
         frames = _frames(problem, supported)
         blocks = np.stack([frames.a, frames.b], axis=2)  # (k, 2, 2), columns a and b
-        frame_of = np.full(n_points, -1, dtype=np.int64)
-        frame_of[frames.nodes] = np.arange(len(frames.nodes))
-
-        first, last = layout.first, layout.last
-        n_local = last - first
-        index_type = PETSc.IntType
-        d_nnz, o_nnz = (count.astype(index_type) for count in _preallocation(mesh, layout))
-        stiffness = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
-                                          nnz=(d_nnz, o_nnz), comm=comm)
-        stiffness.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        # Triangles go to the owner of their first vertex: each is assembled once, and most of
-        # a rank's entries land in its own rows.
-        first_vertex = layout.position[mesh.triangles[:, 0]]
-        owned = np.flatnonzero((first_vertex >= first // 2) & (first_vertex < last // 2))
-        for start in range(0, len(owned), ELEMENT_CHUNK):
-            triangles = mesh.triangles[owned[start:start + ELEMENT_CHUNK]]
-            ke = element_stiffness(mesh.points, triangles, problem.law)
-            _rotate(ke, triangles, frame_of, blocks)
-            dofs = (2 * layout.position[triangles][:, :, None] + np.arange(2)).reshape(len(triangles), 6)
-            dofs = dofs.astype(index_type)
-            stiffness.setValuesRCV(dofs, dofs, ke.reshape(len(triangles), 36), addv=PETSc.InsertMode.ADD_VALUES)
-        stiffness.assemblyBegin()
-        stiffness.assemblyEnd()
-        stiffness.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        stiffness.setOption(PETSc.Mat.Option.SPD, True)
+        stiffness, owned = _assemble_stiffness(PETSc, comm, problem, layout, frames, blocks)
         indptr, indices, values = stiffness.getValuesCSR()
+        n_local = layout.last - layout.first
         absolute = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
                                          csr=(indptr, indices, np.abs(values)), comm=comm)
         from mpi4py import MPI
 
-        longest_row = comm.tompi4py().allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
+        mpi = comm.tompi4py()
+        longest_row = mpi.allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
         del indptr, indices, values
+        diagonal = stiffness.getDiagonal()
+        largest_diagonal = mpi.allreduce(float(np.abs(diagonal.getArray()).max(initial=0.0)), op=MPI.MAX)
+        diagonal.destroy()
 
-        # Q^T F in rotated unknowns, as ReducedSystem builds it (without platens: Q is block-diagonal).
+        # Qᵀ F in rotated unknowns, as ReducedSystem builds it: each framed node's [a b]ᵀ F,
+        # and a platen's advance the sum of its nodes' a · F (its column of Q).
         load = problem.load.copy().reshape(-1, 2)
         load[frames.nodes] = np.einsum("kca,kc->ka", blocks, load[frames.nodes])
         load = load.ravel()
+        slaves = (frames.masters >= 0) & (frames.nodes != frames.masters)
+        np.add.at(load, 2 * frames.masters[slaves], load[2 * frames.nodes[slaves]])
         if len(frames.force_dofs):
             np.add.at(load, frames.force_dofs, frames.forces)
         fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
@@ -163,7 +155,12 @@ class _DistributedSystem:
         supported_all[fixed_dofs] = True
         values_all = np.zeros(n_dof)
         values_all[fixed_dofs] = fixed_values
-        rigid = _rigid_motions(mesh.points, frames.nodes, blocks)
+        rigid = _reduce(_rigid_motions(mesh.points), frames.nodes, blocks, frames.masters)
+        modes_normal = modes_load = None
+        if problem.free_modes is not None:
+            modes = _reduce(problem.free_modes, frames.nodes, blocks, frames.masters)
+            modes_normal, modes_load = modes[frames.normal_slot], load @ modes
+        span = coordinate_span(mesh.points).max(initial=0.0)
         return cls(
             stiffness=stiffness, absolute=absolute, load_local=layout.owned(load),
             supported_local=layout.owned(supported_all), support_values_local=layout.owned(values_all),
@@ -172,14 +169,31 @@ class _DistributedSystem:
             multiplier_mass=method.multiplier_mass(problem.contact.masses), contact_edges=problem.contact.node_edges(),
             gamma=roundoff_bound(longest_row + 2),
             layout=layout, frame_nodes=frames.nodes, frames=blocks, owned_triangles=int(len(owned)), n_dof=n_dof,
-            rigid_motions_local=np.stack([layout.owned(r) for r in rigid]),
+            rigid_motions_local=np.stack([layout.owned(r) for r in rigid.T]), masters=frames.masters,
+            free_modes_normal=modes_normal, free_modes_load=modes_load,
+            force_unit=largest_diagonal * float(span) if span else 0.0,
         )
 
     def mesh_vector(self, slots: np.ndarray) -> np.ndarray:
-        """Mesh-frame vector (2n,) of a vector in rotated unknowns (mesh numbering): Q s. With
-        orthonormal frames Q is orthogonal, so this also maps K' s to K u."""
+        """Mesh-frame vector (2n,) of a vector in rotated unknowns (mesh numbering): Q s, a
+        platen node moving by a (δ + s_x) + b s_y."""
         vector = slots.copy().reshape(-1, 2)
         vector[self.frame_nodes] = np.einsum("kab,kb->ka", self.frames, vector[self.frame_nodes])
+        slaves = (self.masters >= 0) & (self.frame_nodes != self.masters)
+        advance = slots[2 * self.masters[slaves]]
+        vector[self.frame_nodes[slaves]] += self.frames[slaves, :, 0] * advance[:, None]
+        return vector.ravel()
+
+    def mesh_force(self, rotated: np.ndarray) -> np.ndarray:
+        """The mesh-frame force v (2n,) whose rotated form Qᵀ v is ``rotated`` (mesh
+        numbering): K u from K' s. A platen's advance slot holds its nodes' a · v summed,
+        each of which its node's x slot holds too."""
+        w = rotated.copy()
+        slaves = (self.masters >= 0) & (self.frame_nodes != self.masters)
+        np.subtract.at(w, 2 * self.masters[slaves], w[2 * self.frame_nodes[slaves]])
+        vector = w.reshape(-1, 2)
+        transposed = np.swapaxes(self.frames, 1, 2)
+        vector[self.frame_nodes] = np.linalg.solve(transposed, vector[self.frame_nodes][:, :, None])[:, :, 0]
         return vector.ravel()
 
     def default_c(self) -> float:
@@ -192,11 +206,73 @@ class _DistributedSystem:
         return float(np.mean(values))
 
 
-def _preallocation(mesh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
+def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, frames, blocks: np.ndarray):
+    """K' = Qᵀ K Q as a PETSc MPIAIJ matrix, and the triangles this rank assembled.
+
+    Q is block-diagonal (each framed node's [a b]) but for the platens: a platen node j
+    but the first moves by a_j (δ + s_x) + b_j s_y, so the entries of its x slot are
+    added to the advance δ's row and column as well (the first node's x slot)."""
+    mesh = problem.mesh
+    n_points, n_dof = mesh.n_points, 2 * mesh.n_points
+    frame_of = np.full(n_points, -1, dtype=np.int64)
+    frame_of[frames.nodes] = np.arange(len(frames.nodes))
+    slaves = (frames.masters >= 0) & (frames.nodes != frames.masters)
+    master_of = np.full(n_points, -1, dtype=np.int64)
+    master_of[frames.nodes[slaves]] = frames.masters[slaves]
+    # Mesh unknown → PETSc index of the advance its entries also go to (−1: none; PETSc skips those).
+    advance_of = np.full(n_dof, -1, dtype=np.int64)
+    advance_of[2 * frames.nodes[slaves]] = layout.petsc(2 * frames.masters[slaves])
+
+    first, last = layout.first, layout.last
+    n_local = last - first
+    index_type = PETSc.IntType
+    d_nnz, o_nnz = (count.astype(index_type) for count in _preallocation(mesh, layout, master_of))
+    stiffness = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
+                                      nnz=(d_nnz, o_nnz), comm=comm)
+    stiffness.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    # Triangles go to the owner of their first vertex: each is assembled once, and most of
+    # a rank's entries land in its own rows.
+    first_vertex = layout.position[mesh.triangles[:, 0]]
+    owned = np.flatnonzero((first_vertex >= first // 2) & (first_vertex < last // 2))
+    add = PETSc.InsertMode.ADD_VALUES
+    for start in range(0, len(owned), ELEMENT_CHUNK):
+        triangles = mesh.triangles[owned[start:start + ELEMENT_CHUNK]]
+        ke = element_stiffness(mesh.points, triangles, problem.law)
+        _rotate(ke, triangles, frame_of, blocks)
+        mesh_dofs = (2 * triangles[:, :, None] + np.arange(2)).reshape(len(triangles), 6)
+        dofs = (2 * layout.position[triangles][:, :, None] + np.arange(2)).reshape(len(triangles), 6)
+        dofs = dofs.astype(index_type)
+        values = ke.reshape(len(triangles), 36)
+        stiffness.setValuesRCV(dofs, dofs, values, addv=add)
+        advances = advance_of[mesh_dofs]
+        on_platen = np.flatnonzero((advances >= 0).any(axis=1))
+        if len(on_platen):
+            extra, near, part = advances[on_platen].astype(index_type), dofs[on_platen], values[on_platen]
+            for rows, columns in ((extra, near), (near, extra), (extra, extra)):
+                stiffness.setValuesRCV(rows, columns, part, addv=add)
+    stiffness.assemblyBegin()
+    stiffness.assemblyEnd()
+    stiffness.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    stiffness.setOption(PETSc.Mat.Option.SPD, True)
+    return stiffness, owned
+
+
+def _preallocation(mesh, layout: _Layout, master_of: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Entries per owned row inside and outside this rank's columns: a full 2x2 block for the
-    node itself and for each mesh edge, as the element matrices fill them."""
+    node itself and for each mesh edge, as the element matrices fill them, and for each
+    pair of a platen's first node and a node of a triangle touching that platen
+    (``master_of``: each node's platen first node, −1 off platens and for the first)."""
     first_node, last_node = layout.first // 2, layout.last // 2
-    edges = layout.position[np.asarray(mesh.topology.edges, dtype=np.int64)]
+    pairs = np.asarray(mesh.topology.edges, dtype=np.int64)
+    if master_of is not None and (master_of >= 0).any():
+        triangles = mesh.triangles
+        masters = master_of[triangles]
+        coupled = [np.stack([masters[:, i], triangles[:, j]], axis=1)[masters[:, i] >= 0]
+                   for i in range(3) for j in range(3)]
+        coupled = np.concatenate(coupled)
+        coupled = coupled[coupled[:, 0] != coupled[:, 1]]
+        pairs = np.unique(np.sort(np.concatenate([pairs, coupled]), axis=1), axis=0)
+    edges = layout.position[pairs]
     n_local_nodes = last_node - first_node
     inside = np.ones(n_local_nodes, dtype=np.int64)  # the node's own block
     outside = np.zeros(n_local_nodes, dtype=np.int64)
@@ -224,16 +300,13 @@ def _rotate(ke: np.ndarray, triangles: np.ndarray, frame_of: np.ndarray, blocks:
     ke[touched] = np.einsum("tica,ticjd,tjdb->tiajb", q, k, q).reshape(len(touched), 6, 6)
 
 
-def _rigid_motions(points: np.ndarray, frame_nodes: np.ndarray, blocks: np.ndarray) -> list[np.ndarray]:
-    """The plane's rigid motions (x, y translations, rotation about the centroid) in rotated unknowns."""
+def _rigid_motions(points: np.ndarray) -> np.ndarray:
+    """The plane's rigid motions (x, y translations, rotation about the centroid) as mesh
+    displacements (2n, 3); the caller reduces them to the rotated unknowns."""
     centred = points - points.mean(axis=0)
-    motions = []
-    for field_ in (np.tile([1.0, 0.0], (len(points), 1)), np.tile([0.0, 1.0], (len(points), 1)),
-                   np.stack([-centred[:, 1], centred[:, 0]], axis=1)):
-        rotated = field_.copy()
-        rotated[frame_nodes] = np.einsum("kca,kc->ka", blocks, field_[frame_nodes])
-        motions.append(rotated.ravel())
-    return motions
+    motions = [np.tile([1.0, 0.0], (len(points), 1)), np.tile([0.0, 1.0], (len(points), 1)),
+               np.stack([-centred[:, 1], centred[:, 0]], axis=1)]
+    return np.stack([motion.ravel() for motion in motions], axis=1)
 
 
 def _gather_entries(vector, indices: np.ndarray) -> np.ndarray:

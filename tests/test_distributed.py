@@ -2,7 +2,9 @@
 to 1e-8 relative, the same active set, on the square and the plate with a hole, both methods,
 and on punches pressed into the block over their whole face (the flat punch, which starts
 from its overlap, and a tilted one that releases half of it, which then asks the coarse
-levels solved across the ranks for its second guess).
+levels solved across the ranks for its second guess). Platens (force and displacement), a
+body held by contact alone and a 10-step load path agree to 1e-10, the path also through
+the solve command.
 
 Skipped unless petsc4py and mpi4py import and an ``mpiexec`` is on the PATH (see README:
 the petsc extra needs PETSc itself, e.g. Debian's petsc-dev, and PETSC_DIR to build).
@@ -27,7 +29,20 @@ CASES = Path(__file__).resolve().parent.parent / "cases"
 RANKS = 2
 AGREEMENT = 1e-8
 SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive", "standard")] + [
-    ("flat_punch", "positive"), ("tilted_punch", "standard"), ("strip", "positive")]
+    ("flat_punch", "positive"), ("tilted_punch", "standard"), ("strip", "positive"),
+    ("platen_force", "positive"), ("platen_displacement", "standard"), ("held", "positive")]
+#: The features the serial path reduces to more unknowns or to rigid motions agree tighter.
+TIGHT = 1e-10
+#: The Hertz quarter disk of cases/hertz_platen.yaml at one load on a small mesh (2 838
+#: unknowns): pressed by the platen's force (its advance an unknown, nothing but contact
+#: holding the body vertically), by its prescribed advance, and, without the platen, by a
+#: traction on its top (held by contact alone, no platen).
+SMALL_HERTZ = {"mesh": {"size": 0.1, "contact_size": 0.01, "grading": 0.2}}
+VARIANTS = {"platen_force": ("hertz_platen", {}),
+            "platen_displacement": ("hertz_platen", {"boundary": {"top": {"platen": {"displacement": 0.008}},
+                                                                   "axis": "symmetry", "rim": "contact"}}),
+            "held": ("hertz_quarter", {"boundary": {"top": {"traction": [0, -1.8e3]}, "axis": "symmetry",
+                                                    "rim": "contact"}})}
 #: The tilted punch: cases/flat_punch.yaml pressed in everywhere (4e-3 at x = 1.05, 2e-4 at
 #: x = −1.05) on a mesh fine enough (15 000 unknowns) for a coarse level to pay: its coarser
 #: level keeps 13% of the unknowns (on a mesh of size 0.5 graded from 0.02 at 0.15 the coarse
@@ -85,11 +100,15 @@ def case_files(tmp_path_factory) -> dict[str, Path]:
     """Each solve's case file: the shipped ones, and the tilted punch written beside them."""
     import yaml
 
-    data = yaml.safe_load((CASES / "flat_punch.yaml").read_text(encoding="utf-8"))
-    data.update(TILTED_PUNCH)
-    tilted = tmp_path_factory.mktemp("cases") / "tilted_punch.yaml"
-    tilted.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-    return {name: tilted if name == "tilted_punch" else CASES / f"{name}.yaml" for name, _ in SOLVES}
+    directory = tmp_path_factory.mktemp("cases")
+    written = {}
+    for name, (base, changes) in {"tilted_punch": ("flat_punch", TILTED_PUNCH), **VARIANTS}.items():
+        data = yaml.safe_load((CASES / f"{base}.yaml").read_text(encoding="utf-8"))
+        data.pop("load_path", None)
+        data.update(changes if name == "tilted_punch" else {**SMALL_HERTZ, **changes})
+        written[name] = directory / f"{name}.yaml"
+        written[name].write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return {name: written.get(name, CASES / f"{name}.yaml") for name, _ in SOLVES}
 
 
 @pytest.fixture(scope="module")
@@ -122,11 +141,15 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
         assert sum(steps) > 0 and distributed[key + "_proposed"].tolist() == steps
     assert int(distributed[key + "_ranks"]) == RANKS
     assert str(distributed[key + "_status"]) == "converged"
+    if name in VARIANTS:  # the platen's advance, or the rigid motion contact alone holds
+        assert bool(solved.problem.platens) == name.startswith("platen")
+        assert (solved.problem.free_modes is not None) == (name != "platen_displacement")
+    agreement = TIGHT if name in VARIANTS else AGREEMENT
     np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
     u = distributed[key + "_u"]
-    assert np.abs(u - serial.displacement).max() <= AGREEMENT * np.abs(serial.displacement).max()
+    assert np.abs(u - serial.displacement).max() <= agreement * np.abs(serial.displacement).max()
     for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
-        assert np.abs(distributed[key + field] - reference).max() <= AGREEMENT * np.abs(reference).max()
+        assert np.abs(distributed[key + field] - reference).max() <= agreement * np.abs(reference).max()
     # report.json's figures come from K u computed across the ranks: the balance still closes.
     assert float(distributed[key + "_residual"]) < 1e-10
     assert len(distributed[key + "_rss"]) == RANKS and (distributed[key + "_rss"] > 0).all()
@@ -186,41 +209,77 @@ def test_other_commands_refuse_the_petsc_backend(tmp_path):
     assert "solver.backend = petsc" in result.output and not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("name, fragment", [("hertz_platen", "does not handle platens"),
-                                            ("hertz_by_force", "held only by contact")])
-def test_input_the_petsc_backend_cannot_take_is_refused_as_bad_input(name, fragment):
-    """A platen and a body held only by contact are input this backend cannot take, as a load
-    path is: one line naming the case file, exit code 2 like the load path's refusal (they
-    exited 1, as a solver's failure). Checked without petsc4py: the refusal comes from the
-    problem, before any rank solves."""
+@needs_mpi
+def test_the_solve_command_runs_a_load_path_under_mpiexec(tmp_path):
+    """A load path under `mpiexec -n 2 contactfem solve CASE --backend petsc` (it was refused):
+    rank 0 writes each step as it is solved, and report.json has the path and the ranks."""
+    import json
+
     import yaml
 
-    from contactfem.case import parse_case
-    from contactfem.cli.exits import EXIT_BAD_INPUT, _exit_code
-    from contactfem.discretize import build_mesh
-    from contactfem.distributed import _problem_without_stiffness
-    from contactfem.errors import CaseError
+    data = yaml.safe_load((CASES / "hertz_platen.yaml").read_text(encoding="utf-8"))
+    data.update(SMALL_HERTZ)
+    data["load_path"] = {"steps": 3}
+    case_file = tmp_path / "hertz_platen.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    out = tmp_path / "out"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, "-m", "contactfem.cli", "solve", str(case_file),
+               "--backend", "petsc", "--out", str(out), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["parallel"]["ranks"] == RANKS and report["solver"]["status"] == "converged"
+    assert len(report["load_path"]["steps"]) == 3
+    assert report["platens"]["top"]["force"] == pytest.approx(2000, rel=1e-10)
+    assert {"path.h5", "path.csv", "path.pvd", "path-3.vtu", "report.json"} <= {p.name for p in out.iterdir()}
 
-    if name == "hertz_by_force":
-        data = yaml.safe_load((CASES / "hertz_quarter.yaml").read_text(encoding="utf-8"))
-        data["boundary"]["top"] = {"traction": [0, -1.8e3]}
-        case = parse_case(yaml.safe_dump(data, sort_keys=False), source="held.yaml")
-    else:
-        case = load_case(CASES / f"{name}.yaml")
-    with pytest.raises(CaseError, match=fragment) as refused:
-        _problem_without_stiffness(case, build_mesh(case), 0)
-    message = str(refused.value)
-    assert message.startswith(f"{case.source.name}: ") and "\n" not in message
-    assert _exit_code(refused.value) == EXIT_BAD_INPUT
+PATH_SCRIPT = """
+import sys
+import numpy as np
+from contactfem.case import load_case
+from contactfem.distributed_path import solve_distributed_path
+
+out, path, solver = sys.argv[1:4]
+outcome = solve_distributed_path(load_case(path), solver=solver)
+if outcome.result is not None:
+    steps = outcome.result.steps
+    np.savez(out, u=np.stack([s.solution.displacement for s in steps]),
+             mu=np.stack([s.solution.contact.multiplier for s in steps]),
+             active=np.stack([s.solution.contact.active for s in steps]),
+             status=np.array([s.kernel.status.value for s in steps]),
+             factorizations=np.array(outcome.result.factorizations),
+             iterations=np.array(sum(s.kernel.iterations for s in steps)))
+"""
 
 
-def test_a_load_path_on_the_petsc_backend_is_refused_as_bad_input_too():
-    """The load path's refusal, before any MPI is needed: the same exit code 2."""
-    from contactfem.cli.cmd_solve import _solve_distributed
-    from contactfem.cli.exits import EXIT_BAD_INPUT, _exit_code
-    from contactfem.errors import CaseError
+@needs_mpi
+@pytest.mark.parametrize("solver", ["mumps", "gamg"])
+def test_a_load_path_on_two_ranks_agrees_with_the_serial_path(tmp_path, case_files, solver):
+    """cases/hertz_platen.yaml's 10 steps of platen force on a small mesh: every step's
+    displacement and multiplier agree with the serial path to 1e-10, with the same active
+    sets; one distributed solver carries over the steps, and a step that starts from the
+    set factorised last (the one the step before settled on) keeps its factorisation."""
+    from contactfem.solve import solve_load_path
 
-    case = load_case(CASES / "hertz_platen.yaml")
-    with pytest.raises(CaseError, match="load_path") as refused:
-        _solve_distributed(case, None, None, "mumps", Path("unused"), True, False, False, False, None)
-    assert _exit_code(refused.value) == EXIT_BAD_INPUT
+    import yaml
+
+    data = yaml.safe_load((CASES / "hertz_platen.yaml").read_text(encoding="utf-8"))
+    data.update(SMALL_HERTZ)
+    case_file = tmp_path / "hertz_platen.yaml"
+    case_file.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    script, out = tmp_path / "path.py", tmp_path / "path.npz"
+    script.write_text(PATH_SCRIPT)
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), str(case_file), solver],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    serial = solve_load_path(load_case(case_file)).steps
+    with np.load(out) as distributed:
+        assert len(serial) == len(distributed["u"]) == 10
+        assert (distributed["status"] == "converged").all()
+        # Fewer factorisations than Newton steps: the steps that start from the last set reuse it.
+        assert int(distributed["factorizations"]) < int(distributed["iterations"])
+        for index, step in enumerate(serial):
+            np.testing.assert_array_equal(distributed["active"][index], step.solution.contact.active)
+            u, mu = step.solution.displacement, step.solution.contact.multiplier
+            assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
+            assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()

@@ -185,23 +185,23 @@ def _report_solve(case, result, report: dict, written: list[Path], directory: Pa
 def _solve_distributed(case, method: str | None, refine: int | None, petsc_solver: str, directory: Path,
                        quiet: bool, as_json: bool, overwrite: bool, make_plot: bool, progress) -> None:
     """``solve`` under mpiexec: every rank solves its share; rank 0 alone claims the output
-    directory, writes and prints. Its verdict on the directory is shared before the solve, so
-    that a refusal stops every rank (the others would otherwise wait in a collective step)."""
+    directory, writes and prints (a load path's steps as they are solved). Its verdict on the
+    directory is shared before the solve, so that a refusal stops every rank (the others
+    would otherwise wait in a collective step)."""
     import contextlib
 
-    from contactfem.distributed import distributed_report, mpi_world, solve_distributed
+    from contactfem.distributed import mpi_world
     from contactfem.io.atomic import claimed_directory
 
-    if case.load_path is not None:
-        raise CaseError(f"{case.source.name}: load_path: the petsc backend solves one load; "
-                        "run the path with a serial backend (auto, cholmod, pardiso or superlu)")
     world = mpi_world()
     root = world.Get_rank() == 0
     with contextlib.ExitStack() as stack:
-        refusal = None
+        refusal = staging = None
         if root:
             try:
                 claim = stack.enter_context(claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite))
+                staged = stack.enter_context(claim.stage(replaces=RESULT_FILES, last=REPORT_JSON))
+                staging = stack.enter_context(_writable_by_vtk(staged))
             except ContactFemError as error:
                 refusal = error
         code = world.bcast(_exit_code(refusal) if refusal is not None else 0, root=0)
@@ -210,21 +210,61 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
                 _fail(refusal)
             sys.exit(code)
         try:
-            outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver,
-                                        progress=progress if root else None, accept_uncertified=True)
+            solved = _distributed_files(case, method, refine, petsc_solver, staging, progress if root else None)
         except ContactFemError as error:  # raised on every rank alike: decisions use shared data
             if root:
                 _fail(error)
             sys.exit(_exit_code(error))
         if not root:
             return
-        result = outcome.result
-        with claim.stage(replaces=RESULT_FILES, last=REPORT_JSON) as staged, _writable_by_vtk(staged) as staging:
-            report = _write_solution(staging, case, result, distributed_report(case, outcome), progress)
-            names = _files_of(case.output.files)
-            if make_plot:
-                names += _pictures(staging, staging, progress)
+        result, report, names = solved
+        if make_plot:
+            names += _pictures(staging, staging, progress)
     _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
+
+
+def _distributed_files(case, method: str | None, refine: int | None, petsc_solver: str, staging: Path | None,
+                       progress):
+    """The distributed solve (a load path's steps written into ``staging`` as they come) and,
+    on rank 0 (``staging`` given), its files: (result, report, file names); None elsewhere."""
+    from contactfem.distributed import distributed_report, solve_distributed
+    from contactfem.distributed_path import solve_distributed_path
+    from contactfem.io.path import PathWriter
+    from contactfem.io.registry import PATH_PNG
+    from contactfem.plots import plot_load_path
+    from contactfem.report import build_report, load_path_figures, path_step_figures
+
+    if case.load_path is None:
+        outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver, progress=progress,
+                                    accept_uncertified=True, sequencing=case.solver.accelerators.sequencing)
+        if staging is None:
+            return None
+        report = _write_solution(staging, case, outcome.result, distributed_report(case, outcome), progress)
+        return outcome.result, report, _files_of(case.output.files)
+    writer = None if staging is None else PathWriter(staging, case.load_path.factors, case.text)
+    steps: list[dict] = []
+
+    def write_step(index: int, factor: float, step) -> None:
+        steps.append(path_step_figures(factor, step))
+        writer.add(index, step.solution)
+
+    try:
+        outcome = solve_distributed_path(case, method=method, refine=refine, solver=petsc_solver, progress=progress,
+                                         accept_uncertified=True, on_step=write_step if writer else None,
+                                         keep_steps=False)
+    except BaseException:
+        if writer is not None:
+            writer.close()  # its half-written files go with the staging area
+        raise
+    if staging is None:
+        return None
+    result = outcome.result.final
+    extras = {"load_path": load_path_figures(outcome.result, steps), "parallel": outcome.parallel}
+    report = _write_solution(staging, case, result, build_report(case, result, extras), progress, path_writer=writer)
+    names = _files_of(case.output.files)
+    names.append(plot_load_path(staging / PATH_PNG, report["load_path"]["curves"], case.units.to_dict(),
+                                title=case.title).name)
+    return result, report, names
 
 
 def _refuse_uncertified(case, result, directory: Path) -> None:

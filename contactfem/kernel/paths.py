@@ -48,11 +48,13 @@ class PathSolver:
     set, the answer, and takes one Newton step."""
 
     def __init__(self, system: ContactSystem, *, backend: str = "auto", initial_active: np.ndarray | None = None,
-                 starts: PathStarts | None = None, **options) -> None:
+                 starts: PathStarts | None = None, linear=None, **options) -> None:
         self.system, self.backend, self.options = system, backend, options
         accelerators = options.get("accelerators", Accelerators())
-        self.linear = ActiveSetSolver(system, backend, tolerance=options.get("tolerance", 1e-10), scalable=True,
-                                      schur_updates=accelerators.schur_updates)
+        # ``linear``: another solver with ActiveSetSolver's interface (the distributed one).
+        self.linear = linear if linear is not None else ActiveSetSolver(
+            system, backend, tolerance=options.get("tolerance", 1e-10), scalable=True,
+            schur_updates=accelerators.schur_updates)
         self.c = options.get("c") or default_c(system)
         self.starts = starts or PathStarts()
         self.active = initial_active
@@ -94,7 +96,7 @@ class PathSolver:
             self.starts.settled(result.active)
             self.settled_sets[factor] = np.packbits(result.active)
             self.active = result.active
-            state = (factor, result.nodal_force, result.displacement[self.normal_dofs] - self.gap)
+            state = (factor, result.nodal_force, self.linear.normals(result.displacement) - self.gap)
             # Two states at one factor extrapolate nowhere: a repeated factor replaces its state.
             kept = self.history[:-1] if self.history and self.history[-1][0] == factor else self.history
             self.history = [*kept[-1:], state]
