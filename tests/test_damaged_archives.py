@@ -30,6 +30,7 @@ from contactfem.io import archive
 from contactfem.io.archive import MAX_ATTRIBUTE_BYTES, MAX_MAGNITUDE
 from contactfem.io.isolated import can_isolate, run_isolated
 from contactfem.io.readback import MAX_COMPARE_BYTES, read_compare, read_convergence, read_point_record
+from contactfem.sweep import POINT_SCHEMA_VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE_TEXT = (ROOT / "cases" / "square.yaml").read_text(encoding="utf-8").replace("divisions: 32", "divisions: 4")
@@ -450,7 +451,7 @@ def test_valid_studies_read_back(studies):
 
 
 def test_a_damaged_stored_point_is_refused_by_its_reader(tmp_path):
-    good = {"schema_version": 1, "case_text": "x", "digest": "0" * 64, "status": "ok", "unknowns": 10,
+    good = {"schema_version": POINT_SCHEMA_VERSION, "case_text": "x", "digest": "0" * 64, "status": "ok", "unknowns": 10,
             "seconds": {"total": 1.0}, "contact_zone": {"active_nodes": 2, "intervals": [[0.0, 1.0]]}}
     path = tmp_path / "point.json"
     path.write_text(json.dumps(good))
