@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -278,6 +279,9 @@ def single(points: int, method: str, keep_heap: bool = True, scene: str = "profi
         # What each stage added above the interpreter and libraries.
         record["validation_memory_gb"] = record["peak_rss_gb_validation"] - warm
         record["net_peak_gb"] = record["peak_rss_gb"] - warm
+        # The machine's 1, 5 and 15 minute load when the run ended: on a shared machine the
+        # ratio moves with it.
+        record["load_average"] = list(os.getloadavg())
     sys.stdout.write(RECORD_PREFIX + json.dumps(record) + "\n")
     sys.stdout.flush()
 
