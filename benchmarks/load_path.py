@@ -36,7 +36,11 @@ import platform
 import time
 from pathlib import Path
 
-import yaml
+from contactfem.threads import one_blas_thread
+
+one_blas_thread()  # as the command runs a solve, before numpy loads
+
+import yaml  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -102,6 +102,15 @@ class PathSolver:
             self.history = [*kept[-1:], state]
         return result
 
+    def walk(self, factors: Sequence[float]) -> Iterator[KernelResult]:
+        """:meth:`step` at each of ``factors`` in turn, yielding each result as it is solved;
+        stops after the first step that does not converge."""
+        for factor in factors:
+            result = self.step(factor)
+            yield result
+            if result.status is not Status.CONVERGED:
+                return
+
 
 def solve_path(
     system: ContactSystem,
@@ -117,12 +126,7 @@ def solve_path(
     caller keeps what it needs: a long path need not hold every step). ``options`` are
     those of :func:`solve_contact`. Stops after the first step that does not converge.
     """
-    path = PathSolver(system, backend=backend, initial_active=initial_active, starts=starts, **options)
-    for factor in factors:
-        result = path.step(factor)
-        yield result
-        if result.status is not Status.CONVERGED:
-            return
+    return PathSolver(system, backend=backend, initial_active=initial_active, starts=starts, **options).walk(factors)
 
 
 def extrapolated_active(states: list[tuple[float, np.ndarray, np.ndarray]], factor: float, c: float) -> np.ndarray:

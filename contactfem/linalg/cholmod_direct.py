@@ -39,7 +39,9 @@ from contactfem.linalg.cholmod_ctypes import (
     _SPARSE_P,
     _SYS_A,
     _SYS_L,
+    _SYS_LT,
     _SYS_P,
+    _SYS_PT,
     _XTYPE_REAL,
     CholmodLibrary,
     _c_array,
@@ -223,6 +225,13 @@ class DirectCholmodFactor:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         rhs = np.asarray(rhs, dtype=float)
         return self._dense_solve(_SYS_A, rhs).reshape(rhs.shape)
+
+    def backward(self, rhs: np.ndarray) -> np.ndarray:
+        """x = Pᵀ L⁻ᵀ v for ``rhs`` v in the factor's order, (n,) or (n, k): with W = L⁻¹ P B
+        from :meth:`forward_sparse`, A⁻¹ B y = backward(W y), half a full solve (one sweep of
+        the factor instead of two)."""
+        rhs = np.asarray(rhs, dtype=float)
+        return self._dense_solve(_SYS_PT, self._dense_solve(_SYS_LT, rhs)).reshape(rhs.shape)
 
     def solve_sparse(self, rhs: sp.csc_matrix) -> np.ndarray:
         n, k = rhs.shape
