@@ -359,18 +359,22 @@ def test_the_start_of_a_step_is_the_prediction_that_missed_fewer_nodes():
     starts.settled(right)  # extrapolation missed 0 nodes, the coarser level 1
     # Third: extrapolation alone, the coarser level not solved.
     assert starts.choose(0.75, right) is None and asked == [0.25, 0.5]
-    starts.settled(np.array([True, True, True, True]))  # extrapolation missed a node
+    # Extrapolation missed a node, no more than the coarser level last did: it goes on, the
+    # coarser level's record spent.
+    starts.settled(np.array([True, True, True, True]))
+    assert starts.choose(0.875, right) is None and asked == [0.25, 0.5]
+    starts.settled(np.array([True, True, True, True]))  # extrapolation missed a node again
     # Fourth: the coarser level again, and a tie between the two goes to extrapolation.
     assert np.array_equal(starts.choose(1.0, coarse), coarse) and asked == [0.25, 0.5, 1.0]
     starts.settled(coarse)
     assert starts.choose(1.25, coarse) is None
-    starts.settled(right)  # extrapolation missed two nodes: the coarser level next
+    starts.settled(right)  # extrapolation missed a node, the coarser level none when compared: it next
     # A factor solved before starts from its own set (the path solver's): nothing is
     # predicted, and the step judges nothing.
     starts.revisited(1.25)
     starts.settled(right)
     assert np.array_equal(starts.choose(1.5, right), coarse) and asked == [0.25, 0.5, 1.0, 1.5]
-    assert starts.started == {"coarse": 4, "extrapolated": 2, "solved": 1}
+    assert starts.started == {"coarse": 4, "extrapolated": 3, "solved": 1}
 
 
 def test_a_repeated_factor_starts_from_its_own_set_and_judges_nothing():
