@@ -339,6 +339,39 @@ def test_a_set_two_steps_share_costs_no_schur_solve_after_them(monkeypatch):
         assert np.abs(reduced.displacement(step.displacement) - factor * final).max() <= 1e-10 * np.abs(final).max()
 
 
+def test_a_gap_opening_like_the_three_halves_power_of_the_edge_distance_is_extrapolated_exactly():
+    """Beyond the edge a(f) of a growing smooth contact the gap opens like δ^{3/2} (δ = x − a
+    the distance from the edge): with the edge moving steadily with the load, (G − d)^{2/3}
+    = δ is linear in the factor, so extrapolating it from two steps predicts the next set
+    exactly, while the slack's own linear extrapolation crosses zero early, predicting
+    active every node up to δ* beyond the edge, where 2 (δ* + s)^{3/2} = (δ* + 2 s)^{3/2}
+    for an advance s a step: δ* = s (2^{1/3} − 1) / (1 − 2^{−2/3}) ≈ 0.70 s."""
+    from contactfem.kernel import extrapolated_active
+
+    spacing, advance = 0.01, 0.0637  # the edge moves 6.37 node spacings a step
+    x = (np.arange(400) + 0.5) * spacing
+
+    def state(factor: float) -> tuple[float, np.ndarray, np.ndarray]:
+        edge = 0.3 + advance * factor
+        inside = x < edge
+        force = np.where(inside, np.sqrt(np.abs(edge - x)), 0.0)  # the pressure's √δ inside
+        slack = np.where(inside, 0.0, -np.abs(x - edge) ** 1.5)
+        return factor, force, slack
+
+    for factor in (2.0, 7.0, 11.0):
+        states = [state(factor - 2.0), state(factor - 1.0)]
+        expected = x < 0.3 + advance * factor
+        predicted = extrapolated_active(states, factor, c=1.0, apart=states[1][2] < 0)
+        np.testing.assert_array_equal(predicted, expected)
+        # The slack extrapolated linearly overshoots the edge by δ*.
+        (f0, force0, slack0), (f1, force1, slack1) = states
+        linear = (2 * force1 - force0) + (2 * slack1 - slack0) > 0
+        beyond = x - (0.3 + advance * factor)
+        reach = advance * (2 ** (1 / 3) - 1) / (1 - 2 ** (-2 / 3))
+        np.testing.assert_array_equal(linear & ~expected, (beyond > 0) & (beyond < reach))
+        assert np.count_nonzero(linear & ~expected) >= 4
+
+
 def test_the_start_of_a_step_is_the_prediction_that_missed_fewer_nodes():
     from contactfem.sequencing import PredictedStarts
 
