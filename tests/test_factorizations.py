@@ -212,23 +212,28 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
 
 
 @needs_library
-def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(monkeypatch):
+@pytest.mark.parametrize("copy_bytes", [0, 2**30])
+def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(copy_bytes, monkeypatch):
     """A solve with sparse right-hand sides converts CHOLMOD's supernodal factor to a
-    simplicial one in place; the next factorisation of the pattern starts again from the
-    symbolic analysis, so it is a supernodal LLᵀ again (its forward columns still give
-    Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the factorisation it replaced refuses to
-    solve."""
+    simplicial one in place, after a supernodal copy is kept for the dense solves (which
+    still solve the matrix); the next factorisation of the pattern numbers that copy, or
+    without one starts again from the symbolic analysis, so it is a supernodal LLᵀ again
+    (its forward columns still give Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the
+    factorisation it replaced refuses to solve."""
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
+    monkeypatch.setattr(cholmod_direct, "SUPERNODAL_COPY_BYTES", copy_bytes)
     matrix = _elasticity_like(6400, seed=13)
     n = matrix.shape[0]
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(matrix)
     first._pattern_forward(rhs)
-    assert first.analysis.simplicial
+    assert first.analysis.simplicial and bool(first.analysis.solving.value) is (copy_bytes > 0)
+    x = first.solve(np.ones(n))
+    assert np.abs(matrix @ x - 1.0).max() < 1e-10 * np.abs(matrix).max() * np.abs(x).max()
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
     second = factorizer.factorize(changed)
-    assert not second.analysis.simplicial
+    assert not second.analysis.simplicial and not second.analysis.solving.value
     forward, scaled = second._pattern_forward(rhs)
     expected = rhs.T @ second.solve(rhs.toarray())
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
