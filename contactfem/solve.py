@@ -33,7 +33,6 @@ from contactfem.kernel import (
     Status,
     default_c,
     solve_contact,
-    solve_path,
 )
 from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
 from contactfem.mesh import Mesh
@@ -382,9 +381,18 @@ def solve_load_path(
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     accelerators = case_accelerators(case)
-    coarse_path = (_coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
-                   if accelerators.sequencing else None)
+    path = PathSolver(reduced.system, c=c, tolerance=case.solver.tolerance, max_iterations=case.solver.max_iterations,
+                      backend=backend, accelerators=accelerators)
+    # The fine level's ordering and symbolic analysis (outside the interpreter's lock) run
+    # while the coarser levels mesh and assemble, as in a single solve.
+    with ThreadPoolExecutor(max_workers=1) if accelerators.sequencing else _InPlace() as pool:
+        analysed = pool.submit(path.linear.analyse)
+        coarse_path = (_coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
+                       if accelerators.sequencing else None)
+        analysed.result()
     starts = None if coarse_path is None else PredictedStarts(coarse_path.predict)
+    if starts is not None:
+        path.starts = starts
     if coarse_path is not None:
         levels = coarse_path.record()["levels"]
         say(f"  each step starts from the same path on {coarse_path.problem.n_unknowns} unknowns "
@@ -397,10 +405,7 @@ def solve_load_path(
     postprocess = handed_over = 0.0
     last: KernelResult | None = None
     started = clock
-    path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
-                      max_iterations=case.solver.max_iterations, backend=backend, starts=starts,
-                      accelerators=accelerators)
-    for index, (factor, kernel) in enumerate(zip(factors, path)):
+    for index, (factor, kernel) in enumerate(zip(factors, path.walk(factors))):
         seconds = time.perf_counter() - started
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
         say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
