@@ -226,8 +226,8 @@ def obstacle_figures(problem: DiscreteProblem, nodal_force_of: np.ndarray | None
         nodal_force = nodal_force_of
         figures["motion"] = {
             "direction": drive.direction.tolist(), "advance": float(drive.advance),
-            "control": "force" if drive.pushed else "displacement",
-            **({"force": float(drive.force)} if drive.pushed else {}),
+            "control": "displacement" if drive.force is None else "force",
+            **({} if drive.force is None else {"force": float(drive.force)}),
             **({} if nodal_force is None else {"reaction": drive.reaction(nodal_force, contact.normals)}),
         }
     return figures

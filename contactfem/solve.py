@@ -49,6 +49,7 @@ from contactfem.sequencing import (
     layer_pays,
     PredictedStarts,
     patch_count,
+    plane_strain_modulus,
     predict_active_set,
     prediction_first,
     starting_set,
@@ -188,6 +189,12 @@ def solve_case(
     kept = {} if coarse_levels is None else coarse_levels
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
+    if problem.drive is not None and problem.drive.pushed:
+        from contactfem.indenter import solve_pushed
+
+        return solve_pushed(problem, lambda trial: solve_case(
+            case, method=method_name, problem=trial, progress=progress, accept_uncertified=accept_uncertified,
+            accelerators=accelerators), plane_strain_modulus(problem.law), say)[0]
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")

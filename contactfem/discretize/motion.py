@@ -31,10 +31,13 @@ class ObstacleDrive:
     direction: np.ndarray
     advance: float
     force: float | None = None
+    #: Whether the advance is still the unknown of a pushed obstacle (False once a trial
+    #: advance is set: :meth:`contactfem.discretize.problem.DiscreteProblem.advanced`).
+    free: bool = False
 
     @property
     def pushed(self) -> bool:
-        return self.force is not None
+        return self.force is not None and self.free
 
     def moved(self, displacement: np.ndarray) -> np.ndarray:
         """The displacement (n_points, 2) with the obstacle moved back to where it went."""
@@ -71,7 +74,7 @@ def obstacle_drive(case: Case, held: "Supports") -> tuple[ObstacleDrive | None, 
                         f"expected supports that keep the body from following the obstacle")
     pushed = motion.control is PlatenControl.FORCE
     drive = ObstacleDrive(direction=direction, advance=0.0 if pushed else motion.value,
-                          force=motion.value if pushed else None)
+                          force=motion.value if pushed else None, free=pushed)
     return drive, shifted(held, drive.advance, direction)
 
 

@@ -83,7 +83,7 @@ class DiscreteProblem:
         shift = advance - self.drive.advance
         dofs = self.dirichlet_dofs
         return replace(self, dirichlet_values=self.dirichlet_values - shift * self.drive.direction[dofs % 2],
-                       drive=replace(self.drive, advance=advance))
+                       drive=replace(self.drive, advance=advance, free=False))
 
     def contact_system(self, method: ContactMethod) -> ReducedSystem:
         """The kernel's view: supports eliminated, contact nodes in (normal, tangent) unknowns."""
