@@ -46,6 +46,9 @@ class ContactFields:
         A curved obstacle's surface as a polyline (a circle sampled along its arc), to draw
         it; None for a flat one. For a curved obstacle ``obstacle_point`` is its center or
         first vertex and ``obstacle_normal`` the normalised mean of ``normals``.
+    obstacle_shift : (2,) float64 or None
+        How far a moving obstacle went (its advance times its direction): the obstacle
+        described above is where it rests; None for one that stays.
     """
 
     nodes: np.ndarray
@@ -62,6 +65,7 @@ class ContactFields:
     normals: np.ndarray | None = None
     obstacle_points: np.ndarray | None = None
     obstacle_outline: np.ndarray | None = None
+    obstacle_shift: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -772,6 +772,7 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
         active=kernel.active,
         abscissa=contact.abscissa,
         **contact.output_fields(),
+        obstacle_shift=None if problem.drive is None or not moved else problem.drive.advance * problem.drive.direction,
     )
 
 

@@ -166,3 +166,25 @@ def test_the_distributed_solve_refuses_a_curved_or_moving_obstacle():
         refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]],
                                          "motion": {"direction": [0, -1], "displacement": 0.003}})))
     refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]]})))
+
+
+def test_the_archive_reader_checks_a_curved_obstacles_normals(tmp_path):
+    """solution.h5 is untrusted input: non-unit normals, or normals without their closest
+    points, are refused naming the dataset."""
+    import h5py
+
+    from contactfem.errors import ArchiveError
+    from contactfem.io import read_hdf5
+
+    path = tmp_path / "indenter.yaml"
+    path.write_text(yaml.safe_dump(circle_case({"direction": [0, -1], "displacement": 0.004})), encoding="utf-8")
+    out = tmp_path / "out"
+    assert make_runner().invoke(main, ["solve", str(path), "--out", str(out), "--quiet"]).exit_code == 0
+    with h5py.File(out / "solution.h5", "r+") as f:
+        f["/contact/normals"][0] = (2.0, 0.0)
+    with pytest.raises(ArchiveError, match="/contact/normals"):
+        read_hdf5(out / "solution.h5")
+    with h5py.File(out / "solution.h5", "r+") as f:
+        del f["/contact/obstacle_points"]
+    with pytest.raises(ArchiveError, match="/contact/obstacle_points"):
+        read_hdf5(out / "solution.h5")

@@ -6,7 +6,7 @@ normal points from the body into the obstacle; the gap is the distance to the cl
 point, positive when apart. A node whose closest point is an open end of a polyline,
 approached from beyond it, faces no part of the obstacle and carries no constraint (as
 beyond a segment's ends). A node equidistant, to round-off, from two separate parts of a
-concave obstacle has no single closest point: :meth:`Closest.ambiguous` marks it and the
+concave obstacle (closest points in directions that differ) has no single closest point: :meth:`Closest.ambiguous` marks it and the
 contact boundary refuses it.
 
 The polyline's closest points are found without an all-pairs array: the nearest vertex
@@ -22,9 +22,12 @@ from dataclasses import dataclass
 import numpy as np
 
 #: Two candidates within this share of the obstacle's size of the least distance, whose
-#: closest points lie farther apart than :data:`SEPARATE`, make a node's closest point ambiguous.
+#: closest points lie farther apart than :data:`SEPARATE` times that distance (their
+#: normals differ by more than about that angle), make a node's closest point ambiguous.
+#: Neighbouring segments of a convex bend tie near their common vertex with closest
+#: points about sqrt(2 d TIED size) apart: far less than SEPARATE d.
 TIED = 1e-10
-SEPARATE = 1e-6
+SEPARATE = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,8 +98,9 @@ class Circle(_Curved):
                        abscissa=-self.radius * angle, faces=np.ones(len(p), dtype=bool), ambiguous=ambiguous)
 
     def outline(self, segments: int = 256) -> np.ndarray:
-        """Points (segments + 1, 2) around the circle, to draw it."""
-        angle = np.linspace(0.0, 2 * np.pi, segments + 1)
+        """Points (segments + 1, 2) around the circle, clockwise: the disk on the right of
+        the walk, as for a polyline obstacle."""
+        angle = np.linspace(0.0, -2 * np.pi, segments + 1)
         return self.center + self.radius * np.stack([np.cos(angle), np.sin(angle)], axis=1)
 
     def describe(self) -> dict:
@@ -149,7 +153,7 @@ class Polyline(_Curved):
         least[node[best]] = d[best]
         where = np.full((len(p), 2), np.nan)
         where[node[best]] = q[best]
-        tied = (d <= least[node] + TIED * size) & (np.hypot(*(q - where[node]).T) > SEPARATE * size)
+        tied = (d <= least[node] + TIED * size) & (np.hypot(*(q - where[node]).T) > SEPARATE * least[node])
         ambiguous = np.zeros(len(p), dtype=bool)
         ambiguous[node[tied]] = True
         i, s, u, qb, db = node[best], seg[best], raw[best], q[best], d[best]

@@ -45,7 +45,9 @@ obstacle)::
                                   flat obstacle {p : (p − point)·normal ≥ 0} (a curved
                                   one's center or first vertex, and its mean normal); and
                                   obstacle_ends (2, 2) float64 for a finite obstacle (a
-                                  segment between those points), absent for an infinite one
+                                  segment between those points), absent for an infinite one;
+                                  obstacle_shift (2,) float64 for a moving obstacle: how far
+                                  it went from where the other attributes place it
     /newton/<key>          (n_iterations,) one dataset per key of Solution.newton
 
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
@@ -215,6 +217,8 @@ def write_hdf5(
             g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
             if contact.obstacle_ends is not None:
                 g.attrs["obstacle_ends"] = np.asarray(contact.obstacle_ends, dtype=np.float64)
+            if contact.obstacle_shift is not None:
+                g.attrs["obstacle_shift"] = np.asarray(contact.obstacle_shift, dtype=np.float64)
 
             g = f.create_group("newton")
             for key, values in solution.newton.items():
@@ -321,6 +325,7 @@ SOLUTION_LAYOUT = Layout(
         Attribute("/contact", "obstacle_point", "vector", shape=(2,), since=2),
         Attribute("/contact", "obstacle_normal", "vector", shape=(2,), unit=True, since=2),
         Attribute("/contact", "obstacle_ends", "vector", shape=(2, 2), since=2, optional=True),
+        Attribute("/contact", "obstacle_shift", "vector", shape=(2,), since=3, optional=True),
     ),
     series=(Series("/newton", max_length=1_000_000),),
     rules=(_triangles_turn_left, _contact_on_the_obstacle),
