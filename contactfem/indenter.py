@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from contactfem.errors import CaseError, SolverError
+from contactfem.errors import SolverError
 
 #: The reaction is accepted within this share of the force.
 FORCE_TOLERANCE = 1e-12
@@ -30,9 +30,8 @@ def touch_advance(problem) -> float:
     drive, contact = problem.drive, problem.contact
     approach = -(contact.normals @ drive.direction)
     closing = approach > 0
-    if not closing.any():
-        raise CaseError("obstacle.motion.direction: the motion moves the obstacle away from every contact node; expected a direction "
-                          "towards the body")
+    if not closing.any():  # a node already touching holds it (refuse_receding allows no other case)
+        return 0.0
     return float(np.min(contact.gap[closing] / approach[closing]))
 
 

@@ -132,6 +132,10 @@ def test_the_circle_solve_writes_its_obstacle(tmp_path):
      "obstacle.motion.direction"),
     ({"circle": {"center": [0, 1], "radius": 1}, "motion": {"direction": [0, -1], "force": 1, "displacement": 1}},
      "obstacle.motion"),
+    ({"circle": {"center": [0, 1.1], "radius": 1}, "motion": {"direction": [0, 1], "force": 1}},
+     "obstacle.motion.direction"),
+    ({"polyline": [[1, 0.1], [-1, 0.1]], "motion": {"direction": [1, 0], "displacement": 0.2}},
+     "obstacle.motion.direction"),
 ])
 def test_bad_indenters_are_refused_naming_the_key(tmp_path, obstacle, fragment):
     path = tmp_path / "indenter.yaml"

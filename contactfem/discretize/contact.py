@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -152,6 +152,8 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
                             f"face the obstacle (outward normal · obstacle normal ≥ −{FACING_TOLERANCE:g} all "
                             f"along each edge and > {FACING_TOLERANCE:g} somewhere on it)")
     gamma_nodes = np.unique(edges)
+    if getattr(obstacle, "kind", "") == "circle":
+        obstacle = replace(obstacle, reference=_circle_reference(case, mesh, gamma_nodes, obstacle.center))
     # Each node's obstacle normal (a flat obstacle's one normal; a curved one's at the closest point).
     normal_at = np.zeros((mesh.n_points, 2))
     closest = None
@@ -214,6 +216,32 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
         masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent), beyond=beyond,
         normals=normals, positions=points,
     )
+
+
+def _circle_reference(case: Case, mesh: Mesh, gamma_nodes: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """The direction from a circle's center to the nearest point of the contact parts' geometry
+    (edges as chords; a mesh file's nodes): where a circle's abscissae start, the same on
+    every mesh of the case, so that levels of mesh sequencing share them. A moving circle's
+    is its direction of motion: it first touches there."""
+    motion = case.obstacle.motion
+    if motion is not None:
+        return np.asarray(motion.direction, dtype=float)
+    starts, ends = [], []
+    for name in case.contact_parts:
+        for a, b, _, _ in _geometry_edges(case, name):
+            starts.append(a)
+            ends.append(b)
+    if starts:
+        a, b = np.concatenate(starts), np.concatenate(ends)
+        step = b - a
+        t = np.clip(np.einsum("ij,ij->i", center - a, step) / np.maximum(np.einsum("ij,ij->i", step, step), 1e-300),
+                    0.0, 1.0)
+        near = a + t[:, None] * step
+    else:
+        near = mesh.points[gamma_nodes]
+    direction = near[np.argmin(np.hypot(*(near - center).T))] - center
+    norm = float(np.hypot(*direction))
+    return direction / norm if norm > 0 else np.array([0.0, -1.0])
 
 
 def _refuse_ambiguous(case: Case, points: np.ndarray, ambiguous: np.ndarray) -> None:

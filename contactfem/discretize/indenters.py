@@ -73,11 +73,14 @@ class Circle(_Curved):
     """The rigid disk of ``center`` (2,) and ``radius``; the body lies outside it.
 
     The abscissa is the arc length R φ of the closest point, φ measured clockwise (the
-    sense of a flat obstacle's tangent (−n_y, n_x)) from the direction of the points'
-    mean, so that it runs without a cut over a contact zone."""
+    sense of a flat obstacle's tangent (−n_y, n_x)) from the unit ``reference`` direction
+    (from the center), so that it runs without a cut over a contact zone around it: the
+    contact boundary sets it from the geometry, the same on every mesh of a case (None:
+    the direction of the points' mean)."""
 
     center: np.ndarray
     radius: float
+    reference: np.ndarray | None = None
     kind = "circle"
 
     @property
@@ -91,7 +94,7 @@ class Circle(_Curved):
         ambiguous = distance <= TIED * self.radius
         radial = r / np.where(ambiguous, 1.0, distance)[:, None]
         radial[ambiguous] = (0.0, -1.0)
-        mean = radial.sum(axis=0)
+        mean = radial.sum(axis=0) if self.reference is None else np.asarray(self.reference, dtype=float)
         mean = mean / np.hypot(*mean) if np.hypot(*mean) > 0 else np.array([0.0, -1.0])
         angle = np.arctan2(mean[0] * radial[:, 1] - mean[1] * radial[:, 0], radial @ mean)
         return Closest(points=self.center + self.radius * radial, normals=-radial, gap=distance - self.radius,

@@ -84,3 +84,13 @@ def shifted(held: "Supports", advance: float, direction: np.ndarray) -> "Support
         return held
     dofs = held.dirichlet_dofs
     return replace(held, dirichlet_values=held.dirichlet_values - advance * direction[dofs % 2])
+
+
+def refuse_receding(case: Case, drive: ObstacleDrive | None, gap: np.ndarray, normals: np.ndarray) -> None:
+    """Refuse a motion that can bring the obstacle to no contact node: every node apart from
+    it and none it moves towards (d · n < 0)."""
+    if drive is None or not len(gap) or np.any(gap <= 0.0) or np.any(normals @ drive.direction < -1e-12):
+        return
+    raise CaseError(f"{case.source.name}: obstacle.motion.direction = {list(case.obstacle.motion.direction)}: moves "
+                    "the obstacle away from every contact node it faces, which it can then never reach; expected a "
+                    "direction towards the body")

@@ -15,7 +15,7 @@ from contactfem.discretize.exact_checks import check_exact_contact, exact_fields
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
 from contactfem.discretize.meshing import MeshRequest
-from contactfem.discretize.motion import ObstacleDrive, obstacle_drive
+from contactfem.discretize.motion import ObstacleDrive, obstacle_drive, refuse_receding
 from contactfem.errors import CaseError
 from contactfem.discretize.supports import Holds, PlatenConstraint, free_rigid_modes, supports
 from contactfem.mesh import Mesh
@@ -106,6 +106,7 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
     load = loads.load_vector(mesh)
     free_modes = free_rigid_modes(case, mesh, held, contact, load)
     drive, held = obstacle_drive(case, held)
+    refuse_receding(case, drive, contact.gap, contact.normals)
     if drive is not None and free_modes.shape[1]:
         raise CaseError(f"{case.source.name}: obstacle.motion: the supports leave the body a rigid motion that only "
                         "contact holds; expected supports that hold the body still while the obstacle moves")
