@@ -17,6 +17,7 @@ is covered), and the exact point-segment projection is evaluated on those pairs 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,8 @@ import numpy as np
 #: points about sqrt(2 d TIED size) apart: far less than SEPARATE d.
 TIED = 1e-10
 SEPARATE = 1e-3
+#: Nearest segment midpoints asked for each node before a ball query lists the rest.
+FIRST_ASK = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,21 +198,20 @@ def _candidates(points: np.ndarray, vertices: np.ndarray, vertex_tree, midpoint_
                 longest: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (node (c,), segment (c,)) holding every segment that may be a node's closest:
     those whose midpoints lie within the nearest vertex's distance plus half the longest
-    segment. The k nearest midpoints are asked for, k doubled for the nodes whose k-th
-    still lies within that reach."""
+    segment. The :data:`FIRST_ASK` nearest midpoints settle most nodes (their last one lies
+    beyond that reach); the others are listed by one ball query each, in C."""
     n_segments = len(vertices) - 1
     reach = vertex_tree.query(points)[0] + 0.5 * longest * (1 + 1e-12)
-    nodes_out, segs_out = [], []
-    pending = np.arange(len(points))
-    k = min(4, n_segments)
-    while len(pending):
-        dist, index = midpoint_tree.query(points[pending], k=k)
-        dist, index = dist.reshape(len(pending), -1), index.reshape(len(pending), -1)
-        done = (dist[:, -1] > reach[pending]) | (k >= n_segments)
-        keep = done[:, None] & (dist <= reach[pending][:, None])
-        rows, cols = np.nonzero(keep)
-        nodes_out.append(pending[rows])
-        segs_out.append(index[rows, cols])
-        pending = pending[~done]
-        k = min(2 * k, n_segments)
-    return np.concatenate(nodes_out), np.concatenate(segs_out)
+    k = min(FIRST_ASK, n_segments)
+    dist, index = midpoint_tree.query(points, k=k)
+    dist, index = dist.reshape(len(points), -1), index.reshape(len(points), -1)
+    done = (dist[:, -1] > reach) | (k >= n_segments)
+    rows, cols = np.nonzero(done[:, None] & (dist <= reach[:, None]))
+    nodes, segments = [rows], [index[rows, cols]]
+    pending = np.flatnonzero(~done)
+    if len(pending):
+        lists = midpoint_tree.query_ball_point(points[pending], reach[pending], return_sorted=False)
+        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+        nodes.append(np.repeat(pending, counts))
+        segments.append(np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum())))
+    return np.concatenate(nodes), np.concatenate(segments)
