@@ -57,7 +57,7 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
-from contactfem.errors import SolverError
+from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
     REFINEMENT_STEPS,
@@ -92,6 +92,16 @@ PROBE_RTOL = 1e-6
 
 _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
                  "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
+
+
+def refuse_indenter(case: Case) -> None:
+    """Refuse what the distributed solve does not pose: a curved obstacle (its per-node
+    normals are not passed to the ranks' frames) or a moving one."""
+    obstacle = case.obstacle
+    if not obstacle.flat or obstacle.motion is not None:
+        what = f"a {obstacle.shape} obstacle" if not obstacle.flat else "a moving obstacle (obstacle.motion)"
+        raise CaseError(f"{case.source.name}: solver.backend = petsc: {what} is solved serially only; expected a "
+                        "flat obstacle that stays where it is, or another backend (auto, cholmod, pardiso, superlu)")
 
 
 def petsc_available() -> bool:
