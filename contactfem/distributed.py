@@ -191,14 +191,17 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     method_name = method or case.solver.method
     timings: dict[str, float] = {}
 
+    from contactfem.distributed_problem import PieceProblem, gather_coordinates, piece_problem, whole_problem
+
     clock = time.perf_counter()
-    say(f"meshing (each of {ranks} ranks)")
-    mesh = build_mesh(case, refine=refine)
-    timings["mesh"] = time.perf_counter() - clock
     refinements = case.mesh.refine if refine is None else refine
-    clock = time.perf_counter()
-    problem = _problem_without_stiffness(case, mesh, refinements)
-    problem_seconds = time.perf_counter() - clock
+    # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
+    problem = piece_problem(case, mpi, refine)
+    say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
+    if problem is None:
+        problem = _problem_without_stiffness(case, build_mesh(case, refine=refine), refinements)
+    timings["mesh"] = time.perf_counter() - clock
+    problem_seconds = 0.0
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
@@ -210,6 +213,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     clock = time.perf_counter()
     gathered = gather_iterate(linear)
+    coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
     timings["gather"] = time.perf_counter() - clock
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
@@ -219,6 +223,8 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     clock = time.perf_counter()
     from contactfem.solve import SolveResult
 
+    if coordinates is not None:  # the mesh for the writers, now that the solver's memory is freed
+        problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
@@ -286,8 +292,14 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     contact_method = get_method(method_name)
     clock = time.perf_counter()
     say("assembling")
-    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
-    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    from contactfem.distributed_problem import PieceProblem, assemble_piece_system
+
+    if isinstance(problem, PieceProblem):
+        system = assemble_piece_system(PETSc, comm, problem, contact_method)
+        layout = system.layout
+    else:
+        layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+        system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
         f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")

@@ -295,7 +295,8 @@ def petsc_numbers(piece: MeshPiece, mpi) -> tuple[np.ndarray, int, int]:
     from mpi4py import MPI
 
     count = len(piece.owned)
-    offset = mpi.exscan(count, op=MPI.SUM) if piece.rank else 0
+    offset = mpi.exscan(count, op=MPI.SUM)
+    offset = int(offset) if piece.rank else 0  # undefined on rank 0
     ids, numbers = _owned_numbers(piece, offset)
     asked = mpi.alltoall(_requests(piece))
     answers = mpi.alltoall([_answer(ids, numbers, request) if other != piece.rank else np.empty(0, dtype=np.int64)
