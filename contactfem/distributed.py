@@ -158,7 +158,7 @@ class SolutionProduct:
 
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
                       progress: Progress | None = None, accept_uncertified: bool = False,
-                      sequencing: bool = True) -> DistributedResult:
+                      sequencing: bool = True, distributed_mesh: bool = True) -> DistributedResult:
     """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
 
     Parameters
@@ -173,6 +173,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         Start from the active set a coarser mesh predicts, when that pays (as the serial
         solve does; the coarse levels are solved across the ranks too); False starts from
         the nodes inside the obstacle.
+    distributed_mesh : bool
+        Let each rank refine only its piece of the coarse mesh when the case allows it (see
+        :mod:`contactfem.distributed_problem`); False meshes the whole case on every rank.
 
     Raises
     ------
@@ -196,7 +199,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     clock = time.perf_counter()
     refinements = case.mesh.refine if refine is None else refine
     # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
-    problem = piece_problem(case, mpi, refine)
+    problem = piece_problem(case, mpi, refine) if distributed_mesh else None
     say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
     if problem is None:
         problem = _problem_without_stiffness(case, build_mesh(case, refine=refine), refinements)
@@ -227,6 +230,8 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
+    parallel["per_rank"][0]["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
+    parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
     return DistributedResult(result=result, parallel=parallel, rank=rank)
@@ -251,7 +256,8 @@ def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, f
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+    mesh = "replicated" if hasattr(system.layout, "order") else "pieces"
+    return {"ranks": mpi.Get_size(), "solver": solver, "mesh": mesh, "per_rank": per_rank,
             "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
             "factorizations": factorizations}
 
