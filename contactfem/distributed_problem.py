@@ -41,6 +41,7 @@ from contactfem.distributed_assembly import (
 from contactfem.distributed_mesh import MeshPiece, mesh_piece, petsc_numbers
 from contactfem.kernel import roundoff_bound
 from contactfem.mesh import Mesh
+from contactfem.mesh.refine import refine_uniform
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +90,7 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     checked = build_problem(case, coarse, assemble_stiffness=False)
     if checked.platens or checked.free_modes is not None or coarse.n_triangles < mpi.Get_size():
         return None
+    _refuse_oversized(case, coarse.n_triangles * 4**times, times, mpi)
     piece = mesh_piece(coarse, times, mpi.Get_size(), mpi.Get_rank())
     numbers, first, last = petsc_numbers(piece, mpi)
     boundary, ids = _boundary_mesh(piece, mpi)
@@ -119,6 +121,31 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
         mesh_request=MeshRequest.of(case), holds=held.holds, piece=piece, numbers=numbers, node_range=(first, last),
         boundary_ids=ids, boundary_numbers=boundary_numbers, n_points_total=int(piece.global_counts[0]),
         body_load=body)
+
+
+def _refuse_oversized(case: Case, triangles: int, times: int, mpi) -> None:
+    """The size guard per rank: the ranks on this machine (sharing its memory) each need
+    :func:`contactfem.estimate.estimate_cost` of ``ranks`` ranks; refused on every rank alike."""
+    from mpi4py import MPI
+
+    from contactfem.errors import CaseError
+    from contactfem.estimate import estimate_cost, memory_limit, unknowns_of_triangles
+
+    ranks = mpi.Get_size()
+    unknowns = unknowns_of_triangles(triangles)
+    per_rank = estimate_cost(unknowns, "petsc", ranks)["bytes"]
+    here = mpi.Split_type(MPI.COMM_TYPE_SHARED)
+    local = here.Get_size()
+    here.Free()
+    limit = memory_limit()
+    needed = per_rank * local
+    refused = mpi.allreduce(bool(needed > limit.bytes), op=MPI.LOR)
+    if refused:
+        raise CaseError(
+            f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
+            f"{unknowns:.3g} unknowns, whose solve needs about {per_rank / 2**30:.3g} GiB on each of {ranks} ranks "
+            f"with petsc, {local} of them sharing {limit.source}; use more machines, or "
+            f"fewer refinements (--refine or mesh.refine, now {times}; each multiplies the triangles by four)")
 
 
 def _members(ids: np.ndarray, sorter: np.ndarray, wanted: np.ndarray) -> np.ndarray:
@@ -307,7 +334,8 @@ def whole_problem(case: Case, refinements: int, coordinates: np.ndarray) -> tupl
     :func:`contactfem.distributed.step_solution`."""
     from contactfem.discretize.frames import _frames
 
-    mesh = build_mesh(case, refine=refinements)
+    # The pieces passed the guard per rank; the whole mesh now holds no solver beside it.
+    mesh = refine_uniform(build_mesh(case, refine=0), refinements)
     problem = build_problem(case, mesh, refinements=refinements, assemble_stiffness=False)
     n = mesh.n_points
     by_petsc, by_mesh = np.lexsort(coordinates.T[::-1]), np.lexsort(mesh.points.T[::-1])
