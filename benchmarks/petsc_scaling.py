@@ -80,7 +80,9 @@ def single(refine: int, solver: str, method: str, mesh: str = "pieces") -> None:
         "per_rank": [{"rank": rank["rank"], "owned_unknowns": rank["owned_unknowns"],
                       "owned_triangles": rank["owned_triangles"], "peak_rss_gb": rank["peak_rss_bytes"] / GB,
                       "factor_s": rank["factor_seconds"], "linear_iterations": rank["linear_iterations"],
-                      "factor": rank["factor"], "seconds": rank["seconds"]} for rank in per_rank],
+                      "factor": rank["factor"], "seconds": rank["seconds"],
+                      **({"solve_peak_rss_gb": rank["solve_peak_rss_bytes"] / GB}
+                         if "solve_peak_rss_bytes" in rank else {})} for rank in per_rank],
         "max_peak_rss_gb": outcome.parallel["max_peak_rss_bytes"] / GB,
     }
     print(RECORD_PREFIX + json.dumps(record), flush=True)

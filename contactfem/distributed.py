@@ -230,7 +230,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
-    parallel["per_rank"][0]["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
+    first = parallel["per_rank"][0]
+    first["solve_peak_rss_bytes"] = first["peak_rss_bytes"]
+    first["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
     parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)

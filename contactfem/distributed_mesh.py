@@ -75,6 +75,9 @@ class MeshPiece:
     curves : tuple of Circle
     global_counts : (3,) int64
         Nodes, edges and triangles of the whole refined mesh.
+    major : int
+        The coarse mesh's longer side (0: x, 1: y): the pieces are slabs across it, and each
+        rank numbers its owned nodes along it (see :func:`petsc_numbers`).
     """
 
     rank: int
@@ -96,6 +99,7 @@ class MeshPiece:
     part_names: tuple[str, ...]
     curves: tuple[Circle, ...]
     global_counts: np.ndarray
+    major: int = 0
 
     @property
     def n_points(self) -> int:
@@ -128,13 +132,18 @@ def coarse_partition(coarse: Mesh, ranks: int) -> np.ndarray:
     if n_triangles < ranks:
         raise MeshError(f"the coarse mesh has {n_triangles} triangles, fewer than the {ranks} ranks to share them")
     centroids = coarse.points[coarse.triangles].mean(axis=1)
-    extent = coordinate_span(coarse.points)
-    major = 0 if extent[0] >= extent[1] else 1
+    major = _major_axis(coarse.points)
     order = np.lexsort((np.arange(n_triangles), centroids[:, 1 - major], centroids[:, major]))
     bounds = (n_triangles * np.arange(ranks + 1, dtype=np.int64)) // ranks
     owner = np.empty(n_triangles, dtype=np.int64)
     owner[order] = np.repeat(np.arange(ranks, dtype=np.int64), np.diff(bounds))
     return owner
+
+
+def _major_axis(points: np.ndarray) -> int:
+    """0 if the points span at least as far along x as along y, else 1."""
+    extent = coordinate_span(points)
+    return 0 if extent[0] >= extent[1] else 1
 
 
 def mesh_piece(coarse: Mesh, times: int, ranks: int, rank: int) -> MeshPiece:
@@ -188,7 +197,8 @@ def _coarse_piece(coarse: Mesh, triangle_rank: np.ndarray, ranks: int, rank: int
         boundary_edge_local=np.searchsorted(edge_ids, bedge_global),
         edge_parts=coarse.edge_parts[boundary_rows], edge_curves=coarse.edge_curves[boundary_rows],
         part_names=coarse.part_names, curves=coarse.curves,
-        global_counts=np.array([coarse.n_points, len(edges_all), n_triangles], dtype=np.int64))
+        global_counts=np.array([coarse.n_points, len(edges_all), n_triangles], dtype=np.int64),
+        major=_major_axis(coarse.points))
 
 
 def _refine_piece(piece: MeshPiece) -> MeshPiece:
@@ -249,14 +259,19 @@ def _refine_piece(piece: MeshPiece) -> MeshPiece:
 
 
 def _owned_numbers(piece: MeshPiece, offset: int) -> tuple[np.ndarray, np.ndarray]:
-    """The PETSc node numbers of the piece's owned nodes (``offset`` + their rank among them,
-    in increasing global id) and those ids, sorted."""
+    """The owned nodes' global ids, sorted, and their PETSc node numbers: ``offset`` + their
+    rank along the longer side (ties by the other coordinate), as the replicated mesh's
+    :func:`contactfem.distributed_assembly.node_order` numbers them. MUMPS's ordering (PORD)
+    depends on the numbering it is given: numbered by global id, the square at 2.1M unknowns
+    had 5 % more factor entries."""
     owned = piece.owned
-    order = np.argsort(piece.node_ids[owned], kind="stable")
-    ids = piece.node_ids[owned][order]
+    points = piece.points[owned]
+    along = np.lexsort((points[:, 1 - piece.major], points[:, piece.major]))
     numbers = np.empty(len(owned), dtype=np.int64)
-    numbers[order] = offset + np.arange(len(owned), dtype=np.int64)
-    return ids, numbers[order]
+    numbers[along] = offset + np.arange(len(owned), dtype=np.int64)
+    ids = piece.node_ids[owned]
+    by_id = np.argsort(ids)
+    return ids[by_id], numbers[by_id]
 
 
 def _requests(piece: MeshPiece) -> list[np.ndarray]:
