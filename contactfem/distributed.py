@@ -201,10 +201,15 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
     problem = piece_problem(case, mpi, refine) if distributed_mesh else None
     say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
-    if problem is None:
-        problem = _problem_without_stiffness(case, build_mesh(case, refine=refine), refinements)
-    timings["mesh"] = time.perf_counter() - clock
     problem_seconds = 0.0
+    if problem is None:
+        mesh = build_mesh(case, refine=refine)
+        timings["mesh"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        problem = _problem_without_stiffness(case, mesh, refinements)
+        problem_seconds = time.perf_counter() - clock
+    else:  # the piece, its boundary, loads, supports and contact
+        timings["mesh"] = time.perf_counter() - clock
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them

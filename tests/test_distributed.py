@@ -303,3 +303,18 @@ def test_a_load_path_on_two_ranks_agrees_with_the_serial_path(tmp_path, case_fil
             u, mu = step.solution.displacement, step.solution.contact.multiplier
             assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
             assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()
+
+
+@needs_mpi
+def test_a_mesh_too_large_for_the_ranks_is_refused_per_rank(tmp_path):
+    """The size guard estimates each rank's share when each refines its piece: the square at
+    --refine 8 (134M unknowns, about 155 GiB on each of 2 ranks) is refused on every rank,
+    in one line naming the ranks, with exit 2 and nothing written."""
+    out = tmp_path / "out"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, "-m", "contactfem.cli", "solve", str(CASES / "square.yaml"),
+               "--backend", "petsc", "--refine", "8", "--out", str(out), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 2, run.stdout[-2000:] + run.stderr[-4000:]
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and f"on each of {RANKS} ranks" in errors[0], run.stderr
+    assert not out.exists()
