@@ -220,6 +220,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
     coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
     timings["gather"] = time.perf_counter() - clock

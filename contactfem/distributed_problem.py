@@ -17,7 +17,7 @@ once more for the writers, when the solver's memory is freed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,6 +58,9 @@ class PieceProblem(DiscreteProblem):
     boundary_numbers: np.ndarray | None = None  # PETSc number of each boundary mesh node
     n_points_total: int = 0
     body_load: np.ndarray | None = None
+    #: Entries per owned row inside and outside this rank's columns (PETSc's preallocation),
+    #: counted from the piece's edges, which the piece then drops.
+    preallocation: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -93,6 +96,7 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     _refuse_oversized(case, coarse.n_triangles * 4**times, times, mpi)
     piece = mesh_piece(coarse, times, mpi.Get_size(), mpi.Get_rank())
     numbers, first, last = petsc_numbers(piece, mpi)
+    preallocation = _piece_preallocation(piece, numbers, (first, last), mpi)
     boundary, ids = _boundary_mesh(piece, mpi)
     owned = piece.owned
     sorter = np.argsort(ids)
@@ -113,6 +117,9 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     if loads.body_force is not None:
         piece_loads = compile_loads(case, piece.as_mesh())
         body = body_force_vector(piece.points, piece.triangles, piece_loads.body_force_values)
+    # Assembly reads the piece's nodes and triangles only: its edges need not stay through the solve.
+    piece = replace(piece, edges=piece.edges[:0], edge_ids=piece.edge_ids[:0], edge_owner=piece.edge_owner[:0],
+                    triangle_edges=piece.triangle_edges[:0], triangle_ids=piece.triangle_ids[:0])
     return PieceProblem(
         mesh=boundary, law=law, stiffness=None, load=loads.natural.load_vector(boundary.n_points),
         dirichlet_dofs=held.dirichlet_dofs, dirichlet_values=held.dirichlet_values, contact=contact, loads=loads,
@@ -120,7 +127,7 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
         symmetry_normals=held.symmetry_normals, free_modes=None, platens=held.platens,
         mesh_request=MeshRequest.of(case), holds=held.holds, piece=piece, numbers=numbers, node_range=(first, last),
         boundary_ids=ids, boundary_numbers=boundary_numbers, n_points_total=int(piece.global_counts[0]),
-        body_load=body)
+        body_load=body, preallocation=preallocation)
 
 
 def _refuse_oversized(case: Case, triangles: int, times: int, mpi) -> None:
@@ -257,7 +264,7 @@ def _piece_stiffness(PETSc, comm, problem: PieceProblem, frame_of: np.ndarray, b
     piece, numbers = problem.piece, problem.numbers
     first_node, last_node = problem.node_range
     n_local, n_dof = 2 * (last_node - first_node), 2 * problem.n_points_total
-    d_nnz, o_nnz = _piece_preallocation(PETSc, comm, problem)
+    d_nnz, o_nnz = (count.astype(PETSc.IntType) for count in problem.preallocation)
     stiffness = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
                                       nnz=(d_nnz, o_nnz), comm=comm)
     stiffness.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
@@ -275,13 +282,15 @@ def _piece_stiffness(PETSc, comm, problem: PieceProblem, frame_of: np.ndarray, b
     return stiffness
 
 
-def _piece_preallocation(PETSc, comm, problem: PieceProblem) -> tuple[np.ndarray, np.ndarray]:
+def _piece_preallocation(piece: MeshPiece, numbers: np.ndarray, node_range: tuple[int, int],
+                         mpi) -> tuple[np.ndarray, np.ndarray]:
     """Entries per owned row inside and outside this rank's columns: the node's own 2x2 block
     and one per edge, each edge counted by the lowest rank holding it and sent to the owners
     of its two rows."""
-    mpi = comm.tompi4py()
-    piece, numbers = problem.piece, problem.numbers
-    first_node, last_node = problem.node_range
+    from petsc4py import PETSc
+
+    comm = PETSc.Comm(mpi)
+    first_node, last_node = node_range
     bounds = np.concatenate([[0], np.cumsum(mpi.allgather(last_node - first_node))])
     counted = piece.edges[piece.edge_owner == piece.rank]
     pairs = numbers[np.concatenate([counted, counted[:, ::-1]])]
@@ -297,7 +306,7 @@ def _piece_preallocation(PETSc, comm, problem: PieceProblem) -> tuple[np.ndarray
         vector.assemblyEnd()
         counts.append(np.rint(vector.getArray()).astype(np.int64))
         vector.destroy()
-    return np.repeat(2 * (counts[0] + 1), 2).astype(PETSc.IntType), np.repeat(2 * counts[1], 2).astype(PETSc.IntType)
+    return np.repeat(2 * (counts[0] + 1), 2), np.repeat(2 * counts[1], 2)
 
 
 def gather_coordinates(linear, problem: PieceProblem) -> np.ndarray | None:
