@@ -350,6 +350,13 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
     from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
 
     def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
+        from contactfem.distributed_problem import PieceProblem, piece_problem
+
+        # Fewer refinements of the same request: in pieces too (a rectangle's fewer divisions are not).
+        if isinstance(problem, PieceProblem) and request is problem.mesh_request:
+            pieces = piece_problem(case, comm.tompi4py(), refine)
+            if pieces is not None:
+                return pieces
         return _problem_without_stiffness(case, build_mesh(case, refine=refine, request=request), refine, request)
 
     def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:

@@ -10,9 +10,10 @@ in the same order, the same coordinates), so every rank takes the kernel's decis
 
 The route is taken when the fine mesh comes from uniform refinement (``--refine R`` or
 ``mesh.refine``, R ≥ 1) of a body held by its supports without platens; other cases keep the
-replicated mesh of :mod:`contactfem.distributed`. Coarser levels of mesh sequencing stay
-replicated (a sixteenth of the unknowns or less). After the solve, rank 0 meshes the whole case
-once more for the writers, when the solver's memory is freed.
+replicated mesh of :mod:`contactfem.distributed`. A coarser level of mesh sequencing made of
+fewer refinements of the same mesh is in pieces too; a rectangle's (fewer divisions) is meshed
+whole on every rank (a sixteenth of the unknowns). After the solve, rank 0 meshes the whole
+case once more for the writers, when the solver's memory is freed.
 """
 
 from __future__ import annotations

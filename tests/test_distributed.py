@@ -33,7 +33,7 @@ SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive
     ("flat_punch", "positive"), ("tilted_punch", "standard"), ("strip", "positive"),
     ("platen_force", "positive"), ("platen_displacement", "standard"), ("held", "positive"),
     ("square_pieces", "positive"), ("hertz_pieces", "standard"), ("punch_pieces", "positive"),
-    ("platen_refined", "positive")]
+    ("platen_refined", "positive"), ("hertz_levels_pieces", "positive")]
 #: The features the serial path reduces to more unknowns or to rigid motions agree tighter.
 TIGHT = 1e-10
 #: The Hertz quarter disk of cases/hertz_platen.yaml at one load on a small mesh (2 838
@@ -59,7 +59,10 @@ TILTED_PUNCH = {"obstacle": {"segment": [[1.05, -4e-3], [-1.05, -2e-4]]},
 PIECES = {"square_pieces": ("square", {"mesh": {"divisions": 16, "diagonal": "right", "refine": 1}}),
           "hertz_pieces": ("hertz_quarter", {"mesh": {**SMALL_HERTZ["mesh"], "refine": 1}}),
           "punch_pieces": ("flat_punch", {"mesh": {"size": 1.0, "contact_size": 0.08, "grading": 0.15, "refine": 1}}),
-          "platen_refined": ("hertz_platen", {"mesh": {**SMALL_HERTZ["mesh"], "refine": 1}})}
+          "platen_refined": ("hertz_platen", {"mesh": {**SMALL_HERTZ["mesh"], "refine": 1}}),
+          # Refined 3 times (35 000 unknowns): its coarser sequencing level (refined once) is in pieces too.
+          "hertz_levels_pieces": ("hertz_quarter", {"mesh": {"size": 0.2, "contact_size": 0.03, "grading": 0.3,
+                                                             "refine": 3}})}
 
 _have_petsc = all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
 _mpiexec = shutil.which("mpiexec")
@@ -152,6 +155,8 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     key = f"{name}_{method}"
     if name in ("flat_punch", "tilted_punch"):  # both start from the whole face pressed in
         assert solved.kernel.history[0].active == int(distributed[key + "_first_active"]) == len(serial.contact.active)
+    if name == "hertz_levels_pieces":  # the coarse level predicted the start, on both sides
+        assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     if name == "tilted_punch":  # which releases half of it: the coarse levels give the second guess
         assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     if name == "strip":  # peeling off in bending: its creep is extrapolated alike on every rank
