@@ -168,7 +168,7 @@ class SolutionProduct:
 
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
                       progress: Progress | None = None, accept_uncertified: bool = False,
-                      sequencing: bool = True) -> DistributedResult:
+                      sequencing: bool = True, distributed_mesh: bool = True) -> DistributedResult:
     """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
 
     Parameters
@@ -183,6 +183,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         Start from the active set a coarser mesh predicts, when that pays (as the serial
         solve does; the coarse levels are solved across the ranks too); False starts from
         the nodes inside the obstacle.
+    distributed_mesh : bool
+        Let each rank refine only its piece of the coarse mesh when the case allows it (see
+        :mod:`contactfem.distributed_problem`); False meshes the whole case on every rank.
 
     Raises
     ------
@@ -201,14 +204,22 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     method_name = method or case.solver.method
     timings: dict[str, float] = {}
 
+    from contactfem.distributed_problem import PieceProblem, gather_coordinates, piece_problem, whole_problem
+
     clock = time.perf_counter()
-    say(f"meshing (each of {ranks} ranks)")
-    mesh = build_mesh(case, refine=refine)
-    timings["mesh"] = time.perf_counter() - clock
     refinements = case.mesh.refine if refine is None else refine
-    clock = time.perf_counter()
-    problem = _problem_without_stiffness(case, mesh, refinements)
-    problem_seconds = time.perf_counter() - clock
+    # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
+    problem = piece_problem(case, mpi, refine) if distributed_mesh else None
+    say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
+    problem_seconds = 0.0
+    if problem is None:
+        mesh = build_mesh(case, refine=refine)
+        timings["mesh"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        problem = _problem_without_stiffness(case, mesh, refinements)
+        problem_seconds = time.perf_counter() - clock
+    else:  # the piece, its boundary, loads, supports and contact
+        timings["mesh"] = time.perf_counter() - clock
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
@@ -219,7 +230,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
+    coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
     timings["gather"] = time.perf_counter() - clock
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
@@ -229,8 +242,14 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     clock = time.perf_counter()
     from contactfem.solve import SolveResult
 
+    if coordinates is not None:  # the mesh for the writers, now that the solver's memory is freed
+        problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
+    first = parallel["per_rank"][0]
+    first["solve_peak_rss_bytes"] = first["peak_rss_bytes"]
+    first["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
+    parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
     return DistributedResult(result=result, parallel=parallel, rank=rank)
@@ -255,7 +274,8 @@ def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, f
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+    mesh = "replicated" if hasattr(system.layout, "order") else "pieces"
+    return {"ranks": mpi.Get_size(), "solver": solver, "mesh": mesh, "per_rank": per_rank,
             "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
             "factorizations": factorizations}
 
@@ -296,8 +316,14 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     contact_method = get_method(method_name)
     clock = time.perf_counter()
     say("assembling")
-    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
-    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    from contactfem.distributed_problem import PieceProblem, assemble_piece_system
+
+    if isinstance(problem, PieceProblem):
+        system = assemble_piece_system(PETSc, comm, problem, contact_method)
+        layout = system.layout
+    else:
+        layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+        system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
         f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")
@@ -334,6 +360,13 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
     from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
 
     def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
+        from contactfem.distributed_problem import PieceProblem, piece_problem
+
+        # Fewer refinements of the same request: in pieces too (a rectangle's fewer divisions are not).
+        if isinstance(problem, PieceProblem) and request is problem.mesh_request:
+            pieces = piece_problem(case, comm.tompi4py(), refine)
+            if pieces is not None:
+                return pieces
         return _problem_without_stiffness(case, build_mesh(case, refine=refine, request=request), refine, request)
 
     def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:
