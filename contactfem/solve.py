@@ -22,6 +22,7 @@ from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
 from contactfem.discretize.meshing import MeshRequest, estimate_triangles
 from contactfem.discretize.frames import ReducedSystem
+from contactfem.estimate import choose_backend, memory_limit
 from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, SolverError
 from contactfem.kernel import (
     Accelerators,
@@ -35,7 +36,8 @@ from contactfem.kernel import (
     solve_contact,
     solve_path,
 )
-from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
+from contactfem.kernel.iterative import IterativeSetSolver
+from contactfem.linalg import DISTRIBUTED_BACKENDS, ITERATIVE_BACKENDS, resolve_backend
 from contactfem.mesh import Mesh
 from contactfem.mesh.transfer import interpolate_p1
 from contactfem.methods import get_method
@@ -82,7 +84,12 @@ class SolveResult:
     kernel : KernelResult
         The kernel's account: status, iterations, history, factorisations.
     backend : str
-        The sparse direct solver used.
+        The linear solver of the Newton steps: a sparse direct backend, or ``amg``.
+    backend_reason : str
+        Why that one (:func:`contactfem.estimate.choose_backend`).
+    linear : mapping
+        The iterative solver's account (CG iterations and residuals of each step, the
+        hierarchies built; :attr:`IterativeSetSolver.figures`); empty for a direct backend.
     timings : mapping of str to float
         Seconds per stage: ``mesh`` and ``assemble`` (when this solve built the
         problem), ``solve`` (sequencing and kernel) and ``postprocess``.
@@ -103,6 +110,8 @@ class SolveResult:
     timings: Mapping[str, float] = field(default_factory=dict)
     sequencing: Mapping = field(default_factory=dict)
     coarse_levels: Mapping = field(default_factory=dict, repr=False)
+    backend_reason: str = ""
+    linear: Mapping = field(default_factory=dict)
 
 
 def prepare(
@@ -183,15 +192,21 @@ def solve_case(
     say = progress or (lambda message: None)
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
-    backend = _serial_backend(case)
+    _serial_backend(case)
     timings: dict[str, float] = {}
     kept = {} if coarse_levels is None else coarse_levels
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
+    choice = choose_backend(problem.n_unknowns, case.solver.backend, memory_limit())
+    backend = choice.name
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators)
+    if backend in ITERATIVE_BACKENDS:
+        say(f"  {choice.reason}")
+    linear: dict = {}
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators,
+                                                 linear)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -201,15 +216,17 @@ def solve_case(
     solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
     timings["postprocess"] = time.perf_counter() - clock
     return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
-                       timings=timings, sequencing=sequencing, coarse_levels=kept)
+                       timings=timings, sequencing=sequencing, coarse_levels=kept, backend_reason=choice.reason,
+                       linear=linear)
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
                    coarse_levels: dict | None = None, accelerators: Accelerators | None = None,
-                   ) -> tuple[ReducedSystem, KernelResult, dict]:
+                   linear_figures: dict | None = None) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
-    what the prediction cost: what a fine solve and a coarse level share."""
+    what the prediction cost: what a fine solve and a coarse level share. An iterative
+    ``backend`` writes its account into ``linear_figures``."""
     tolerance = case.solver.tolerance
     accelerators = case_accelerators(case) if accelerators is None else accelerators
     kept = {} if coarse_levels is None else coarse_levels
@@ -231,8 +248,11 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
-        def solver() -> ActiveSetSolver:
-            return ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance,
+        def solver() -> ActiveSetSolver | IterativeSetSolver:
+            reduced = fine_soon.result()[0]
+            if backend in ITERATIVE_BACKENDS:
+                return IterativeSetSolver(reduced.system, reduced.rigid_motions(), tolerance=tolerance)
+            return ActiveSetSolver(reduced.system, backend, tolerance=tolerance,
                                    schur_updates=accelerators.schur_updates)
 
         if problem.n_unknowns >= BESIDE_COARSER_FROM:
@@ -278,6 +298,8 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         stalled_guess=stalled_guess if initial_active is None and sequenced else None,
         linear=linear,
     )
+    if isinstance(linear, IterativeSetSolver) and linear_figures is not None:
+        linear_figures.update(linear.figures)
     return reduced, kernel, sequencing
 
 
@@ -371,6 +393,9 @@ def solve_load_path(
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
     backend = _serial_backend(case)
+    if case.solver.backend in ITERATIVE_BACKENDS:
+        raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: a load path is solved by "
+                        "factorisations carried from step to step, not iteratively; use auto or a direct backend")
     factors = case.load_path.factors
     timings: dict[str, float] = {}
     problem = prepare(case, refine=refine, progress=say, timings=timings)
@@ -496,8 +521,6 @@ def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
     """Refuse, before solving, a path whose steps' fields (displacement, stresses, von Mises,
     contact fields), all kept, would not fit in a quarter of memory (``contactfem solve``
     writes each step as it is solved and keeps none)."""
-    from contactfem.estimate import memory_limit
-
     mesh = problem.mesh
     per_step = 8 * (2 * mesh.n_points + 5 * mesh.n_triangles + 6 * len(problem.contact.nodes))
     steps = len(case.load_path.factors)
@@ -511,13 +534,16 @@ def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
 
 
 def _serial_backend(case: Case) -> str:
-    """The case's backend, which must run in this process (petsc runs under mpiexec)."""
+    """The case's direct backend, which must run in this process (petsc runs under mpiexec):
+    what coarse levels, layers and load paths factorise with (``amg`` and ``auto`` give the
+    fastest direct backend installed; the fine level's is :func:`contactfem.estimate.choose_backend`'s)."""
     backend = resolve_backend(case.solver.backend)
     if backend in DISTRIBUTED_BACKENDS:
         raise CaseError(f"{case.source.name}: solver.backend = {backend}: runs a solve across MPI ranks, as "
                         "`mpiexec -n P contactfem solve CASE --backend petsc`; this command solves in one "
-                        "process (use auto, cholmod, pardiso or superlu)")
-    return backend
+                        "process (use auto, cholmod, pardiso, superlu or amg)")
+    return resolve_backend("auto") if backend in ITERATIVE_BACKENDS else backend
+
 
 
 @dataclass(frozen=True, eq=False)
