@@ -158,3 +158,27 @@ def test_amg_without_pyamg_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(registry, "iterative_available", lambda name="amg": False)
     line = _refused(tmp_path, {**square_case_dict(8), "solver": {"backend": "amg"}})
     assert "solver.backend = amg" in line and "pyamg" in line
+
+
+def test_check_names_the_backend_auto_would_take_and_why(tmp_path, monkeypatch):
+    """On a machine whose memory holds the square at 64 x 64 with amg but not 4/3 of CHOLMOD's
+    estimated peak, ``check`` prints amg and the figures behind the choice."""
+    import json
+
+    from test_hostile_input import a_machine_of
+
+    data = square_case_dict(64)
+    unknowns = prepare(case_from(data)).n_unknowns
+    direct = resolve_backend("auto")
+    memory = int(estimate_cost(unknowns, direct)["bytes"] / DIRECT_MEMORY_SHARE) - 1
+    assert estimate_cost(unknowns, "amg")["bytes"] < memory
+    a_machine_of(monkeypatch, memory)
+    path = tmp_path / "amg.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    result = make_runner().invoke(main, ["check", str(path), "--json"])
+    assert result.exit_code == 0, result.stderr
+    estimate = json.loads(result.stdout)["estimate"]
+    assert estimate["backend"] == "amg"
+    assert estimate["backend_reason"].startswith(f"auto: a factorisation with {direct} needs about")
+    text = make_runner().invoke(main, ["check", str(path)])
+    assert text.exit_code == 0 and "backend    amg: auto: a factorisation with" in text.stdout
