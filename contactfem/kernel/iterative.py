@@ -131,7 +131,7 @@ class IterativeSetSolver(IterateMeasures):
         target = RESIDUAL_SHARE * self.tolerance * float(np.abs(rhs).max(initial=0.0))
         x, record = amg.solve(rhs, target, start)
         iterations = record.iterations
-        for _ in range(RESTARTS + 1):
+        for attempt in range(RESTARTS + 1):
             u = np.where(equations, x, values)
             internal = self.stiffness @ u
             with np.errstate(invalid="ignore", over="ignore"):
@@ -142,7 +142,7 @@ class IterativeSetSolver(IterateMeasures):
                 floor = self.gamma * (absolute + np.abs(self.load))[equations].max(initial=0.0)
                 size = np.abs(self.load - internal)[equations].max(initial=0.0)
             wanted = max(RESIDUAL_SHARE * self.tolerance * force, floor)
-            if not size > wanted:  # also stops on NaN: the certificate reports it
+            if not size > wanted or attempt == RESTARTS:  # also stops on NaN: the certificate reports it
                 break
             x, again = amg.solve(rhs, 0.5 * wanted, x)
             iterations += again.iterations
