@@ -28,6 +28,7 @@ from contactfem.kernel import (
     Accelerators,
     ActiveSetSolver,
     Iteration,
+    IterativeSetSolver,
     KernelResult,
     STALL_ITERATIONS,
     PathSolver,
@@ -36,7 +37,6 @@ from contactfem.kernel import (
     solve_contact,
     solve_path,
 )
-from contactfem.kernel.iterative import IterativeSetSolver
 from contactfem.linalg import DISTRIBUTED_BACKENDS, ITERATIVE_BACKENDS, resolve_backend
 from contactfem.mesh import Mesh
 from contactfem.mesh.transfer import interpolate_p1
