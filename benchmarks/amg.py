@@ -12,7 +12,7 @@ mesh sequencing, the Newton steps, post-processing and writing the files) in a p
 its own, whose peak RSS (resource.getrusage, RUSAGE_SELF) is that run's. N = 2048 runs
 ``auto`` only: its direct factorisation is the one that does not fit (about 18.7 GiB by the
 cost model, 18.25 GB measured with CHOLMOD). Before it starts, the script reads
-/proc/meminfo and refuses to run N = 2048 with less than 18 GB available (the machine is
+/proc/meminfo and refuses to run N = 2048 with less than 18 GiB available (the machine is
 shared).
 
 Writes JSON (--out, default benchmarks/results/amg.json): a run of some sizes keeps the
@@ -36,8 +36,9 @@ ROOT = Path(__file__).resolve().parents[1]
 CASE_FILE = ROOT / "cases" / "square.yaml"
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "amg.json"
 BASE_DIVISIONS = 32
-#: The memory a run of N = 2048 needs free before it starts (its measured peak, 13–14 GB, and a margin).
-LARGEST_NEEDS_GB = 18.0
+#: The memory a run of N = 2048 needs available before it starts, in GiB as `free -g` shows
+#: it (the cost model's 12.9 GB peak and a margin).
+LARGEST_NEEDS_GIB = 18.0
 RECORD_PREFIX = "AMG-RECORD "
 #: Sizes up to this run the direct backend too; above, the stored figures serve (a direct
 #: solve at 2.1M unknowns peaks near 5 GB on a machine others share).
@@ -60,11 +61,11 @@ sys.exit(code)
 """
 
 
-def available_gb() -> float:
-    """MemAvailable of /proc/meminfo, in GB."""
+def available_gib() -> float:
+    """MemAvailable of /proc/meminfo, in GiB."""
     for line in Path("/proc/meminfo").read_text().splitlines():
         if line.startswith("MemAvailable:"):
-            return int(line.split()[1]) * 1024 / 1e9
+            return int(line.split()[1]) / 2**20
     return 0.0
 
 
@@ -121,9 +122,9 @@ def main() -> None:
     data = json.loads(args.out.read_text()) if args.out.exists() else {"records": []}
     records = [r for r in data.get("records", []) if r["divisions"] not in args.sizes]
     for divisions in args.sizes:
-        if divisions >= 2048 and available_gb() < LARGEST_NEEDS_GB:
-            raise SystemExit(f"N = {divisions}: only {available_gb():.1f} GB available, "
-                             f"{LARGEST_NEEDS_GB:g} needed before it starts")
+        if divisions >= 2048 and available_gib() < LARGEST_NEEDS_GIB:
+            raise SystemExit(f"N = {divisions}: only {available_gib():.1f} GiB available, "
+                             f"{LARGEST_NEEDS_GIB:g} needed before it starts")
         backends = ["auto"] if divisions >= 2048 else ["amg", "auto"] if divisions <= DIRECT_UP_TO else ["amg"]
         for backend in backends:
             runs = [run(divisions, backend) for _ in range(args.repeat)]
