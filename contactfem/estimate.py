@@ -209,9 +209,27 @@ def address_space_overhead() -> float:
     return ADDRESS_SPACE_BASE + ADDRESS_SPACE_PER_BLAS_THREAD * (max(threads, 1) - 1)
 
 
+#: This process's own cgroup limit, read once (:func:`_cgroup_limit` of the default paths):
+#: a solve reads it for every level it meshes, and the files behind it do not change while
+#: a process runs; other paths (a test's tree) are read every time.
+_OWN_CGROUP: dict[tuple[Path, Path], int | None] = {}
+_OWN_PATHS = (Path("/proc/self"), Path("/sys/fs/cgroup"))
+
+
 def _cgroup_limit(proc: Path, cgroups: Path) -> int | None:
     """The least memory limit of this process's cgroup and its parents, in bytes (None: none
-    set, or no cgroup file system to read)."""
+    set, or no cgroup file system to read); this process's own (the default paths) is read
+    once and kept."""
+    key = (Path(proc), Path(cgroups))
+    if key != _OWN_PATHS:
+        return _read_cgroup_limit(proc, cgroups)
+    if key not in _OWN_CGROUP:
+        _OWN_CGROUP[key] = _read_cgroup_limit(proc, cgroups)
+    return _OWN_CGROUP[key]
+
+
+def _read_cgroup_limit(proc: Path, cgroups: Path) -> int | None:
+    """:func:`_cgroup_limit`, read from the files."""
     try:
         lines = (proc / "cgroup").read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:
