@@ -353,11 +353,12 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
 
 def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, c: float, solver: str,
                           say: Progress) -> tuple[np.ndarray | None, dict]:
-    """:func:`contactfem.solve.predict_from_coarser` with the coarse levels solved across the
+    """:func:`contactfem.coarse_levels.predict_from_coarser` with the coarse levels solved across the
     ranks too (a serial coarse solve would put a quarter-size matrix on every rank). Every
     decision is taken from data all ranks share, so they all recurse alike."""
     from contactfem.result import ContactFields
-    from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
+    from contactfem.coarse_levels import CoarseSolve, predict_from_coarser
+    from contactfem.solve import SEQUENCING_METHOD
 
     def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
         from contactfem.distributed_problem import PieceProblem, piece_problem

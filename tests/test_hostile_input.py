@@ -586,7 +586,8 @@ def test_a_sliver_that_needs_far_more_triangles_than_its_size_says_is_refused_wi
 @pytest.mark.parametrize("refine", [3, 4, 5, 6, 7])
 def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeypatch, refine):
     """check refuses exactly the meshes whose estimated peak memory (the figure it prints for
-    the others) exceeds the machine's memory; here a machine of 4 GiB."""
+    the others) exceeds the machine's memory with the backend auto takes for them (amg
+    where a factorisation would not fit); here a machine of 4 GiB."""
     import json
 
     memory = 4 * 2**30
@@ -594,15 +595,17 @@ def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeyp
     path = tmp_path / CASE_NAME
     path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32"), encoding="utf-8")
     result = invoke("check", path, "--refine", refine, "--json")
-    from contactfem.estimate import estimate_cost
-    from contactfem.linalg import resolve_backend
+    from contactfem.estimate import MemoryLimit, choose_backend, estimate_cost
 
-    expected = estimate_cost(2 * 32 * 32 * 4**refine, resolve_backend("auto"))["bytes"]
+    unknowns = 2 * 32 * 32 * 4**refine
+    backend = choose_backend(unknowns, "auto", MemoryLimit(memory, "a machine of 4 GiB")).name
+    expected = estimate_cost(unknowns, backend)["bytes"]
     if expected > memory:
         assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB")
     else:
         assert result.exit_code == 0, result.stderr
         estimate = json.loads(result.stdout)["estimate"]
+        assert estimate["backend"] == backend and estimate["bytes"] == pytest.approx(expected, rel=1e-2)
         assert estimate["bytes"] <= memory == estimate["limit_bytes"]
         assert estimate["limit"] == "this machine's 4 GiB"
 
@@ -664,7 +667,8 @@ def test_a_cgroup_limit_refuses_a_mesh_the_machine_could_hold(tmp_path, monkeypa
     monkeypatch.setattr(estimate, "_cgroup_limit", lambda proc, cgroups: 2**30)
     monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
     path = tmp_path / CASE_NAME
-    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 512"), encoding="utf-8")
+    # 2.1M unknowns: more than 1 GiB whatever the backend, amg included.
+    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 1024"), encoding="utf-8")
     assert_one_line(invoke("check", path), CASE_NAME, "more than this process's cgroup memory limit of 1 GiB")
     out = tmp_path / "out"
     assert_one_line(invoke("solve", path, "--out", out), CASE_NAME, "cgroup memory limit")
