@@ -318,14 +318,14 @@ def test_a_layer_holding_most_of_a_graded_mesh_is_refused_from_a_sample_of_the_c
     of ΓC: the nodes near every few contact nodes already exceed the layer's share, so the
     prediction is kept without a search among all contact nodes (a lower bound: a node near
     some of them is near one of them)."""
+    import contactfem.coarse_levels as coarse_levels
     import contactfem.sequencing as sequencing
-    import contactfem.solve as solve
     from contactfem.methods import get_method
     from contactfem.coarse_levels import CoarseSolve, correct_in_layer
     from contactfem.solve import prepare
 
     monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
-    monkeypatch.setattr(solve, "LAYER_SAMPLES", 500)
+    monkeypatch.setattr(coarse_levels, "LAYER_SAMPLES", 500)
     case = rough_polygon_case(2000)
     # Grading 0.25 (steep): h reaches size within a few layer depths of ΓC, so that the
     # layer holds 0.88 of the nodes. The rule's grading at this contact_size (0.05) spreads
@@ -341,7 +341,7 @@ def test_a_layer_holding_most_of_a_graded_mesh_is_refused_from_a_sample_of_the_c
         searched.append(len(nearby))
         return sequencing.contact_layer(points, nearby, depth)
 
-    monkeypatch.setattr(solve, "contact_layer", recording)
+    monkeypatch.setattr(coarse_levels, "contact_layer", recording)
     predicted = np.zeros(len(boundary), dtype=bool)
     predicted[::4] = True
     level = CoarseSolve(None, None, {}, problem.mesh, np.zeros((problem.mesh.n_points, 2)))
