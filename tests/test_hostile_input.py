@@ -99,9 +99,9 @@ def substitute(old: str, new: str) -> str:
 def test_dev_zero_is_refused_without_reading_it():
     if not os.path.exists("/dev/zero"):
         pytest.skip("no /dev/zero")
-    started = time.perf_counter()
+    started = time.process_time()
     assert_one_line(invoke("check", "/dev/zero"), "/dev/zero", "character device", "not a regular file")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path):
@@ -172,10 +172,10 @@ BOMB = "".join(
 
 def test_billion_laughs_is_refused_quickly(tmp_path):
     assert len(BOMB) < 1000  # 9**9 = 387 million strings once expanded
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, BOMB, "aliases expanded", str(MAX_YAML_VALUES))
     refuse_text(tmp_path, square(title="x") + BOMB.replace("i: &i", "title: &i"), "aliases expanded")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_billion_laughs_through_parse_case():
@@ -193,9 +193,9 @@ def test_billion_laughs_through_parse_case():
     ("title: *nothing\n", ("undefined alias",)),
 ], ids=["recursive-list", "recursive-map", "deep", "deep-by-alias", "too-many-values", "undefined-alias"])
 def test_yaml_structure_is_bounded(tmp_path, text, fragments):
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, text, *fragments)
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 @pytest.mark.parametrize(("old", "new", "fragments"), [
@@ -390,16 +390,16 @@ def balanced(items: list[str], op: str) -> str:
         "one-over-zero", "log-zero", "power-of-zoo", "huge-number", "tiny-number", "power-tower", "imaginary",
         "deep", "long", "many-signs", "big-gradient", "floor", "sliding"])
 def test_exact_block_corner_cases(tmp_path, ux, fragments):
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, exact_case(ux), "exact", *fragments)
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_a_tower_of_exponentials_in_both_components_is_refused_before_deriving(tmp_path):
     tower = "exp(" * 45 + "x*y" + ")" * 45
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, exact_case(tower, tower), "exact.displacement", "gradient")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 @pytest.mark.parametrize(("ux", "fragments"), [
@@ -468,10 +468,10 @@ def test_too_many_polygon_vertices(tmp_path, monkeypatch):
     monkeypatch.setattr("contactfem.case.limits.MAX_POLYGON_VERTICES", INLINE_LIMIT)
     n = INLINE_LIMIT + 1
     vertices = [[i, 0] for i in range(n)]
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, polygon_case(None, vertices, ["e"] * n), "geometry.polygon.vertices",
                 f"at most {INLINE_LIMIT}")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
     assert MAX_POLYGON_VERTICES >= 100_000
 
 
