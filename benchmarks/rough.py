@@ -4,6 +4,7 @@ Usage:
     python benchmarks/rough.py                          # 1k ... 100k points (about 10 minutes on 2 cores)
     python benchmarks/rough.py --sizes 1000 4000 16000  # choose the sizes
     python benchmarks/rough.py --single 4000            # one size in this process: a JSON record on stdout
+    python benchmarks/rough.py --workers 2              # the sizes as tasks of a local Dask cluster
     python benchmarks/rough.py --write-surface          # rewrite cases/rough_surface.csv (4 001 points)
     python benchmarks/rough.py --scene outline          # a closed outline from a file instead (see below)
     python benchmarks/rough.py --write-outline          # rewrite cases/rough_rim.csv (2 001 vertices)
@@ -48,6 +49,7 @@ exponents p of stage time (and peak memory) ~ points^p, by least squares on the 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import resource
 import subprocess
@@ -350,6 +352,7 @@ def table(records: list[dict]) -> str:
 
 def main() -> None:
     from performance import add_heap_option
+    from sizes import add_engine_options, run_sizes
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, default=DEFAULT_SIZES, help="profile points per run")
@@ -361,6 +364,7 @@ def main() -> None:
     parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
     parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
     add_heap_option(parser)
+    add_engine_options(parser)
     parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
     parser.add_argument("--write-outline", action="store_true", help=f"rewrite {OUTLINE_FILE.relative_to(ROOT)}")
     args = parser.parse_args()
@@ -390,12 +394,8 @@ def main() -> None:
               "hurst": HURST, "height": HEIGHT, "seed": SEED, "sizes": args.sizes, "method": args.method,
               "heap": "glibc defaults" if args.plain_heap else "kept for reuse, as the command runs (contactfem.heap)",
               "machine": machine_info(), "records": []}
-    for points in args.sizes:
-        record = run_subprocess(points, args.method, args.timeout, keep_heap=not args.plain_heap, scene=args.scene)
-        result["records"].append(record)
-        result["growth_exponents"] = scaling(result["records"])
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
+    def finished(record: dict) -> None:
+        points = record["points"]
         if "error" in record:
             print(f"{points:7d} points: FAILED: {record['error']}", flush=True)
         else:
@@ -404,6 +404,16 @@ def main() -> None:
                   f"{record['solve_s']:.2f} s ({record['newton_steps']} Newton, {record['factorizations']} "
                   f"factorisations), baseline {record['baseline_s']:.2f} s, peak {record['peak_rss_gb']:.2f} GB",
                   flush=True)
+
+    # Each size in its own subprocess, here one after another or as Dask tasks (--workers, --scheduler).
+    result["records"] = run_sizes(
+        functools.partial(run_subprocess, method=args.method, timeout=args.timeout, keep_heap=not args.plain_heap,
+                          scene=args.scene),
+        args.sizes, scheduler=args.scheduler, workers=args.workers, finished=finished,
+        lost=lambda points, reason: {"points": points, "method": args.method, "error": reason})
+    result["growth_exponents"] = scaling(result["records"])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(table(result["records"]))
     print("growth exponents (time ~ points^p):", json.dumps(result["growth_exponents"]))
 
