@@ -423,6 +423,12 @@ class _DistributedSolver:
             ksp.setType("preonly")
             pc.setType("cholesky")
             pc.setFactorSolverType("mumps")
+            # PETSc 3.18 sets MUMPS's ICNTL from the options database at the symbolic
+            # factorisation (a value set on the factor before is reset): the ordering goes there,
+            # unless the user chose one (PETSC_OPTIONS="-mat_mumps_icntl_7 N").
+            options = PETSc.Options()
+            if not options.hasName("mat_mumps_icntl_7"):
+                options["mat_mumps_icntl_7"] = mumps_ordering(PETSc)
             # PETSc options (PETSC_OPTIONS="-mat_mumps_icntl_14 50 ...") reach MUMPS from here.
             ksp.setFromOptions()
         else:
@@ -677,6 +683,55 @@ class _DistributedSolver:
         """:meth:`contactfem.kernel.ActiveSetSolver.certify` with u's non-finite entries counted over all ranks."""
         return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
                                  tolerance, self.condition)
+
+
+#: MUMPS's orderings (ICNTL(7)) in order of preference: nested dissection by METIS (5), then by
+#: SCOTCH (3), when the library was built with them.
+MUMPS_ORDERINGS = (5, 3)
+#: ICNTL(7) = 7: MUMPS chooses among what it has (AMF on small matrices, its own PORD nested
+#: dissection on large ones; benchmarks/petsc_install_route.py compares them on the square).
+MUMPS_AUTOMATIC = 7
+_mumps_ordering: int | None = None
+
+
+def mumps_ordering(PETSc) -> int:
+    """The first ordering of :data:`MUMPS_ORDERINGS` this MUMPS was built with, asked of the
+    library once per process: the analysis of a small grid Laplacian on this rank alone
+    reports in INFOG(7) the ordering it used, which is the one asked for when the library has
+    it (MUMPS falls back to its automatic choice otherwise); :data:`MUMPS_AUTOMATIC` if none."""
+    global _mumps_ordering
+    if _mumps_ordering is None:
+        _mumps_ordering = next((o for o in MUMPS_ORDERINGS if _mumps_used(PETSc, o) == o), MUMPS_AUTOMATIC)
+    return _mumps_ordering
+
+
+def _mumps_used(PETSc, ordering: int) -> int:
+    """INFOG(7) of MUMPS's analysis of a 16 × 16 grid Laplacian with ICNTL(7) = ``ordering``."""
+    import scipy.sparse as sp
+
+    side = 16
+    line = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(side, side))
+    grid = sp.csr_matrix(sp.kron(sp.eye(side), line) + sp.kron(line, sp.eye(side)))
+    matrix = PETSc.Mat().createAIJ(size=grid.shape, csr=(grid.indptr, grid.indices, grid.data), comm=PETSc.COMM_SELF)
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    prefix = "contactfem_ordering_probe_"
+    options = PETSc.Options()
+    options[f"{prefix}mat_mumps_icntl_7"] = ordering
+    try:
+        matrix.assemble()
+        ksp.setOperators(matrix)
+        ksp.setOptionsPrefix(prefix)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps")
+        ksp.setFromOptions()
+        pc.setUp()
+        return int(pc.getFactorMatrix().getMumpsInfog(7))
+    finally:
+        options.delValue(f"{prefix}mat_mumps_icntl_7")
+        ksp.destroy()
+        matrix.destroy()
 
 
 def _mumps_figures(factor) -> dict:
