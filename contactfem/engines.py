@@ -18,7 +18,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import closing, contextmanager, nullcontext
 from typing import Any
 
 from contactfem.case import shortened
@@ -245,10 +245,12 @@ def in_order(engine: SerialEngine | DaskEngine, function: Callable[..., Any], ta
              lost: Lost = _raising, name: str = "task",
              progress: Callable[[dict, Any, int, int], None] | None = None) -> list[Any]:
     """Every task's value in the order of ``tasks``, whatever order they finish in;
-    ``progress(task, value, done, total)`` as each finishes."""
+    ``progress(task, value, done, total)`` as each finishes, and may raise to stop."""
     values: dict[int, Any] = {}
-    for done, (task, value) in enumerate(engine.map(function, tasks, *shared, lost=lost, name=name), start=1):
-        values[id(task)] = value
-        if progress is not None:
-            progress(task, value, done, len(tasks))
+    # closing: a progress that raises (a caller stopping early) cancels what is left at once.
+    with closing(engine.map(function, tasks, *shared, lost=lost, name=name)) as finished:
+        for done, (task, value) in enumerate(finished, start=1):
+            values[id(task)] = value
+            if progress is not None:
+                progress(task, value, done, len(tasks))
     return [values[id(task)] for task in tasks]

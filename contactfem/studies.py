@@ -243,7 +243,9 @@ def convergence_study(
     and are put back in level order, so the figures do not depend on where they ran. Each
     row carries h, unknowns, seconds per stage, Newton iterations and every error norm;
     ``rates`` holds the observed rate between levels. ``on_solution(level, method,
-    solution)`` receives every level's solution, in order.
+    solution)`` receives every level's solution, in order. Each level validates the case's
+    text (``case.text``) again, as a worker must: a case changed after it was parsed is
+    solved as its text says.
 
     Raises
     ------
@@ -261,7 +263,7 @@ def convergence_study(
         reference = nested_reference(case, base_refine + levels - 1 + extra, methods,
                                      progress=lambda message: say("  " + message.strip()))
     tasks = [{"index": level, "refine": base_refine + level, "methods": tuple(methods), "text": case.text,
-              "source": str(case.source), "digest": case.digest} for level in range(levels)]
+              "source": str(Path(case.source).absolute()), "digest": case.digest} for level in range(levels)]
 
     def lost(task: dict, reason: str) -> dict:
         return {"level": task["index"], "failure": ("SolverError", reason)}
