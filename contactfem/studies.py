@@ -140,18 +140,22 @@ def nested_reference(case: Case, refine: int, methods: tuple[str, ...],
     return Reference(solved=solved, multiplier=nodal_multiplier(positive.solution), refine=refine)
 
 
-def study_level(task: dict, reference: Reference | None) -> dict:
+def study_level(task: dict, reference: Reference | None, progress: Progress | None = None) -> dict:
     """One level of a convergence study (``task``: the case's ``text``, ``source`` and
     ``digest``, the ``index`` of the level, its ``refine`` and the ``methods``), wherever the
     engine runs it: its rows without the estimates that need the other levels, the energy
     estimate and contact quantities of each method, and the solutions; or the ``failure``
     ``(kind, message)`` that stopped it (kind: the name of a ContactFemError class, or
-    ``"memory"``), so that the caller raises the same kind of error naming the level."""
+    ``"memory"``), so that the caller raises the same kind of error naming the level.
+    ``progress``: the stages of its mesh and solves, when it runs in the caller's process."""
     from contactfem.accuracy import energy_estimate, quantities
     from contactfem.case import parse_case
     from contactfem.engines import worker_budget
 
     level = task["index"]
+    if progress is not None:
+        progress(f"level {level} of {task['levels'] - 1}")
+    detail = None if progress is None else (lambda message: progress("  " + message.strip()))
     try:
         case = parse_case(task["text"], source=task["source"])
         if case.digest != task["digest"]:
@@ -160,11 +164,11 @@ def study_level(task: dict, reference: Reference | None) -> dict:
         timings: dict[str, float] = {}
         started = time.perf_counter()
         with worker_budget():
-            problem = prepare(case, refine=task["refine"], timings=timings)
+            problem = prepare(case, refine=task["refine"], timings=timings, progress=detail)
             setup = time.perf_counter() - started
             rows, energy, contact, solutions = [], {}, {}, {}
             for name in task["methods"]:
-                outcome = solve_case(case, method=name, problem=problem)
+                outcome = solve_case(case, method=name, problem=problem, progress=detail)
                 if problem.exact is not None:
                     errors = exact_errors(outcome.solution, problem, problem.exact)
                 else:
@@ -262,7 +266,8 @@ def convergence_study(
         say(f"reference: {extra} refinement(s) beyond the last level")
         reference = nested_reference(case, base_refine + levels - 1 + extra, methods,
                                      progress=lambda message: say("  " + message.strip()))
-    tasks = [{"index": level, "refine": base_refine + level, "methods": tuple(methods), "text": case.text,
+    tasks = [{"index": level, "levels": levels, "refine": base_refine + level, "methods": tuple(methods),
+              "text": case.text,
               "source": str(Path(case.source).absolute()), "digest": case.digest} for level in range(levels)]
 
     def lost(task: dict, reason: str) -> dict:
@@ -275,8 +280,10 @@ def convergence_study(
         if "failure" in value:
             say(f"[{done}/{total}] level {task['index']}: failed, {value['failure'][1]}")
         else:
+            # In this process the level's own stages came first: its rows are their details.
+            where = "  " if engine.kind == "serial" else f"[{done}/{total}] "
             for row in value["rows"]:
-                say(f"[{done}/{total}] level {row['level']} {row['method']}: h = {row['h']:.4g}, {row['unknowns']} "
+                say(f"{where}level {row['level']} {row['method']}: h = {row['h']:.4g}, {row['unknowns']} "
                     f"unknowns, H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
         # The study stops at its lowest failing level, as one run after another would: once
         # every level below a failure has finished (the levels still running are cancelled).
@@ -285,7 +292,10 @@ def convergence_study(
             raise _level_failure(failed, base_refine + failed, *finished_levels[failed]["failure"])
 
     with engine.shared(reference) as shared:
-        results = in_order(engine, study_level, tasks, shared, lost=lost, name="level", progress=finished)
+        # Run here, a level reports its stages as it goes; a worker's would not reach this terminal.
+        level = study_level if engine.kind != "serial" or progress is None else (
+            lambda task, reference: study_level(task, reference, progress=say))
+        results = in_order(engine, level, tasks, shared, lost=lost, name="level", progress=finished)
     rows = []
     earlier: dict[str, list] = {name: [] for name in methods}  # (unknowns, quantities) per level
     for result in results:
