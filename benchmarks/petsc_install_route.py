@@ -2,7 +2,7 @@
 (--refine 4: 512 divisions, 525 000 unknowns) with MUMPS on 1 and 2 MPI ranks, with Debian's
 reference BLAS against OpenBLAS, and with MUMPS's automatic ordering (ICNTL(7) = 7) against
 PORD (4, in every MUMPS) and the ordering contactfem chooses
-(:func:`contactfem.distributed.mumps_ordering`: METIS, else SCOTCH, else the automatic one,
+(:func:`contactfem.distributed_mumps.mumps_ordering`: METIS, else SCOTCH, else the automatic one,
 as the library has).
 
 Usage:
@@ -44,7 +44,7 @@ def chosen_ordering() -> int:
     """The ordering contactfem chooses on this machine, asked of its MUMPS."""
     from petsc4py import PETSc
 
-    from contactfem.distributed import mumps_ordering
+    from contactfem.distributed_mumps import mumps_ordering
 
     return mumps_ordering(PETSc)
 
@@ -83,7 +83,7 @@ def main() -> None:
                                                                             os.environ.get("LD_LIBRARY_PATH")]))
                 tries = []
                 for _ in range(args.repeats):
-                    record = run(args.refine, ranks, "mumps", "positive", args.timeout, environment)
+                    record = run(args.refine, ranks, "mumps", "positive", args.timeout, environment=environment)
                     if "error" in record:
                         tries.append(record)
                         break

@@ -57,7 +57,8 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
-from contactfem.errors import SolverError
+from contactfem.distributed_mumps import mumps_figures, mumps_ordering
+from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
     REFINEMENT_STEPS,
@@ -92,6 +93,16 @@ PROBE_RTOL = 1e-6
 
 _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
                  "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
+
+
+def refuse_indenter(case: Case) -> None:
+    """Refuse what the distributed solve does not pose: a curved obstacle (its per-node
+    normals are not passed to the ranks' frames) or a moving one."""
+    obstacle = case.obstacle
+    if not obstacle.flat or obstacle.motion is not None:
+        what = f"a {obstacle.shape} obstacle" if not obstacle.flat else "a moving obstacle (obstacle.motion)"
+        raise CaseError(f"{case.source.name}: solver.backend = petsc: {what} is solved serially only; expected a "
+                        "flat obstacle that stays where it is, or another backend (auto, cholmod, pardiso, superlu)")
 
 
 def petsc_available() -> bool:
@@ -158,7 +169,7 @@ class SolutionProduct:
 
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
                       progress: Progress | None = None, accept_uncertified: bool = False,
-                      sequencing: bool = True) -> DistributedResult:
+                      sequencing: bool = True, distributed_mesh: bool = True) -> DistributedResult:
     """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
 
     Parameters
@@ -173,6 +184,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         Start from the active set a coarser mesh predicts, when that pays (as the serial
         solve does; the coarse levels are solved across the ranks too); False starts from
         the nodes inside the obstacle.
+    distributed_mesh : bool
+        Let each rank refine only its piece of the coarse mesh when the case allows it (see
+        :mod:`contactfem.distributed_problem`); False meshes the whole case on every rank.
 
     Raises
     ------
@@ -191,14 +205,22 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     method_name = method or case.solver.method
     timings: dict[str, float] = {}
 
+    from contactfem.distributed_problem import PieceProblem, gather_coordinates, piece_problem, whole_problem
+
     clock = time.perf_counter()
-    say(f"meshing (each of {ranks} ranks)")
-    mesh = build_mesh(case, refine=refine)
-    timings["mesh"] = time.perf_counter() - clock
     refinements = case.mesh.refine if refine is None else refine
-    clock = time.perf_counter()
-    problem = _problem_without_stiffness(case, mesh, refinements)
-    problem_seconds = time.perf_counter() - clock
+    # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
+    problem = piece_problem(case, mpi, refine) if distributed_mesh else None
+    say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
+    problem_seconds = 0.0
+    if problem is None:
+        mesh = build_mesh(case, refine=refine)
+        timings["mesh"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        problem = _problem_without_stiffness(case, mesh, refinements)
+        problem_seconds = time.perf_counter() - clock
+    else:  # the piece, its boundary, loads, supports and contact
+        timings["mesh"] = time.perf_counter() - clock
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
@@ -209,7 +231,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
+    coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
     timings["gather"] = time.perf_counter() - clock
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
@@ -219,8 +243,14 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     clock = time.perf_counter()
     from contactfem.solve import SolveResult
 
+    if coordinates is not None:  # the mesh for the writers, now that the solver's memory is freed
+        problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
+    first = parallel["per_rank"][0]
+    first["solve_peak_rss_bytes"] = first["peak_rss_bytes"]
+    first["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
+    parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
     return DistributedResult(result=result, parallel=parallel, rank=rank)
@@ -245,7 +275,8 @@ def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, f
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+    mesh = "replicated" if hasattr(system.layout, "order") else "pieces"
+    return {"ranks": mpi.Get_size(), "solver": solver, "mesh": mesh, "per_rank": per_rank,
             "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
             "factorizations": factorizations}
 
@@ -286,8 +317,14 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     contact_method = get_method(method_name)
     clock = time.perf_counter()
     say("assembling")
-    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
-    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    from contactfem.distributed_problem import PieceProblem, assemble_piece_system
+
+    if isinstance(problem, PieceProblem):
+        system = assemble_piece_system(PETSc, comm, problem, contact_method)
+        layout = system.layout
+    else:
+        layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+        system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
         f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")
@@ -324,6 +361,13 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
     from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
 
     def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
+        from contactfem.distributed_problem import PieceProblem, piece_problem
+
+        # Fewer refinements of the same request: in pieces too (a rectangle's fewer divisions are not).
+        if isinstance(problem, PieceProblem) and request is problem.mesh_request:
+            pieces = piece_problem(case, comm.tompi4py(), refine)
+            if pieces is not None:
+                return pieces
         return _problem_without_stiffness(case, build_mesh(case, refine=refine, request=request), refine, request)
 
     def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:
@@ -404,7 +448,7 @@ class _DistributedSolver:
         self.factorizations = 0
         self.column_solves = 0  # every step factorises its own active set: no Schur columns
         self.factor_seconds: list[float] = []
-        #: MUMPS's account of the last factorisation (see :func:`_mumps_figures`); empty for GAMG.
+        #: MUMPS's account of the last factorisation (:func:`distributed_mumps.mumps_figures`); none for GAMG.
         self.factor_figures: dict = {}
         #: Iterations of each solve (1 for a direct solve: one substitution).
         self.linear_iterations: list[int] = []
@@ -551,7 +595,7 @@ class _DistributedSolver:
         self.factor_seconds.append(time.perf_counter() - started)
         self.factorizations += 1
         if self.solver_name == "mumps":
-            self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
+            self.factor_figures = mumps_figures(self.ksp.getPC().getFactorMatrix())
         self.base = self.linear_solve(base_rhs)
         self.checks.append(self._probe(active))
         self._factorized = active.copy()
@@ -683,66 +727,6 @@ class _DistributedSolver:
         """:meth:`contactfem.kernel.ActiveSetSolver.certify` with u's non-finite entries counted over all ranks."""
         return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
                                  tolerance, self.condition)
-
-
-#: MUMPS's orderings (ICNTL(7)) in order of preference: nested dissection by METIS (5), then by
-#: SCOTCH (3), when the library was built with them.
-MUMPS_ORDERINGS = (5, 3)
-#: ICNTL(7) = 7: MUMPS chooses among what it has (AMF on small matrices, its own PORD nested
-#: dissection on large ones; benchmarks/petsc_install_route.py compares them on the square).
-MUMPS_AUTOMATIC = 7
-_mumps_ordering: int | None = None
-
-
-def mumps_ordering(PETSc) -> int:
-    """The first ordering of :data:`MUMPS_ORDERINGS` this MUMPS was built with, asked of the
-    library once per process: the analysis of a small grid Laplacian on this rank alone
-    reports in INFOG(7) the ordering it used, which is the one asked for when the library has
-    it (MUMPS falls back to its automatic choice otherwise); :data:`MUMPS_AUTOMATIC` if none."""
-    global _mumps_ordering
-    if _mumps_ordering is None:
-        _mumps_ordering = next((o for o in MUMPS_ORDERINGS if _mumps_used(PETSc, o) == o), MUMPS_AUTOMATIC)
-    return _mumps_ordering
-
-
-def _mumps_used(PETSc, ordering: int) -> int:
-    """INFOG(7) of MUMPS's analysis of a 16 × 16 grid Laplacian with ICNTL(7) = ``ordering``."""
-    import scipy.sparse as sp
-
-    side = 16
-    line = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(side, side))
-    grid = sp.csr_matrix(sp.kron(sp.eye(side), line) + sp.kron(line, sp.eye(side)))
-    matrix = PETSc.Mat().createAIJ(size=grid.shape, csr=(grid.indptr, grid.indices, grid.data), comm=PETSc.COMM_SELF)
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-    prefix = "contactfem_ordering_probe_"
-    options = PETSc.Options()
-    options[f"{prefix}mat_mumps_icntl_7"] = ordering
-    try:
-        matrix.assemble()
-        ksp.setOperators(matrix)
-        ksp.setOptionsPrefix(prefix)
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        pc.setType("cholesky")
-        pc.setFactorSolverType("mumps")
-        ksp.setFromOptions()
-        pc.setUp()
-        return int(pc.getFactorMatrix().getMumpsInfog(7))
-    finally:
-        options.delValue(f"{prefix}mat_mumps_icntl_7")
-        ksp.destroy()
-        matrix.destroy()
-
-
-def _mumps_figures(factor) -> dict:
-    """What MUMPS reports of a factorisation (its user guide's INFO/INFOG/RINFOG): entries of
-    the factors over all ranks (INFOG(29), negative in millions), flops of the elimination
-    (RINFOG(3)), the ordering it chose (INFOG(7): 2 AMF... 5 METIS, 7 automatic), and this
-    rank's megabytes allocated (INFO(16)) and used (INFO(22)) by the factorisation."""
-    entries = int(factor.getMumpsInfog(29))
-    return {"factor_entries": entries if entries >= 0 else -entries * 10**6,
-            "flops": float(factor.getMumpsRinfog(3)), "ordering": int(factor.getMumpsInfog(7)),
-            "allocated_mb": int(factor.getMumpsInfo(16)), "used_mb": int(factor.getMumpsInfo(22))}
 
 
 def _reason_name(PETSc, reason: int) -> str:

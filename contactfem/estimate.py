@@ -22,18 +22,25 @@ from pathlib import Path
 
 REFERENCE_UNKNOWNS = 2.1e6
 # petsc: MUMPS on one rank (benchmarks/results/petsc_scaling.json: 26.6 s, 4.35 GB at 2.1M).
-# The size guard uses the one-rank figure whatever the ranks: it cannot know how many of
-# them share this machine's memory, and on one machine they need about as much in all.
+# On P ranks each needs (1 + RANK_OVERHEAD (P − 1)) / P of it (see :func:`estimate_cost`).
 FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0, "petsc": 26.6}
 PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9}
 GROWTH = 1.1
+#: What each further rank adds to a distributed solve's memory, as a share of the one-rank
+#: peak: the interfaces' rows and MUMPS's separators held twice, the libraries per process.
+#: benchmarks/results/petsc_scaling.json, square at 2.1M unknowns, MUMPS: the largest rank
+#: needs 0.59–0.60 of the one-rank peak on two ranks (0.18) and 0.35–0.36 on four (0.14):
+#: the larger share keeps the guard on the safe side.
+RANK_OVERHEAD = 0.18
 
 
-def estimate_cost(unknowns: int, backend: str) -> dict[str, float]:
-    """Seconds and bytes a solve of ``unknowns`` is expected to take with ``backend``."""
+def estimate_cost(unknowns: int, backend: str, ranks: int = 1) -> dict[str, float]:
+    """Seconds and bytes a solve of ``unknowns`` is expected to take with ``backend``; with
+    ``ranks`` > 1 (petsc, each rank holding its piece of the mesh), the bytes of one rank."""
     scale = max(unknowns, 1) / REFERENCE_UNKNOWNS
     seconds = 1.3 * FACTOR_SECONDS[backend] * scale**GROWTH * 1.25
-    peak = PEAK_BYTES[backend] * scale + 0.15e9  # the interpreter and libraries
+    share = (1 + RANK_OVERHEAD * (ranks - 1)) / ranks
+    peak = PEAK_BYTES[backend] * scale * share + 0.15e9  # the interpreter and libraries
     return {"seconds": seconds, "bytes": peak}
 
 
@@ -158,9 +165,27 @@ def address_space_overhead() -> float:
     return ADDRESS_SPACE_BASE + ADDRESS_SPACE_PER_BLAS_THREAD * (max(threads, 1) - 1)
 
 
+#: This process's own cgroup limit, read once (:func:`_cgroup_limit` of the default paths):
+#: a solve reads it for every level it meshes, and the files behind it do not change while
+#: a process runs; other paths (a test's tree) are read every time.
+_OWN_CGROUP: dict[tuple[Path, Path], int | None] = {}
+_OWN_PATHS = (Path("/proc/self"), Path("/sys/fs/cgroup"))
+
+
 def _cgroup_limit(proc: Path, cgroups: Path) -> int | None:
     """The least memory limit of this process's cgroup and its parents, in bytes (None: none
-    set, or no cgroup file system to read)."""
+    set, or no cgroup file system to read); this process's own (the default paths) is read
+    once and kept."""
+    key = (Path(proc), Path(cgroups))
+    if key != _OWN_PATHS:
+        return _read_cgroup_limit(proc, cgroups)
+    if key not in _OWN_CGROUP:
+        _OWN_CGROUP[key] = _read_cgroup_limit(proc, cgroups)
+    return _OWN_CGROUP[key]
+
+
+def _read_cgroup_limit(proc: Path, cgroups: Path) -> int | None:
+    """:func:`_cgroup_limit`, read from the files."""
     try:
         lines = (proc / "cgroup").read_text(encoding="utf-8", errors="replace").splitlines()
     except OSError:

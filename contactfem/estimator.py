@@ -155,7 +155,7 @@ def estimate(problem: DiscreteProblem, solution: Solution) -> Estimate:
     # Contact edges: σ_T ν + λ_h n along n and t, and ∫ λ_h (g0 − u_hn).
     contact = problem.contact
     if len(contact.edges):
-        n, t = contact.normal, contact.tangent
+        n, t, node_normal = _contact_directions(contact, points)
         lam = np.zeros(mesh.n_points)
         lam[solution.contact.nodes] = solution.contact.multiplier
         e = contact.edges
@@ -163,14 +163,25 @@ def estimate(problem: DiscreteProblem, solution: Solution) -> Estimate:
         L, edge_normal = edge_geometry(points, e)
         traction = np.einsum("eab,eb->ea", sigma[tri], edge_normal)
         l0, l1 = lam[e[:, 0]], lam[e[:, 1]]
-        r0, r1 = traction @ n + l0, traction @ n + l1
+        if n is None:  # a curved obstacle: each edge along the mean of its nodes' normals
+            n = node_normal[e[:, 0]] + node_normal[e[:, 1]]
+            n = n / np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-300)[:, None]
+            t = np.stack([-n[:, 1], n[:, 0]], axis=1)
+            along_n, along_t = np.einsum("ea,ea->e", traction, n), np.einsum("ea,ea->e", traction, t)
+        else:
+            along_n, along_t = traction @ n, traction @ t
+        r0, r1 = along_n + l0, along_n + l1
         normal_part = L / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
-        tangential_part = L * (traction @ t) ** 2
+        tangential_part = L * along_t ** 2
         terms["contact_normal"] = np.bincount(tri, scale * L * normal_part, minlength=n_tri)
         terms["contact_tangential"] = np.bincount(tri, scale * L * tangential_part, minlength=n_tri)
         ends = np.unique(e)
         slack = np.zeros(mesh.n_points)
-        slack[ends] = contact.obstacle.gap(points[ends]) - solution.displacement[ends] @ n
+        if node_normal is None:
+            slack[ends] = contact.obstacle.gap(points[ends]) - solution.displacement[ends] @ n
+        else:
+            slack[ends] = contact.obstacle.gap(points[ends]) - np.einsum("ea,ea->e", solution.displacement[ends],
+                                                                         node_normal[ends])
         s0, s1 = slack[e[:, 0]], slack[e[:, 1]]
         complementarity = np.maximum(L / 6.0 * (2 * l0 * s0 + l0 * s1 + l1 * s0 + 2 * l1 * s1), 0.0)
         terms["complementarity"] = np.bincount(tri, complementarity, minlength=n_tri)
@@ -186,3 +197,14 @@ def _edge_triangle(mesh, edges: np.ndarray) -> np.ndarray:
     if (index < 0).any():
         raise ValueError("a boundary edge of the problem is not an edge of its mesh")
     return topology.edge_triangles[index].max(axis=1)
+
+
+def _contact_directions(contact, points: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """A flat obstacle's normal and tangent (and None); for a curved one (None, None and
+    each mesh node's obstacle normal (n_points, 2) at its closest point, on ΓC's nodes)."""
+    if getattr(contact.obstacle, "flat", False):
+        return contact.normal, contact.tangent, None
+    node_normal = np.zeros((len(points), 2))
+    ends = np.unique(contact.edges)
+    node_normal[ends] = contact.obstacle.normals(points[ends])
+    return None, None, node_normal

@@ -141,7 +141,13 @@ def _quadratic(vector: np.ndarray, matrix: sp.spmatrix) -> float:
 
 def _dual_norm(problem: DiscreteProblem, weighted: np.ndarray, mass: sp.spmatrix, laplacian: sp.spmatrix) -> float:
     """(rᵀ A⁻¹ r)^½ with r[2i + c] = n_c · weighted[i] and A the H¹ Gram matrix, supports removed."""
-    normal = problem.contact.normal
+    contact = problem.contact
+    if getattr(contact.obstacle, "flat", False):
+        normal = contact.normal
+    else:  # each contact node's own normal (weighted vanishes off the contact nodes)
+        normal = np.zeros((problem.mesh.n_points, 2))
+        normal[contact.nodes] = contact.normals
+        normal = normal.T
     r = np.zeros(2 * problem.mesh.n_points)
     r[0::2] = normal[0] * weighted
     r[1::2] = normal[1] * weighted

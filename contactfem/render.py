@@ -123,15 +123,23 @@ def load_result(result_dir: Path | str) -> dict:
     return read_hdf5(path)
 
 
-def obstacle_of(data: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
+def obstacle_of(data: dict) -> tuple | None:
     """(point, unit normal into the obstacle, segment ends (2, 2) or None) as stored with the
-    contact fields, or None (files older than schema 2)."""
-    attrs = data.get("contact", {}).get("attrs", {})
+    contact fields, where a moving obstacle went, or None (files older than schema 2).
+
+    A curved obstacle (``/contact/obstacle_vertices``) adds its surface (k, 2) where it
+    went and its shift from rest (2,): (point, mean normal, None, surface, shift)."""
+    contact = data.get("contact", {})
+    attrs = contact.get("attrs", {})
     if "obstacle_point" not in attrs or "obstacle_normal" not in attrs:
         return None
     ends = attrs.get("obstacle_ends")
-    return (np.asarray(attrs["obstacle_point"], dtype=float), np.asarray(attrs["obstacle_normal"], dtype=float),
-            None if ends is None else np.asarray(ends, dtype=float).reshape(2, 2))
+    shift = np.asarray(attrs.get("obstacle_shift", (0.0, 0.0)), dtype=float).reshape(2)
+    point, normal = np.asarray(attrs["obstacle_point"], dtype=float) + shift, np.asarray(attrs["obstacle_normal"], dtype=float)
+    if "obstacle_vertices" in contact:
+        surface = np.asarray(contact["obstacle_vertices"], dtype=float).reshape(-1, 2) + shift
+        return point, normal, None, surface, shift
+    return point, normal, None if ends is None else np.asarray(ends, dtype=float).reshape(2, 2) + shift
 
 
 def units_of(data: dict) -> dict[str, str]:
@@ -178,13 +186,24 @@ def turn_over_limit(points: np.ndarray, triangles: np.ndarray, displacement: np.
 def imposed_approach(data: dict) -> float:
     """How far the obstacle starts inside the body (≥ 0): minus the most negative initial gap of
     the contact nodes, an indentation imposed by the data (a punch set into the body)."""
-    gaps = np.asarray(data.get("contact", {}).get("gap", []), dtype=float)
+    contact = data.get("contact", {})
+    if np.any(contact.get("attrs", {}).get("obstacle_shift", 0.0)):
+        return 0.0  # a moving obstacle: its gaps are those it went to, not where it started
+    gaps = np.asarray(contact.get("gap", []), dtype=float)
     return float(max(0.0, -gaps.min())) if len(gaps) else 0.0
 
 
 def drawn_obstacle(obstacle: tuple | None, normal_factor: float, approach: float) -> tuple | None:
     """The obstacle as drawn: moved towards the body by (normal_factor − 1)·approach, so that an
     imposed indentation is magnified like the displacement it causes (unchanged without one)."""
+    if obstacle is not None and len(obstacle) == 5:  # curved: its motion magnified like the body's
+        point, normal, _, surface, shift = obstacle
+        if normal_factor <= 1:
+            return obstacle
+        # A moving obstacle's advance magnified like the displacement it causes; else an
+        # imposed indentation's, towards the body along the mean normal.
+        more = (normal_factor - 1.0) * (shift if shift.any() else -max(approach, 0.0) * normal)
+        return point + more, normal, None, surface + more, shift
     if obstacle is None or approach <= 0 or normal_factor <= 1:
         return obstacle
     point, normal, ends = obstacle
@@ -220,6 +239,8 @@ def drawn_positions(points: np.ndarray, displacement: np.ndarray, factor: float,
         return drawn, limited
     point, normal = obstacle[0], obstacle[1]
     normal_factor = factor if normal_factor is None else normal_factor
+    if len(obstacle) == 5:
+        return _drawn_by_curved(points, displacement, factor, obstacle, keep, normal_factor, approach)
     shown = drawn_obstacle((point, normal, obstacle[2] if len(obstacle) > 2 else None), normal_factor, approach)
     ends = shown[2]
     start = (point - points) @ normal
@@ -235,6 +256,25 @@ def drawn_positions(points: np.ndarray, displacement: np.ndarray, factor: float,
         along = drawn @ tangent
         limited &= (along >= low) & (along <= high)
     drawn[limited] += (drawn_gap[limited] - floor[limited])[:, None] * normal
+    return drawn, limited
+
+
+def _drawn_by_curved(points: np.ndarray, displacement: np.ndarray, factor: float, obstacle: tuple, keep: float,
+                     normal_factor: float, approach: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`drawn_positions` for a curved obstacle: the true distance G of x + u and the
+    drawn one D of the drawn point are measured to each one's closest point on the obstacle
+    (where it went, and as drawn); where D < keep·max(G, 0), the drawn point is moved back
+    along the drawn obstacle's normal there."""
+    from contactfem.discretize.indenters import Polyline
+
+    normal = obstacle[1]
+    moved = displacement @ normal
+    drawn = points + factor * displacement + (normal_factor - factor) * moved[:, None] * normal
+    true = Polyline(vertices=obstacle[3]).closest(points + displacement)
+    shown = Polyline(vertices=drawn_obstacle(obstacle, normal_factor, approach)[3]).closest(drawn)
+    floor = keep * np.maximum(true.gap, 0.0)
+    limited = shown.faces & (shown.gap < floor)
+    drawn[limited] += (shown.gap[limited] - floor[limited])[:, None] * shown.normals[limited]
     return drawn, limited
 
 
@@ -320,12 +360,15 @@ def zoom_window(data: dict) -> dict | None:
     return {"from": centre - half, "to": centre + half, "what": "where the contact zone ends"}
 
 
-def _window_box(obstacle, window: dict, aspect: float) -> tuple[tuple[float, float], tuple[float, float]]:
+def _window_box(obstacle, window: dict, aspect: float,
+                centre: np.ndarray | None = None) -> tuple[tuple[float, float], tuple[float, float]]:
     """Axis-aligned limits of the zoom: ``window`` along the obstacle, mostly on the body's side."""
     point, normal = obstacle[0], obstacle[1]
     tangent = np.array([-normal[1], normal[0]])
     s0, s1 = window["from"], window["to"]
     base = point - (point @ tangent) * tangent
+    if len(obstacle) == 5 and centre is not None:  # along a curved obstacle: about the nodes in the window
+        base = centre - (0.5 * (s0 + s1)) * tangent
     width = s1 - s0
     depth = width * aspect
     corners = np.array([base + s * tangent + d * normal for s in (s0, s1) for d in (0.15 * depth, -0.85 * depth)])
@@ -363,7 +406,9 @@ def _draw_panel(ax, plt, data: dict, drawn: np.ndarray, shown_obstacle, norm, cm
                                      zorder=1.5, label="undeformed outline"))
 
     rest = obstacle_of(data)
-    if shown_obstacle is not None:
+    if shown_obstacle is not None and len(shown_obstacle) == 5:
+        _draw_curved(ax, shown_obstacle, rest, max(xlim[1] - xlim[0], ylim[1] - ylim[0]))
+    elif shown_obstacle is not None:
         reach = 10 * max(xlim[1] - xlim[0], ylim[1] - ylim[0])
         centre = np.array([0.5 * (xlim[0] + xlim[1]), 0.5 * (ylim[0] + ylim[1])])
 
@@ -408,6 +453,29 @@ def _draw_panel(ax, plt, data: dict, drawn: np.ndarray, shown_obstacle, norm, cm
     ax.add_artist(AnchoredSizeBar(ax.transData, length, f"{length:g} {units['length']}".strip(),
                                   _emptiest_corner(drawn, xlim, ylim), pad=0.4, borderpad=0.6, sep=4,
                                   frameon=True, size_vertical=0, fontproperties={"size": 8}))
+
+
+def _draw_curved(ax, shown: tuple, rest: tuple | None, span: float) -> None:
+    """A curved obstacle: its surface, shaded on its side (a circle filled), dotted at rest when it moved."""
+    from matplotlib.patches import Polygon
+
+    surface = shown[3]
+    closed = len(surface) > 2 and np.allclose(surface[0], surface[-1])
+    if closed:
+        region = surface
+    else:
+        step = np.diff(surface, axis=0)
+        side = np.stack([step[:, 1], -step[:, 0]], axis=1)
+        side = side / np.maximum(np.hypot(*side.T), 1e-300)[:, None]
+        depth = 0.06 * span * (side.sum(axis=0) / max(float(np.hypot(*side.sum(axis=0))), 1e-300))
+        region = np.concatenate([surface, surface[::-1] + depth])
+    ax.add_patch(Polygon(region, closed=True, facecolor="#e4e4e4", edgecolor="#a0a0a0", hatch="//", linewidth=0,
+                         zorder=0.5))
+    ax.plot(surface[:, 0], surface[:, 1], color="black", linewidth=1.4, zorder=1, label="rigid obstacle")
+    if rest is not None and rest[4].any():
+        at_rest = rest[3] - rest[4]
+        ax.plot(at_rest[:, 0], at_rest[:, 1], color="black", linewidth=0.8, linestyle=":", zorder=1,
+                label="obstacle at rest")
 
 
 def _limits(drawn: np.ndarray, points: np.ndarray, data: dict) -> tuple[tuple, tuple]:
@@ -561,7 +629,7 @@ def _draw_zoom(figure, plt, body_ax, data: dict, window: dict, factor: float, sc
     obstacle = obstacle_of(data)
     zoom_ax = figure.add_axes(_ZOOM_BOX)
     aspect = (_ZOOM_BOX[3] * height_px) / (_ZOOM_BOX[2] * width_px)
-    zxlim, zylim = _fit(*_window_box(obstacle, window, aspect), aspect)
+    zxlim, zylim = _fit(*_window_box(obstacle, window, aspect, _window_centre(data, window)), aspect)
     inside = ((points[:, 0] >= zxlim[0]) & (points[:, 0] <= zxlim[1]) & (points[:, 1] >= zylim[0])
               & (points[:, 1] <= zylim[1]))
     # The zoom magnifies the normal displacement so that the gaps it frames can be
@@ -584,6 +652,17 @@ def _draw_zoom(figure, plt, body_ax, data: dict, window: dict, factor: float, sc
     body_ax.add_patch(Rectangle((zxlim[0], zylim[0]), zxlim[1] - zxlim[0], zylim[1] - zylim[0],
                                 fill=False, edgecolor="black", linestyle=":", linewidth=1.0, zorder=5))
     return zoom_ax, zoom_factor
+
+
+def _window_centre(data: dict, window: dict) -> np.ndarray | None:
+    """The mean position of the contact nodes whose abscissa lies in ``window`` (None: none)."""
+    contact = data["contact"]
+    s = np.asarray(contact["abscissa"], dtype=float)
+    inside = (s >= window["from"]) & (s <= window["to"])
+    if not inside.any():
+        return None
+    points = np.asarray(data["mesh"]["points"], dtype=float)[np.asarray(contact["nodes"], dtype=np.int64)[inside]]
+    return points.mean(axis=0)
 
 
 def _draw_legend_and_bar(figure, body_ax, norm, cmap, units: dict, font: float, main_width: float,

@@ -102,7 +102,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             solution.method, contact.gap, contact.normal_displacement, contact.multiplier, contact.nodal_force
         ),
         "contact_zone": contact_zone(problem, contact.active),
-        "obstacle": obstacle_figures(problem),
+        "obstacle": obstacle_figures(problem, contact.nodal_force),
         "contact_force": {
             "normal": float(contact.nodal_force.sum()),
             "vector": (-(problem.contact.normals * contact.nodal_force[:, None]).sum(axis=0)).tolist(),
@@ -203,20 +203,34 @@ def sign_conditions(
     return figures
 
 
-def obstacle_figures(problem: DiscreteProblem) -> dict:
+def obstacle_figures(problem: DiscreteProblem, nodal_force_of: np.ndarray | None = None) -> dict:
     """The obstacle as solved: its surface, a finite one's ends, and which nodes of ΓC face it."""
     contact = problem.contact
     obstacle = contact.obstacle
     description = obstacle.describe()
-    return {
+    figures = {
         "kind": description["kind"],
-        "point": description["point"],
-        "normal": description["normal"],
+        "point": [float(v) for v in np.asarray(obstacle.point, dtype=float)],
+        "normal": [float(v) for v in contact.reference_normal],
         "ends": description.get("ends"),
         "extent": None if obstacle.extent is None else list(obstacle.extent),
         "facing_nodes": int(len(contact.nodes)),
         "beyond_nodes": int(len(contact.beyond)),
     }
+    if not contact.flat:
+        # Each node's gap and normal are those of its closest point at rest: small deformations.
+        figures.update({key: description[key] for key in ("center", "radius", "vertices") if key in description})
+        figures["small_deformations"] = True
+    drive = problem.drive
+    if drive is not None:
+        nodal_force = nodal_force_of
+        figures["motion"] = {
+            "direction": drive.direction.tolist(), "advance": float(drive.advance),
+            "control": "displacement" if drive.force is None else "force",
+            **({} if drive.force is None else {"force": float(drive.force)}),
+            **({} if nodal_force is None else {"reaction": drive.reaction(nodal_force, contact.normals)}),
+        }
+    return figures
 
 
 def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:

@@ -37,6 +37,18 @@ class ContactFields:
         The flat obstacle: a point of its surface and its unit normal n.
     obstacle_ends : (2, 2) float64 or None
         The end points of a finite obstacle (a segment), None for an infinite one.
+    normals : (m, 2) float64 or None
+        The obstacle's unit normal at each node's closest point (None: ``obstacle_normal``
+        at every node, a flat obstacle).
+    obstacle_points : (m, 2) float64 or None
+        Each node's closest point on the obstacle, in the reference configuration.
+    obstacle_outline : (k, 2) float64 or None
+        A curved obstacle's surface as a polyline (a circle sampled along its arc), to draw
+        it; None for a flat one. For a curved obstacle ``obstacle_point`` is its center or
+        first vertex and ``obstacle_normal`` the normalised mean of ``normals``.
+    obstacle_shift : (2,) float64 or None
+        How far a moving obstacle went (its advance times its direction): the obstacle
+        described above is where it rests; None for one that stays.
     """
 
     nodes: np.ndarray
@@ -50,6 +62,10 @@ class ContactFields:
     obstacle_point: np.ndarray
     obstacle_normal: np.ndarray
     obstacle_ends: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    obstacle_points: np.ndarray | None = None
+    obstacle_outline: np.ndarray | None = None
+    obstacle_shift: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

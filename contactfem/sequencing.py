@@ -562,12 +562,17 @@ class PredictedStarts(PathStarts):
     step it predicts every node whose gap the push would close at the last steps' rate,
     and the zone's stiffening makes that a large overshoot (769 predicted wrong against
     47 from the coarser level, 140 active, on a 16 000-point rough profile at the second
-    of ten steps). The first step, and any after extrapolation missed a node, asks the
-    coarser level; a tie goes to extrapolation."""
+    of ten steps). The first step asks the coarser level; a tie goes to extrapolation. A
+    step that extrapolation alone started and missed hands the next to the coarser level
+    unless it missed no more than that level did when last compared; that record serves
+    once (a Hertz platen's zone edge, which the coarser level often misses by a node,
+    extrapolation by none: two Newton steps for each hand-over)."""
 
     def __init__(self, predict: Callable[[float], np.ndarray | None]) -> None:
         self.predict = predict
         self.prefer_coarse = True
+        #: The nodes the coarser level missed when last compared (0 once that served).
+        self.coarse_missed = 0
         self.candidates: dict[str, np.ndarray] = {}
         #: Steps started from each kind of set (solved: a factor solved before, its own set).
         self.started = {"coarse": 0, "extrapolated": 0, "solved": 0}
@@ -591,5 +596,9 @@ class PredictedStarts(PathStarts):
 
     def settled(self, active: np.ndarray) -> None:
         missed = {name: int(np.count_nonzero(guess != active)) for name, guess in self.candidates.items()}
+        if "coarse" in missed:
+            self.coarse_missed = missed["coarse"]
         if "extrapolated" in missed:
-            self.prefer_coarse = missed["extrapolated"] > missed.get("coarse", 0)
+            self.prefer_coarse = missed["extrapolated"] > self.coarse_missed
+            if "coarse" not in missed and missed["extrapolated"]:
+                self.coarse_missed = 0

@@ -33,7 +33,6 @@ from contactfem.kernel import (
     Status,
     default_c,
     solve_contact,
-    solve_path,
 )
 from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
 from contactfem.mesh import Mesh
@@ -49,6 +48,7 @@ from contactfem.sequencing import (
     layer_pays,
     PredictedStarts,
     patch_count,
+    plane_strain_modulus,
     predict_active_set,
     prediction_first,
     starting_set,
@@ -188,6 +188,12 @@ def solve_case(
     kept = {} if coarse_levels is None else coarse_levels
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
+    if problem.drive is not None and problem.drive.pushed:
+        from contactfem.indenter import solve_pushed
+
+        return solve_pushed(problem, lambda trial: solve_case(
+            case, method=method_name, problem=trial, progress=progress, accept_uncertified=accept_uncertified,
+            accelerators=accelerators), plane_strain_modulus(problem.law), say)[0]
 
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
@@ -382,9 +388,18 @@ def solve_load_path(
     reduced = problem.contact_system(contact_method)
     c = case.solver.c if case.solver.c is not None else default_c(reduced.system)
     accelerators = case_accelerators(case)
-    coarse_path = (_coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
-                   if accelerators.sequencing else None)
+    path = PathSolver(reduced.system, c=c, tolerance=case.solver.tolerance, max_iterations=case.solver.max_iterations,
+                      backend=backend, accelerators=accelerators)
+    # The fine level's ordering and symbolic analysis (outside the interpreter's lock) run
+    # while the coarser levels mesh and assemble, as in a single solve.
+    with ThreadPoolExecutor(max_workers=1) if accelerators.sequencing else _InPlace() as pool:
+        analysed = pool.submit(path.linear.analyse)
+        coarse_path = (_coarse_path(case, problem, c, case.solver.tolerance, case.solver.max_iterations)
+                       if accelerators.sequencing else None)
+        analysed.result()
     starts = None if coarse_path is None else PredictedStarts(coarse_path.predict)
+    if starts is not None:
+        path.starts = starts
     if coarse_path is not None:
         levels = coarse_path.record()["levels"]
         say(f"  each step starts from the same path on {coarse_path.problem.n_unknowns} unknowns "
@@ -397,10 +412,7 @@ def solve_load_path(
     postprocess = handed_over = 0.0
     last: KernelResult | None = None
     started = clock
-    path = solve_path(reduced.system, factors, c=c, tolerance=case.solver.tolerance,
-                      max_iterations=case.solver.max_iterations, backend=backend, starts=starts,
-                      accelerators=accelerators)
-    for index, (factor, kernel) in enumerate(zip(factors, path)):
+    for index, (factor, kernel) in enumerate(zip(factors, path.walk(factors))):
         seconds = time.perf_counter() - started
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
         say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
@@ -736,6 +748,8 @@ def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, k
     """The fields of a converged solve: stresses per triangle and the contact fields
     (``gradients``: the mesh's shape gradients, when the caller keeps them)."""
     mesh = problem.mesh
+    if problem.drive is not None:  # the kernel's field is relative to the moving obstacle
+        displacement = problem.drive.moved(displacement)
     stress = stresses(mesh.points, mesh.triangles, displacement, problem.law, gradients)
     return Solution(
         method=method,
@@ -743,13 +757,15 @@ def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, k
         displacement=displacement,
         stress=stress,
         von_mises=von_mises(stress),
-        contact=_contact_fields(problem, displacement, kernel),
+        contact=_contact_fields(problem, displacement, kernel, moved=True),
         newton=_history_arrays(kernel.history),
     )
 
 
-def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult) -> ContactFields:
-    """The contact fields of a solve (a fine one's output, a coarse level's prediction)."""
+def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult,
+                    moved: bool = False) -> ContactFields:
+    """The contact fields of a solve (a fine one's output, a coarse level's prediction);
+    ``moved``: ``displacement`` is the lab's, the gaps those to the advanced obstacle."""
     contact = problem.contact
     return ContactFields(
         nodes=contact.nodes,
@@ -757,12 +773,11 @@ def _contact_fields(problem: DiscreteProblem, displacement: np.ndarray, kernel: 
         multiplier=kernel.multiplier,
         nodal_force=kernel.nodal_force,
         normal_displacement=np.einsum("ij,ij->i", displacement[contact.nodes], contact.normals),
-        gap=contact.gap,
+        gap=contact.gap if problem.drive is None or not moved else problem.drive.gap(contact.gap, contact.normals),
         active=kernel.active,
         abscissa=contact.abscissa,
-        obstacle_point=contact.obstacle.point,
-        obstacle_normal=contact.obstacle.normal,
-        obstacle_ends=contact.obstacle.ends,
+        **contact.output_fields(),
+        obstacle_shift=None if problem.drive is None or not moved else problem.drive.advance * problem.drive.direction,
     )
 
 

@@ -124,8 +124,8 @@ def test_a_matrix_that_is_not_positive_definite_is_refused(label, provider, capf
 @pytest.mark.parametrize("size", [9, 6400])
 def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     """The Schur columns from the library: full columns A⁻¹ B in dense blocks equal
-    A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B to 1e-12 through
-    either route, whichever kind of factor (always an LLᵀ, even for a 2 × 2 grid); only a
+    A⁻¹ B column by column, and the forward ones satisfy Wᵀ W = Bᵀ A⁻¹ B and
+    Pᵀ L⁻ᵀ W y = A⁻¹ B y (the backward half of a solve) to 1e-12 through either route, whichever kind of factor (always an LLᵀ, even for a 2 × 2 grid); only a
     supernodal one is converted by the pattern solve."""
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", {"simplicial": 0, "supernodal": 2}[kind])
     matrix = _elasticity_like(size, seed=4)
@@ -142,10 +142,14 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     # Both routes: CHOLMOD's blocked sparse solve, then its solve with each column's pattern
     # (which converts a supernodal factor to a simplicial one), then whichever forward_sparse picks.
     assert factor.analysis.simplicial is (kind == "simplicial")
+    weights = rng.standard_normal(columns)
+    combined = dense @ weights
     for route in (factor._blocked_forward, factor._pattern_forward, factor.forward_sparse):
         forward, scaled = route(sp.csc_matrix(rhs))
         schur = (forward.T @ scaled).toarray()
         assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
+        # A⁻¹ B y from the forward columns by the backward half of a solve: Pᵀ L⁻ᵀ (W y).
+        assert np.abs(factor.backward(scaled @ weights) - combined).max() < 1e-12 * np.abs(combined).max()
     assert factor.analysis.simplicial
     assert factor.analysis.converted is (kind == "supernodal")
 
@@ -208,23 +212,28 @@ def test_library_frees_a_factor_with_its_last_user(monkeypatch):
 
 
 @needs_library
-def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(monkeypatch):
+@pytest.mark.parametrize("copy_bytes", [0, 2**30])
+def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(copy_bytes, monkeypatch):
     """A solve with sparse right-hand sides converts CHOLMOD's supernodal factor to a
-    simplicial one in place; the next factorisation of the pattern starts again from the
-    symbolic analysis, so it is a supernodal LLᵀ again (its forward columns still give
-    Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the factorisation it replaced refuses to
-    solve."""
+    simplicial one in place, after a supernodal copy is kept for the dense solves (which
+    still solve the matrix); the next factorisation of the pattern numbers that copy, or
+    without one starts again from the symbolic analysis, so it is a supernodal LLᵀ again
+    (its forward columns still give Bᵀ A⁻¹ B = Wᵀ W, which an LDLᵀ would not), and the
+    factorisation it replaced refuses to solve."""
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
+    monkeypatch.setattr(cholmod_direct, "SUPERNODAL_COPY_BYTES", copy_bytes)
     matrix = _elasticity_like(6400, seed=13)
     n = matrix.shape[0]
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(matrix)
     first._pattern_forward(rhs)
-    assert first.analysis.simplicial
+    assert first.analysis.simplicial and bool(first.analysis.solving.value) is (copy_bytes > 0)
+    x = first.solve(np.ones(n))
+    assert np.abs(matrix @ x - 1.0).max() < 1e-10 * np.abs(matrix).max() * np.abs(x).max()
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
     second = factorizer.factorize(changed)
-    assert not second.analysis.simplicial
+    assert not second.analysis.simplicial and not second.analysis.solving.value
     forward, scaled = second._pattern_forward(rhs)
     expected = rhs.T @ second.solve(rhs.toarray())
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
@@ -465,14 +474,15 @@ def test_a_pardiso_factor_is_released_with_its_last_user():
 @pytest.mark.parametrize("size", [400, 6400])
 def test_the_direct_route_switched_off_gives_the_same_answers_through_cvxopts_interface(size, monkeypatch):
     """``cholmod`` with the direct route on (the bundled library through ctypes) and off
-    (cvxopt's interface): the same solves and the same Schur blocks Bᵀ A⁻¹ B from forward
-    columns, to 1e-12 relative, through a Factorizer refactorising one pattern. Switched
+    (cvxopt's interface): the same solves, the same Schur blocks Bᵀ A⁻¹ B from forward
+    columns and the same A⁻¹ B y from their backward solve, to 1e-12 relative, through a Factorizer refactorising one pattern. Switched
     off, the library is not asked for at all."""
     matrix = _elasticity_like(size, seed=21)
     n = matrix.shape[0]
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
     rhs = np.random.default_rng(22).standard_normal((n, 3))
     columns = sp.csc_matrix((np.ones(6), (np.arange(0, n, n // 6)[:6], np.arange(6))), shape=(n, 6))
+    weights = np.linspace(-1.0, 2.0, 6)
 
     def run() -> tuple[type, list[np.ndarray]]:
         factorizer = linalg.Factorizer("cholmod", name="the test matrix")
@@ -480,7 +490,8 @@ def test_the_direct_route_switched_off_gives_the_same_answers_through_cvxopts_in
         for values in (matrix, changed):
             factor = factorizer.factorize(values)
             forward, scaled = factor.forward_sparse(columns)
-            results += [np.asarray(factor.solve(rhs)).reshape(rhs.shape), (forward.T @ scaled).toarray()]
+            results += [np.asarray(factor.solve(rhs)).reshape(rhs.shape), (forward.T @ scaled).toarray(),
+                        factor.backward(scaled @ weights)]
         return type(factor), results
 
     assert linalg.direct_cholmod_enabled()

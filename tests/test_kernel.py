@@ -544,20 +544,19 @@ def test_schur_updates_from_forward_columns_match_a_fresh_factorisation(monkeypa
     assert (linear.scaled_store is linear.forward_store) == (route == "library")
 
 
-@pytest.mark.parametrize("dense_entries", [0, 10**12])
+@pytest.mark.parametrize("dense_bytes", [0, 2**29])
 @pytest.mark.parametrize("scaled", [False, True])
-def test_schur_blocks_from_forward_columns_split_shared_and_own_rows(scaled, dense_entries, monkeypatch):
-    """Wᵀ S for sparse forward columns is the dense product to round-off, whether the rows
-    that many columns share (the elimination tree's top) go through dense blocks and the
-    others through a sparse product, or all of them one way, or the new columns are made
-    dense (a few of them); and for new columns against all of them (the rows a store of
-    Schur blocks gains)."""
+def test_schur_blocks_from_forward_columns_are_their_dense_product(scaled, dense_bytes, monkeypatch):
+    """Wᵀ S for sparse forward columns is the dense product to round-off, whether both are
+    gathered densely over the rows the left-hand columns touch or, past the bound on dense
+    blocks, multiplied as sparse matrices; for new columns against all of them (the rows a
+    store of Schur blocks gains), and for columns whose rows the other side never touches."""
     import scipy.sparse as sp
 
     import contactfem.kernel.costs as costs
     from contactfem.kernel.columns import cross as _cross
 
-    monkeypatch.setattr(costs, "DENSE_CROSS_ENTRIES", dense_entries)
+    monkeypatch.setattr(costs, "COLUMN_BYTES", dense_bytes)
 
     rng = np.random.default_rng(11)
     n, k = 5000, 40

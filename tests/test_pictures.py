@@ -170,8 +170,16 @@ def body_pixels_beyond_the_obstacle(png: Path, panel: dict, slack_pixels: float 
     transform = np.asarray(panel["pixel_transform"])
     linear, offset = transform[:, :2], transform[:, 2]
     xy = np.linalg.solve(linear, (np.column_stack([cols + 0.5, rows + 0.5]) - offset).T).T
-    point, normal, ends = panel["obstacle"]
     pixel_size = 1.0 / abs(np.linalg.det(linear)) ** 0.5
+    if len(panel["obstacle"]) == 5:  # a curved obstacle: depth below its drawn surface, at the closest point
+        from contactfem.discretize.indenters import Polyline
+
+        closest = Polyline(vertices=panel["obstacle"][3]).closest(xy)
+        depth = np.where(closest.faces, -closest.gap, -np.inf)
+        beyond = depth > slack_pixels * pixel_size
+        touching = (depth <= 0) & (depth > -3 * pixel_size)
+        return len(xy), int(beyond.sum()), int(touching.sum())
+    point, normal, ends = panel["obstacle"]
     depth = (xy - point) @ normal  # > 0: on the obstacle's side of its line
     beyond = depth > slack_pixels * pixel_size
     if ends is not None:  # a segment: only what lies in front of it is inside the obstacle

@@ -478,6 +478,23 @@ def test_the_benchmark_times_contact_and_linear_solves_in_alternation(tmp_path, 
     assert len(rough.measure(300, tmp_path, "positive", repeat=3)["baseline_samples_s"]) == 3
 
 
+def test_the_sweep_keeps_each_size_from_its_best_round_with_every_round_s_ratio():
+    """benchmarks/rough.py's rounds: a size's record is its run with the lowest ratio, with
+    the ratios of every run that measured one and their median; a failed run counts for
+    nothing unless every run failed, and then the first failure is the record."""
+    import rough
+
+    runs = [{"points": 8, "solve_over_baseline": 3.5, "round": 0}, {"points": 8, "error": "timed out"},
+            {"points": 8, "solve_over_baseline": 2.5, "round": 2}, {"points": 8, "solve_over_baseline": 4.0}]
+    best = rough.best_of_rounds(runs)
+    assert best["round"] == 2 and best["solve_over_baseline"] == 2.5
+    assert best["round_ratios"] == [3.5, 2.5, 4.0] and best["round_median_ratio"] == 3.5
+    assert "round_ratios" not in runs[2]  # the run's own record is left as it was
+    failed = [{"points": 8, "error": "exit code 1"}, {"points": 8, "error": "timed out"}]
+    assert rough.best_of_rounds(failed) is failed[0]
+    assert rough._median_ratio(best) == "3.5" and rough._median_ratio({"median_solve_over_baseline": 2.94}) == "2.9"
+
+
 def _patches_by_union_find(abscissa, active, pairs):
     """The zone's intervals the slow, obvious way: union-find over the joined pairs, then
     each group's lowest and highest abscissa (ties: the lower position) and size."""

@@ -73,6 +73,7 @@ from contactfem.case.model import (
     MeshFileGeometry,
     MeshSettings,
     Obstacle,
+    ObstacleMotion,
     OutputSettings,
     PartKind,
     Platen,
@@ -94,7 +95,7 @@ __all__ = [
     "OUTLINE_EXPECTED", "OUTPUT_NAME_RESERVE", "OUTPUT_PATH_RESERVE", "PART_KINDS", "PART_LOADS", "PATH_MAX",
     "PLATEN_CONTROLS", "PROFILE_SOURCES", "SCALE_LIMIT", "SIDES", "SUPPORT_KINDS",
     "Accelerators", "Arc", "BoundaryPart", "Case", "ExactBlock", "Geometry", "LoadPath", "Loop", "Material", "MeshFileGeometry",
-    "MeshSettings", "Obstacle", "OutputSettings", "PartKind", "Platen", "PlatenControl", "PolygonGeometry", "RectangleGeometry",
+    "MeshSettings", "Obstacle", "ObstacleMotion", "OutputSettings", "PartKind", "Platen", "PlatenControl", "PolygonGeometry", "RectangleGeometry",
     "SolverSettings", "Units",
     "is_number", "load_case", "parse_case", "path_problem", "read_text_file", "shortened",
 ]

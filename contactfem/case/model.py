@@ -189,16 +189,47 @@ class LoadPath:
 
 
 @dataclass(frozen=True)
-class Obstacle:
-    """The rigid half-plane {p : (p − point)·normal ≥ 0}; ``normal`` is a unit vector pointing into it.
+class ObstacleMotion:
+    """How a rigid obstacle is driven: its advance along the unit ``direction`` is one
+    unknown, prescribed (``control`` displacement: ``value`` is the advance) or pushed
+    (force: ``value`` is the force along the direction the obstacle presses with)."""
 
-    ``ends`` are the two end points of a finite obstacle (a segment: a table, a punch), None
-    for an infinite one: only the part of the surface between them exists.
+    direction: tuple[float, float]
+    control: PlatenControl
+    value: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "control", PlatenControl(self.control))
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """The rigid obstacle.
+
+    ``shape`` ``line`` is the half-plane {p : (p − point)·normal ≥ 0}; ``normal`` is a
+    unit vector pointing into it. ``ends`` are the two end points of a finite obstacle (a
+    segment: a table, a punch), None for an infinite one: only the part of the surface
+    between them exists.
+
+    ``shape`` ``circle`` is the disk of ``center`` and ``radius`` (the body outside it);
+    ``polyline`` the open polyline through ``vertices`` (a polyline or a profile), the
+    obstacle on the right of the walk from the first vertex to the last. A curved obstacle
+    has no single normal: ``point`` is its center or first vertex and ``normal`` None.
+    ``motion`` drives the obstacle (None: it stays where it is).
     """
 
     point: tuple[float, float]
-    normal: tuple[float, float]
+    normal: tuple[float, float] | None
     ends: tuple[tuple[float, float], tuple[float, float]] | None = None
+    shape: str = "line"
+    center: tuple[float, float] | None = None
+    radius: float | None = None
+    vertices: tuple[tuple[float, float], ...] | None = None
+    motion: ObstacleMotion | None = None
+
+    @property
+    def flat(self) -> bool:
+        return self.shape == "line"
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from contactfem.case.files import case_digest, read_text_file
 from contactfem.case.geometry import read_geometry, read_mesh_settings
 from contactfem.case.messages import shortened
 from contactfem.case.model import Case, ExactBlock
+from contactfem.case.obstacle import read_obstacle
 from contactfem.case.reader import Reader
 from contactfem.case.sections import (
     read_body_force,
@@ -17,7 +18,6 @@ from contactfem.case.sections import (
     read_exact_displacement,
     read_load_path,
     read_material,
-    read_obstacle,
     read_output,
     read_solver,
     read_units,
@@ -84,7 +84,10 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     exact_displacement = read_exact_displacement(r, top["exact"]) if "exact" in top else None
     body_force = read_body_force(r, top.get("body_force"), exact_displacement is not None)
     parts = read_boundary(r, top["boundary"], part_names, exact_displacement)
-    obstacle = read_obstacle(r, top["obstacle"])
+    obstacle = read_obstacle(r, top["obstacle"], source)
+    if exact_displacement is not None and (not obstacle.flat or obstacle.motion is not None):
+        raise r.fail("exact", "...", "a manufactured solution (exact:) is derived for a flat obstacle that stays "
+                                     "where it is; drop the exact: block or give a flat obstacle without motion")
     exact = None if exact_displacement is None else ExactBlock(exact_displacement, material, obstacle.normal)
     solver = read_solver(r, top.get("solver", {}))
     output = read_output(r, top.get("output", {}), source)
@@ -93,6 +96,9 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     if load_path is not None and exact is not None:
         raise r.fail("load_path", top["load_path"], "a manufactured solution (exact:) is the answer to one load; "
                                                     "drop load_path or the exact: block")
+    if load_path is not None and obstacle.motion is not None and obstacle.motion.control.value == "force":
+        raise r.fail("load_path", top["load_path"], "a pushed obstacle (obstacle.motion.force) is solved for one "
+                                                    "force; drop load_path, or drive the obstacle by displacement")
     if load_path is not None and "path" not in output.files:
         files = [name for name in output.files if name != "json"]
         output = replace(output, files=(*files, "path", *(("json",) if "json" in output.files else ())))

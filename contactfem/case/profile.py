@@ -31,43 +31,13 @@ def profile_geometry(r: Reader, spec: Any, key: str, source: Path) -> tuple[Geom
     and last s. With s strictly increasing and depth above every height the outline is a
     simple counter-clockwise polygon; it is still checked (in O(k log k)) like any other.
     """
-    spec = r.mapping(spec, key, (*PROFILE_SOURCES, "spacing", "start", "x", "points", "name", "depth", "sides",
-                                 "top", "origin", "direction"), required=("depth",))
-    given = [name for name in PROFILE_SOURCES if name in spec]
-    if len(given) != 1:
-        raise r.fail(key, {name: "..." for name in given} or spec,
-                     f"expected exactly one of {', '.join(PROFILE_SOURCES)} (the heights)")
-    (kind,) = given
-    allowed = {"file": ("spacing", "start"), "heights": ("spacing", "start"), "expression": ("x", "points")}[kind]
-    for option in ("spacing", "start", "x", "points"):
-        if option in spec and option not in allowed:
-            raise r.fail(f"{key}.{option}", spec[option], f"not used with {kind}; {kind} takes "
-                         f"{' and '.join(allowed)}" + (" (a one-column file)" if kind == "file" else ""))
-    limit = limits.MAX_POLYGON_VERTICES - 2  # the top's two corners complete the polygon
-    if kind == "expression":
-        s, h = _profile_expression(r, spec, key, limit)
-    elif kind == "heights":
-        values = spec["heights"]
-        if not isinstance(values, list) or len(values) < 2:
-            raise r.fail(f"{key}.heights", values, "expected a list of at least 2 heights")
-        if len(values) > limit:
-            raise r.fail(f"{key}.heights", f"<{len(values)} heights>", f"expected at most {limit} heights")
-        h = np.array([r.number(v, f"{key}.heights[{i}]", low=-limits.SCALE_LIMIT, high=limits.SCALE_LIMIT)
-                      for i, v in enumerate(values)])
-        s = _equally_spaced(r, spec, key, len(h), "heights")
-    else:
-        s, h = _profile_file(r, spec, key, source, limit)
+    spec = r.mapping(spec, key, (*PROFILE_SOURCES, *GRAPH_OPTIONS, "name", "depth", "sides", "top"),
+                     required=("depth",))
+    s, h, origin, d, n = profile_graph(r, spec, key, source, limits.MAX_POLYGON_VERTICES - 2)
     depth = r.number(spec["depth"], f"{key}.depth", low=-limits.SCALE_LIMIT, high=limits.SCALE_LIMIT)
     if not depth > h.max():
         raise r.fail(f"{key}.depth", depth, f"the top must lie above the highest point of the profile, "
                      f"h = {h.max():.6g}; expected a depth greater than that")
-    origin = r.point(spec.get("origin", [0, 0]), f"{key}.origin")
-    direction = r.point(spec.get("direction", [1, 0]), f"{key}.direction")
-    norm = math.hypot(*direction)
-    if not norm > 0 or not math.isfinite(norm):
-        raise r.fail(f"{key}.direction", list(direction), "expected a nonzero vector [dx, dy] along the profile")
-    d = np.array(direction) / norm
-    n = np.array([-d[1], d[0]])
     name = r.name(spec.get("name", "base"), f"{key}.name")
     top = r.name(spec.get("top", "top"), f"{key}.top")
     sides = spec.get("sides", ["left", "right"])
@@ -90,6 +60,49 @@ def profile_geometry(r: Reader, spec: Any, key: str, source: Path) -> tuple[Geom
     check_extent(r, key, points)
     loop = Loop(vertices=points, edge_names=names)
     return PolygonGeometry(loop, ()), tuple(dict.fromkeys(names))
+
+
+#: The keys that place a profile's heights: where they are sampled and along which line.
+GRAPH_OPTIONS = ("spacing", "start", "x", "points", "origin", "direction")
+
+
+def profile_graph(r: Reader, spec: dict, key: str, source: Path,
+                  limit: int) -> tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray]:
+    """The graph h(s) a profile mapping gives (``file``, ``heights`` or ``expression``, at
+    most ``limit`` points) over the line through ``origin`` along ``direction``: s (k,)
+    strictly increasing, h (k,), the origin, the unit direction d and its left normal n.
+    Point i is origin + s_i d + h_i n. The body's bottom edge (``geometry.profile``) and a
+    rigid profile (``obstacle.profile``) are read by this one function."""
+    given = [name for name in PROFILE_SOURCES if name in spec]
+    if len(given) != 1:
+        raise r.fail(key, {name: "..." for name in given} or spec,
+                     f"expected exactly one of {', '.join(PROFILE_SOURCES)} (the heights)")
+    (kind,) = given
+    allowed = {"file": ("spacing", "start"), "heights": ("spacing", "start"), "expression": ("x", "points")}[kind]
+    for option in ("spacing", "start", "x", "points"):
+        if option in spec and option not in allowed:
+            raise r.fail(f"{key}.{option}", spec[option], f"not used with {kind}; {kind} takes "
+                         f"{' and '.join(allowed)}" + (" (a one-column file)" if kind == "file" else ""))
+    if kind == "expression":
+        s, h = _profile_expression(r, spec, key, limit)
+    elif kind == "heights":
+        values = spec["heights"]
+        if not isinstance(values, list) or len(values) < 2:
+            raise r.fail(f"{key}.heights", values, "expected a list of at least 2 heights")
+        if len(values) > limit:
+            raise r.fail(f"{key}.heights", f"<{len(values)} heights>", f"expected at most {limit} heights")
+        h = np.array([r.number(v, f"{key}.heights[{i}]", low=-limits.SCALE_LIMIT, high=limits.SCALE_LIMIT)
+                      for i, v in enumerate(values)])
+        s = _equally_spaced(r, spec, key, len(h), "heights")
+    else:
+        s, h = _profile_file(r, spec, key, source, limit)
+    origin = r.point(spec.get("origin", [0, 0]), f"{key}.origin")
+    direction = r.point(spec.get("direction", [1, 0]), f"{key}.direction")
+    norm = math.hypot(*direction)
+    if not norm > 0 or not math.isfinite(norm):
+        raise r.fail(f"{key}.direction", list(direction), "expected a nonzero vector [dx, dy] along the profile")
+    d = np.array(direction) / norm
+    return s, h, origin, d, np.array([-d[1], d[0]])
 
 
 def _equally_spaced(r: Reader, spec: dict, key: str, count: int, what: str) -> np.ndarray:

@@ -20,7 +20,6 @@ from contactfem.case.model import (
     BoundaryPart,
     LoadPath,
     Material,
-    Obstacle,
     OutputSettings,
     PartKind,
     Platen,
@@ -192,39 +191,6 @@ def read_load_path(r: Reader, data: Any) -> LoadPath:
                             expected=f"expected a load factor > 0 and at most {limits.SCALE_LIMIT:g}")
                    for i, f in enumerate(factors))
     return LoadPath(factors=values)
-
-
-def read_obstacle(r: Reader, data: Any) -> Obstacle:
-    data = r.mapping(data, "obstacle", ("point", "normal", "points", "segment"))
-    given = [key for key in ("points", "segment") if key in data]
-    if given:
-        key = given[0]
-        if len(given) > 1 or "point" in data or "normal" in data:
-            raise r.fail("obstacle", data, "give one of: point and normal, points (an infinite line), "
-                                           "or segment (a finite one)")
-        points = data[key]
-        if not isinstance(points, list) or len(points) != 2:
-            raise r.fail(f"obstacle.{key}", points, "expected two points [[x0, y0], [x1, y1]] on the obstacle's surface")
-        p0 = np.array(r.point(points[0], f"obstacle.{key}[0]"))
-        p1 = np.array(r.point(points[1], f"obstacle.{key}[1]"))
-        d = p1 - p0
-        length = np.hypot(*d)
-        scale = max(np.abs(p0).max(), np.abs(p1).max(), 1e-300)
-        if not length > 1e-9 * scale:
-            raise r.fail(f"obstacle.{key}", points, "the two points must differ (a segment of positive length)")
-        # The obstacle lies to the right of the line walked from the first point to the second.
-        normal = (d[1] / length, -d[0] / length)
-        ends = (tuple(float(v) for v in p0), tuple(float(v) for v in p1)) if key == "segment" else None
-        return Obstacle(point=tuple(float(v) for v in p0), normal=normal, ends=ends)
-    for key in ("point", "normal"):
-        if key not in data:
-            raise CaseError(f"{r.filename}: obstacle.{key}: missing (give point and normal, points, or segment)")
-    point = r.point(data["point"], "obstacle.point")
-    normal = np.array(r.point(data["normal"], "obstacle.normal"))
-    length = np.hypot(*normal)
-    if abs(length - 1.0) > 1e-6:
-        raise r.fail("obstacle.normal", normal.tolist(), "expected a unit vector pointing into the obstacle")
-    return Obstacle(point=point, normal=tuple(normal / length))
 
 
 def read_units(r: Reader, data: Any) -> Units:

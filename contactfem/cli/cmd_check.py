@@ -142,6 +142,19 @@ def _obstacle_text(obstacle: dict) -> str:
         return f"({p[0]:g}, {p[1]:g})"
 
     normal = f"normal {point(obstacle['normal'])}"
+    moving = ""
+    if "motion" in obstacle:
+        motion = obstacle["motion"]
+        moving = (f", moved along {point(motion['direction'])} by {motion['advance']:g}" if motion["control"] ==
+                  "displacement" else f", pushed along {point(motion['direction'])} by a force {motion['force']:g}")
+    if obstacle["kind"] == "circle":
+        return (f"the circle of center {point(obstacle['center'])} and radius {obstacle['radius']:g}{moving}; "
+                f"{obstacle['facing_nodes']} contact nodes, each along the normal of its closest point")
+    if obstacle["kind"] == "polyline":
+        vertices = obstacle["vertices"]
+        return (f"the polyline of {len(vertices)} points from {point(vertices[0])} to {point(vertices[-1])}{moving}; "
+                f"{obstacle['facing_nodes']} of {obstacle['facing_nodes'] + obstacle['beyond_nodes']} contact nodes "
+                "face it, each along the normal of its closest point")
     if obstacle["ends"] is None:
         return f"the line through {point(obstacle['point'])}, {normal}"
     low, high = obstacle["extent"]

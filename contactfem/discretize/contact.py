@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -40,6 +40,7 @@ class ContactBoundary:
     masses: ContactBoundaryMasses
     beyond: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     normals: np.ndarray | None = None
+    positions: np.ndarray | None = None
 
     @property
     def normal(self) -> np.ndarray:
@@ -53,6 +54,35 @@ class ContactBoundary:
     def tangent(self) -> np.ndarray:
         normal = self.normal
         return np.array([-normal[1], normal[0]])
+
+    @property
+    def flat(self) -> bool:
+        return bool(getattr(self.obstacle, "flat", False))
+
+    @property
+    def reference_normal(self) -> np.ndarray:
+        """A flat obstacle's normal; a curved one's normalised mean normal over the contact
+        nodes (what a picture or an archive that takes one direction is given)."""
+        if self.flat:
+            return self.obstacle.normal
+        total = np.asarray(self.normals, dtype=float).sum(axis=0)
+        norm = float(np.hypot(*total))
+        return total / norm if norm > 0 else np.array([0.0, -1.0])
+
+    def output_fields(self) -> dict:
+        """What the result records of the obstacle (:class:`contactfem.result.ContactFields`)."""
+        fields = {"obstacle_point": np.asarray(self.obstacle.point, dtype=float),
+                  "obstacle_normal": np.asarray(self.reference_normal, dtype=float),
+                  "obstacle_ends": self.obstacle.ends}
+        if not self.flat:
+            closest = self.obstacle.closest(self.obstacle_points_of())
+            fields.update(normals=self.normals, obstacle_points=closest.points,
+                          obstacle_outline=self.obstacle.outline())
+        return fields
+
+    def obstacle_points_of(self) -> np.ndarray:
+        """The contact nodes' reference positions (m, 2) (kept for the closest points)."""
+        return self.positions
 
     def node_edges(self) -> np.ndarray:
         """The ΓC edges as pairs of positions in ``nodes`` (k', 2): those whose two ends
@@ -109,35 +139,52 @@ def contact_patches(abscissa: np.ndarray, active: np.ndarray,
 def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundary:
     """ΓC of ``mesh``: refuses a contact part facing away from the obstacle, naming it."""
     obstacle = obstacle_of(case.obstacle)
-    normal = obstacle.normal
     edges = mesh.edges_of(list(case.contact_parts))
     for name in case.contact_parts:
         part_edges = mesh.edges_of(name)
         if len(part_edges) == 0:
             raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
-        problem = facing_problem(case, name, mesh, part_edges, normal)
+        if not obstacle.flat:
+            continue  # a curved obstacle is judged node by node (:func:`_curved_reach`)
+        problem = facing_problem(case, name, mesh, part_edges, obstacle.normal)
         if problem is not None:
             raise CaseError(f"{case.source.name}: boundary.{name} = contact: {problem}; a contact part must "
                             f"face the obstacle (outward normal · obstacle normal ≥ −{FACING_TOLERANCE:g} all "
                             f"along each edge and > {FACING_TOLERANCE:g} somewhere on it)")
+    gamma_nodes = np.unique(edges)
+    if getattr(obstacle, "kind", "") == "circle":
+        obstacle = replace(obstacle, reference=_circle_reference(case, mesh, gamma_nodes, obstacle.center))
+    # Each node's obstacle normal (a flat obstacle's one normal; a curved one's at the closest point).
+    normal_at = np.zeros((mesh.n_points, 2))
+    closest = None
+    if obstacle.flat:
+        normal_at[:] = obstacle.normal
+    else:
+        closest = obstacle.closest(mesh.points[gamma_nodes])
+        normal_at[gamma_nodes] = closest.normals
     # A node whose normal motion a support fixes carries no multiplier: both components
     # prescribed, or one prescribed while the obstacle's normal is not along the other.
     dirichlet_dofs, symmetry_nodes, symmetry_normals = held.dirichlet_dofs, held.symmetry_nodes, held.symmetry_normals
     prescribed = np.zeros((mesh.n_points, 2), dtype=bool)
     prescribed[dirichlet_dofs // 2, dirichlet_dofs % 2] = True
-    roller_keeps_normal = np.where(prescribed[:, 0], abs(normal[1]), abs(normal[0])) > 1 - 1e-12
+    roller_keeps_normal = np.where(prescribed[:, 0], abs(normal_at[:, 1]), abs(normal_at[:, 0])) > 1 - 1e-12
     supported = prescribed.all(axis=1) | (prescribed.any(axis=1) & ~roller_keeps_normal)
     # On a symmetry line the node keeps contact only if the obstacle's normal runs along the line.
-    along_line = np.abs(symmetry_normals @ np.array([-normal[1], normal[0]])) > 1 - 1e-12
+    along_line = np.abs(np.einsum("ij,ij->i", symmetry_normals, normal_at[symmetry_nodes][:, ::-1] * (-1.0, 1.0))) > 1 - 1e-12
     supported[symmetry_nodes[~along_line]] = True
     # A platen holds its nodes' motion along its normal: like a roller, a node keeps
     # contact only if the obstacle's normal runs along the platen, and not on a symmetry line too.
     for platen in held.platens:
-        along_platen = abs(platen.tangent @ normal) > 1 - 1e-12
-        supported[platen.nodes[platen.on_symmetry | (not along_platen)]] = True
-    gamma_nodes = np.unique(edges)
-    candidates = gamma_nodes[~supported[gamma_nodes]]
-    facing = obstacle.faces(mesh.points[candidates])
+        along_platen = np.abs(normal_at[platen.nodes] @ platen.tangent) > 1 - 1e-12
+        supported[platen.nodes[platen.on_symmetry | ~along_platen]] = True
+    keep = ~supported[gamma_nodes]
+    candidates = gamma_nodes[keep]
+    if closest is None:
+        facing = obstacle.faces(mesh.points[candidates])
+    else:
+        facing = closest.faces[keep]
+        _refuse_ambiguous(case, mesh.points[candidates], closest.ambiguous[keep] & facing)
+        _curved_reach(case, mesh, edges, candidates[facing], normal_at)
     nodes, beyond = candidates[facing], candidates[~facing]
     if obstacle.extent is not None and len(nodes) == 0:
         span = obstacle.abscissa(mesh.points[gamma_nodes])
@@ -147,7 +194,10 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
             f"({', '.join(f'boundary.{n}' for n in case.contact_parts)}) lies in front of the segment: "
             f"it spans [{low:g}, {high:g}] along the obstacle, the contact parts [{span.min():g}, {span.max():g}]"
         )
-    abscissa = obstacle.abscissa(mesh.points[nodes])
+    if closest is None:
+        abscissa = obstacle.abscissa(mesh.points[nodes])
+    else:
+        abscissa = closest.abscissa[keep][facing]
     order = np.argsort(abscissa, kind="stable")
     nodes, abscissa = nodes[order], abscissa[order]
 
@@ -155,11 +205,67 @@ def contact_boundary(case: Case, mesh: Mesh, held: "Supports") -> ContactBoundar
     lumped = np.asarray(full_mass.sum(axis=1)).ravel()[nodes]
     consistent = full_mass[nodes][:, nodes].tocsr()
     points = mesh.points[nodes]
+    if closest is None:
+        gap, normals = obstacle.gap(points), obstacle.normals(points)
+    else:
+        position = np.full(mesh.n_points, -1)
+        position[gamma_nodes] = np.arange(len(gamma_nodes))
+        gap, normals = closest.gap[position[nodes]], closest.normals[position[nodes]]
     return ContactBoundary(
-        nodes=nodes, edges=edges, gap=obstacle.gap(points), abscissa=abscissa, obstacle=obstacle,
+        nodes=nodes, edges=edges, gap=gap, abscissa=abscissa, obstacle=obstacle,
         masses=ContactBoundaryMasses(lumped=lumped, consistent=consistent), beyond=beyond,
-        normals=obstacle.normals(points),
+        normals=normals, positions=points,
     )
+
+
+def _circle_reference(case: Case, mesh: Mesh, gamma_nodes: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """The direction from a circle's center to the nearest point of the contact parts' geometry
+    (edges as chords; a mesh file's nodes): where a circle's abscissae start, the same on
+    every mesh of the case, so that levels of mesh sequencing share them. A moving circle's
+    is its direction of motion: it first touches there."""
+    motion = case.obstacle.motion
+    if motion is not None:
+        return np.asarray(motion.direction, dtype=float)
+    starts, ends = [], []
+    for name in case.contact_parts:
+        for a, b, _, _ in _geometry_edges(case, name):
+            starts.append(a)
+            ends.append(b)
+    if starts:
+        a, b = np.concatenate(starts), np.concatenate(ends)
+        step = b - a
+        t = np.clip(np.einsum("ij,ij->i", center - a, step) / np.maximum(np.einsum("ij,ij->i", step, step), 1e-300),
+                    0.0, 1.0)
+        near = a + t[:, None] * step
+    else:
+        near = mesh.points[gamma_nodes]
+    direction = near[np.argmin(np.hypot(*(near - center).T))] - center
+    norm = float(np.hypot(*direction))
+    return direction / norm if norm > 0 else np.array([0.0, -1.0])
+
+
+def _refuse_ambiguous(case: Case, points: np.ndarray, ambiguous: np.ndarray) -> None:
+    """Refuse a contact node with no single closest point on the obstacle."""
+    if ambiguous.any():
+        x, y = points[np.flatnonzero(ambiguous)[0]]
+        raise CaseError(f"{case.source.name}: obstacle: the contact node at ({x:g}, {y:g}) is equidistant, to "
+                        f"round-off, from two separate parts of the obstacle; expected each contact node to have "
+                        f"one closest point (move the obstacle or the body so that no node lies on a concave "
+                        f"corner's bisector)")
+
+
+def _curved_reach(case: Case, mesh: Mesh, edges: np.ndarray, nodes: np.ndarray, normal_at: np.ndarray) -> None:
+    """Refuse a curved obstacle that no contact node can reach: none facing it with its
+    outward normal (the mean of its ΓC edges') towards the obstacle."""
+    _, outward = edge_geometry(mesh.points, edges)
+    mean = np.zeros((mesh.n_points, 2))
+    np.add.at(mean, edges[:, 0], outward)
+    np.add.at(mean, edges[:, 1], outward)
+    towards = np.einsum("ij,ij->i", mean[nodes], normal_at[nodes]) > FACING_TOLERANCE
+    if not towards.any():
+        parts = ", ".join(f"boundary.{n}" for n in case.contact_parts)
+        raise CaseError(f"{case.source.name}: obstacle.{case.obstacle.shape}: no contact node ({parts}) faces it "
+                        f"with its outward normal towards it; expected the obstacle in front of a contact part")
 
 
 #: Whether a contact part faces the obstacle is decided on the geometry, not on the mesh: its

@@ -225,7 +225,8 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
       (a · n_p = −1, a · n_s = 0), b = n_s, and the y slot is fixed to 0.
     """
     contact = problem.contact
-    n_o, t_o = contact.normal, contact.tangent
+    n_o = contact.normals  # (m, 2): a flat obstacle's one normal, or each node's own
+    t_o = np.stack([-n_o[:, 1], n_o[:, 0]], axis=1)
     n_points = problem.mesh.n_points
     c = contact.nodes
     sx, sy = supported[2 * c], supported[2 * c + 1]
@@ -242,23 +243,23 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
         tangent_of[platen.nodes] = platen.tangent
     on_symmetry = sym_index[c] >= 0
     m = len(c)
-    a = np.tile(n_o, (m, 1))
-    b = np.tile(t_o, (m, 1))
+    a = n_o.reshape(m, 2).copy()
+    b = t_o.reshape(m, 2).copy()
     slot = 2 * c
     roller_x = sx & ~sy  # u_x prescribed, normal along y
     a[roller_x] = (1.0, 0.0)
-    b[roller_x] = (0.0, n_o[1])
+    b[roller_x] = np.stack([np.zeros(m), n_o[:, 1]], axis=1)[roller_x]
     slot = np.where(roller_x, 2 * c + 1, slot)
     roller_y = sy & ~sx  # u_y prescribed, normal along x
-    a[roller_y] = (n_o[0], 0.0)
+    a[roller_y] = np.stack([n_o[:, 0], np.zeros(m)], axis=1)[roller_y]
     b[roller_y] = (0.0, 1.0)
     a[on_symmetry] = problem.symmetry_normals[sym_index[c[on_symmetry]]]
-    b[on_symmetry] = n_o
+    b[on_symmetry] = n_o[on_symmetry]
     slot = np.where(on_symmetry, 2 * c + 1, slot)
     # Contact nodes on a platen (the contact boundary keeps them only with n along it).
     platen_contact = master_of[c] >= 0
     a[platen_contact] = motion_of[c[platen_contact]]
-    b[platen_contact] = n_o
+    b[platen_contact] = n_o[platen_contact]
     slot = np.where(platen_contact, 2 * c + 1, slot)
     # Symmetry nodes that are not contact nodes: a = n_s, b = t_s (or the platen's frame).
     # (setdiff1d sorts its second argument even when the first is empty: 0.08 ms a call.)

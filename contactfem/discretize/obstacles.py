@@ -15,7 +15,9 @@ for the contact nodes in the reference configuration (small deformations):
 The flat obstacles are :class:`HalfPlane` (the infinite line bounding the half-plane
 {p : (p − point)·normal ≥ 0}, given by a point and a normal or by two points on the line)
 and :class:`Segment` (the finite part of such a line between two ends: a table, a punch's
-face). :func:`obstacle_of` builds the one a case describes.
+face). The curved ones (:mod:`contactfem.discretize.indenters`) are a disk and an open
+polyline; each node gets the gap and normal of its closest point on them.
+:func:`obstacle_of` builds the one a case describes.
 """
 
 from __future__ import annotations
@@ -115,8 +117,14 @@ class Segment(HalfPlane):
         return {**super().describe(), "ends": np.asarray(self.ends, dtype=float).tolist()}
 
 
-def obstacle_of(settings: "ObstacleSettings") -> HalfPlane:
+def obstacle_of(settings: "ObstacleSettings") -> Obstacle:
     """The obstacle a case's validated ``obstacle`` section describes."""
+    if not settings.flat:
+        from contactfem.discretize.indenters import Circle, Polyline
+
+        if settings.shape == "circle":
+            return Circle(center=np.asarray(settings.center, dtype=float), radius=float(settings.radius))
+        return Polyline(vertices=np.asarray(settings.vertices, dtype=float))
     point = np.asarray(settings.point, dtype=float)
     normal = np.asarray(settings.normal, dtype=float)
     if settings.ends is None:

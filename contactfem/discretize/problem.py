@@ -15,6 +15,8 @@ from contactfem.discretize.exact_checks import check_exact_contact, exact_fields
 from contactfem.discretize.frames import ReducedSystem
 from contactfem.discretize.loads import Loads, compile_loads
 from contactfem.discretize.meshing import MeshRequest
+from contactfem.discretize.motion import ObstacleDrive, obstacle_drive, refuse_receding
+from contactfem.errors import CaseError
 from contactfem.discretize.supports import Holds, PlatenConstraint, free_rigid_modes, supports
 from contactfem.mesh import Mesh
 from contactfem.methods import ContactMethod
@@ -56,6 +58,8 @@ class DiscreteProblem:
     mesh_request: MeshRequest | None = None
     # Which part holds each held node along which direction: the reactions are booked by it.
     holds: Holds | None = None
+    # A moving obstacle: its advance, carried by the prescribed values (contactfem.discretize.motion).
+    drive: ObstacleDrive | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -69,7 +73,17 @@ class DiscreteProblem:
             self, load=factor * self.load, dirichlet_values=factor * self.dirichlet_values,
             loads=self.loads.scaled(factor),
             platens=tuple(replace(p, value=factor * p.value) for p in self.platens),
+            drive=None if self.drive is None else replace(
+                self.drive, advance=factor * self.drive.advance,
+                force=None if self.drive.force is None else factor * self.drive.force),
         )
+
+    def advanced(self, advance: float) -> "DiscreteProblem":
+        """The problem with its moving obstacle advanced by ``advance`` (a pushed obstacle's trial)."""
+        shift = advance - self.drive.advance
+        dofs = self.dirichlet_dofs
+        return replace(self, dirichlet_values=self.dirichlet_values - shift * self.drive.direction[dofs % 2],
+                       drive=replace(self.drive, advance=advance, free=False))
 
     def contact_system(self, method: ContactMethod) -> ReducedSystem:
         """The kernel's view: supports eliminated, contact nodes in (normal, tangent) unknowns."""
@@ -91,6 +105,11 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
     contact = contact_boundary(case, mesh, held)
     load = loads.load_vector(mesh)
     free_modes = free_rigid_modes(case, mesh, held, contact, load)
+    drive, held = obstacle_drive(case, held)
+    refuse_receding(case, drive, contact.gap, contact.normals)
+    if drive is not None and free_modes.shape[1]:
+        raise CaseError(f"{case.source.name}: obstacle.motion: the supports leave the body a rigid motion that only "
+                        "contact holds; expected supports that hold the body still while the obstacle moves")
     exact = exact_fields(case)
     if exact is not None:
         check_exact_contact(case, mesh, contact.edges)
@@ -100,5 +119,5 @@ def build_problem(case: Case, mesh: Mesh, refinements: int = 0, assemble_stiffne
         exact=exact, refinements=refinements, symmetry_nodes=held.symmetry_nodes,
         symmetry_normals=held.symmetry_normals, free_modes=free_modes if free_modes.shape[1] else None,
         platens=held.platens, mesh_request=MeshRequest.of(case) if request is None else request,
-        holds=held.holds,
+        holds=held.holds, drive=drive,
     )

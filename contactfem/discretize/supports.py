@@ -359,7 +359,7 @@ def _refuse_rigid_motion(case: Case, mesh: Mesh, held: Supports, contact: "Conta
         return np.zeros((2 * mesh.n_points, 0))
     if contact is not None:
         c_nodes = contact.nodes
-        contact_rows = seen_through(c_nodes, np.tile(contact.normal, (len(c_nodes), 1)))
+        contact_rows = seen_through(c_nodes, contact.normals)
         held_weak, _, held_vectors = loose(support_gram + gram_of(contact_rows, c_nodes))
     else:
         c_nodes, contact_rows = np.zeros(0, dtype=np.int64), np.zeros((0, 3))

@@ -34,10 +34,20 @@ obstacle)::
     /contact/exact_pressure (m,) float64, only when the case has an exact solution: its
                            contact pressure −σ_nn at the contact nodes (NaN where the
                            exact stress is not finite)
+    /contact/normals       (m, 2) float64, a curved obstacle only (circle, polyline,
+                           profile): its unit normal at each node's closest point
+    /contact/obstacle_points (m, 2) float64, a curved obstacle only: each node's closest
+                           point on it (reference configuration); gap = (q − x)·n there,
+                           and the abscissa is the arc length of q along the obstacle
+    /contact/obstacle_vertices (v, 2) float64, a curved obstacle only: its surface as a
+                           polyline (a circle sampled along its arc), to draw it
     /contact               attrs: obstacle_point (2,), obstacle_normal (2,) float64: the
-                                  flat obstacle {p : (p − point)·normal ≥ 0}; and
+                                  flat obstacle {p : (p − point)·normal ≥ 0} (a curved
+                                  one's center or first vertex, and its mean normal); and
                                   obstacle_ends (2, 2) float64 for a finite obstacle (a
-                                  segment between those points), absent for an infinite one
+                                  segment between those points), absent for an infinite one;
+                                  obstacle_shift (2,) float64 for a moving obstacle: how far
+                                  it went from where the other attributes place it
     /newton/<key>          (n_iterations,) one dataset per key of Solution.newton
 
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
@@ -199,10 +209,16 @@ def write_hdf5(
             _dataset(g, "abscissa", contact.abscissa, np.float64)
             if exact_pressure is not None:
                 _dataset(g, "exact_pressure", exact_pressure, np.float64)
+            if contact.normals is not None:
+                _dataset(g, "normals", np.reshape(contact.normals, (-1, 2)), np.float64)
+                _dataset(g, "obstacle_points", np.reshape(contact.obstacle_points, (-1, 2)), np.float64)
+                _dataset(g, "obstacle_vertices", np.reshape(contact.obstacle_outline, (-1, 2)), np.float64)
             g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
             g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
             if contact.obstacle_ends is not None:
                 g.attrs["obstacle_ends"] = np.asarray(contact.obstacle_ends, dtype=np.float64)
+            if contact.obstacle_shift is not None:
+                g.attrs["obstacle_shift"] = np.asarray(contact.obstacle_shift, dtype=np.float64)
 
             g = f.create_group("newton")
             for key, values in solution.newton.items():
@@ -231,6 +247,8 @@ def _contact_on_the_obstacle(data: dict) -> tuple[str, str] | None:
     attrs = contact["attrs"]
     if "abscissa" not in contact or "obstacle_normal" not in attrs:
         return None
+    if "normals" in contact or "obstacle_points" in contact:
+        return _contact_on_curved(data)
     x = data["mesh"]["points"][contact["nodes"]]
     point, normal = np.asarray(attrs["obstacle_point"]), np.asarray(attrs["obstacle_normal"])
     tangent = np.array([-normal[1], normal[0]])
@@ -245,6 +263,25 @@ def _contact_on_the_obstacle(data: dict) -> tuple[str, str] | None:
     return None
 
 
+def _contact_on_curved(data: dict) -> tuple[str, str] | None:
+    """A curved obstacle's stored normals are unit vectors and the gaps those of the nodes'
+    closest points: g0 = (q − x)·n (the gap stored is the final one, shifted along the
+    motion when the obstacle moves: only its bound |g0| ≤ |q − x| holds then)."""
+    contact = data["contact"]
+    for name in ("normals", "obstacle_points", "obstacle_vertices"):
+        if name not in contact:
+            return f"/contact/{name}", "missing; expected normals, obstacle_points and obstacle_vertices together"
+    normals, q = contact["normals"], contact["obstacle_points"]
+    length = np.hypot(normals[:, 0], normals[:, 1])
+    off = np.abs(length - 1.0) > 1e-9
+    if off.any():
+        first = int(np.flatnonzero(off)[0])
+        return "/contact/normals", f"row {first} has length {length[first]:.6g}; expected unit normals"
+    if len(contact["obstacle_vertices"]) < 2:
+        return "/contact/obstacle_vertices", "expected at least 2 vertices"
+    return None
+
+
 #: The layout :func:`read_hdf5` checks a file against (the module docstring in code). Named
 #: sizes: n points, n_tri triangles, n_be boundary edges, n_curves curves, parts part names,
 #: m contact nodes, k contact edges.
@@ -254,7 +291,7 @@ SOLUTION_LAYOUT = Layout(
     sizes={"n": "the rows of /mesh/points", "n_tri": "the rows of /mesh/triangles",
            "n_be": "the rows of /mesh/boundary_edges", "n_curves": "the rows of /mesh/curves",
            "parts": "the names in /mesh/@part_names", "m": "the entries of /contact/nodes",
-           "k": "the rows of /contact/edges"},
+           "k": "the rows of /contact/edges", "n_ov": "the rows of /contact/obstacle_vertices"},
     arrays=(
         Array("/mesh/points", "f", ("n", 2), "float64", finite=True, at_least=3),
         Array("/mesh/triangles", "iu", ("n_tri", 3), "int64", index_of="n", at_least=1),
@@ -276,6 +313,9 @@ SOLUTION_LAYOUT = Layout(
         Array("/contact/abscissa", "f", ("m",), "float64", finite=True, since=2),
         # NaN where the exact stress is not finite.
         Array("/contact/exact_pressure", "f", ("m",), "float64", since=3, optional=True),
+        Array("/contact/normals", "f", ("m", 2), "float64", finite=True, since=3, optional=True),
+        Array("/contact/obstacle_points", "f", ("m", 2), "float64", finite=True, since=3, optional=True),
+        Array("/contact/obstacle_vertices", "f", ("n_ov", 2), "float64", finite=True, since=3, optional=True),
     ),
     texts=(TextData("/case", MAX_CASE_TEXT_BYTES),),
     attributes=(
@@ -285,6 +325,7 @@ SOLUTION_LAYOUT = Layout(
         Attribute("/contact", "obstacle_point", "vector", shape=(2,), since=2),
         Attribute("/contact", "obstacle_normal", "vector", shape=(2,), unit=True, since=2),
         Attribute("/contact", "obstacle_ends", "vector", shape=(2, 2), since=2, optional=True),
+        Attribute("/contact", "obstacle_shift", "vector", shape=(2,), since=3, optional=True),
     ),
     series=(Series("/newton", max_length=1_000_000),),
     rules=(_triangles_turn_left, _contact_on_the_obstacle),

@@ -185,11 +185,15 @@ def contact_table(solution: Solution) -> str:
     """contact.csv: one row per contact node along ΓC, sorted by its position along the obstacle."""
     contact = solution.contact
     points = solution.mesh.points[contact.nodes]
-    return csv_table({
+    columns = {
         "abscissa": contact.abscissa, "x": points[:, 0], "y": points[:, 1],
         "pressure": contact.multiplier, "nodal_force": contact.nodal_force, "gap": contact.gap,
         "normal_displacement": contact.normal_displacement, "active": contact.active.astype(int),
-    })
+    }
+    if contact.normals is not None:  # a curved obstacle: each node's closest point and normal there
+        q, n = np.reshape(contact.obstacle_points, (-1, 2)), np.reshape(contact.normals, (-1, 2))
+        columns.update({"obstacle_x": q[:, 0], "obstacle_y": q[:, 1], "normal_x": n[:, 0], "normal_y": n[:, 1]})
+    return csv_table(columns)
 
 
 def _write_csv(data: ResultData, directory: Path) -> list[Path]:

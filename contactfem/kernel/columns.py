@@ -180,7 +180,9 @@ class SchurColumns:
         released nodes' columns of K on the free unknowns, the added nodes' unit vectors)
         and K00 = Pᵀ L D Lᵀ P, Cᵀ K00⁻¹ C = Wᵀ D⁻¹ W for W = L⁻¹ P C, whose columns are
         sparse; the Schur system is the same, and u = z0 − K00⁻¹ C [u_r; μ] costs one full
-        solve instead of a product with full-length columns."""
+        solve instead of a product with full-length columns, or only its backward half where
+        the backend solves with Lᵀ alone: K00⁻¹ C y = Pᵀ L⁻ᵀ (D⁻¹ W y), the forward half being
+        the stored columns already."""
         r = len(released)
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
@@ -193,38 +195,43 @@ class SchurColumns:
         rhs = np.concatenate([b_r - (k_r0 @ base + gram[:r, :r] @ released_values),
                               added_values - (base[dofs_d] + gram[r:, :r] @ released_values)])
         u_r, mu = self._solve_schur(top, bottom, rhs, r, len(added))
-        combined = k_r0.T @ (released_values - u_r)
-        combined[dofs_d] -= mu
-        u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
+        if self.backward:
+            weights = np.concatenate([released_values - u_r, -mu])
+            u = base + self.factor.backward(self.scaled_store[:, slots] @ weights)
+        else:
+            combined = k_r0.T @ (released_values - u_r)
+            combined[dofs_d] -= mu
+            u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
         u[dofs_r] = u_r
         return u
 
 
 def cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
-    """leftᵀ right for sparse forward columns, dense (k_left, k_right).
+    """leftᵀ right for sparse forward columns (canonical CSC, as CHOLMOD and ``sp.hstack``
+    give them), dense (k_left, k_right).
 
-    The columns share the rows near the elimination tree's root and little else: the rows
-    that an eighth of the right-hand columns or more touch go through BLAS as dense blocks,
-    the others through a sparse product. A row in the sparse product costs about its two
-    counts' product, in the dense block the two column counts.
+    Only the rows that ``left`` touches count: a few thousand for contact nodes' columns (the
+    elimination tree's paths from them, through the separators they share). Both are gathered
+    densely over those rows (``right``'s entries found among them through a map of every
+    row to its place) and multiplied through BLAS: one pass over ``right``'s entries, no
+    sparse row indexing. Dense blocks past :data:`contactfem.kernel.costs.COLUMN_BYTES` give way to
+    a sparse product.
     """
-    k = right.shape[1]
-    if left.shape[1] * (left.shape[0] + right.nnz) <= costs.DENSE_CROSS_ENTRIES:
-        # A few new columns: rightᵀ times them made dense, one pass over right's entries
-        # per column.
-        return np.asarray(right.T @ left.toarray()).T
-    counts = np.bincount(right.indices, minlength=right.shape[0])
-    shared = counts >= max(1, k // 8)
-    if 8 * int(shared.sum()) * (k + left.shape[1]) > costs.COLUMN_BYTES:
-        shared[:] = False
-    heavy = np.flatnonzero(shared)
-    product = left[heavy].toarray().T @ right[heavy].toarray()
-    if len(heavy) < int(np.count_nonzero(counts)):
-        # left without the shared rows' entries, selected from its arrays (cheaper than a
-        # product with a diagonal mask).
-        light_entries = ~shared[left.indices]
-        kept_before = np.concatenate([[0], np.cumsum(light_entries)])
-        light = sp.csc_matrix((left.data[light_entries], left.indices[light_entries], kept_before[left.indptr]),
-                              shape=left.shape)
-        product += (light.T @ right).toarray()
-    return product
+    rows = np.unique(left.indices)
+    k_left, k_right = left.shape[1], right.shape[1]
+    if 8 * len(rows) * (k_left + k_right) > costs.COLUMN_BYTES:
+        return (left.T @ right).toarray()
+    place = np.full(left.shape[0], -1, dtype=np.int64)
+    place[rows] = np.arange(len(rows))
+    dense_left = np.zeros((len(rows), k_left))
+    dense_left[place[left.indices], _entry_columns(left)] = left.data
+    at = place[right.indices]
+    hit = at >= 0
+    dense_right = np.zeros((len(rows), k_right))
+    dense_right[at[hit], _entry_columns(right)[hit]] = right.data[hit]
+    return dense_left.T @ dense_right
+
+
+def _entry_columns(matrix: sp.csc_matrix) -> np.ndarray:
+    """The column of each stored entry of a CSC matrix, in storage order."""
+    return np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))

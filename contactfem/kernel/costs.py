@@ -35,9 +35,6 @@ SIMPLICIAL_FORWARD_COLUMNS_FROM = 5_000
 #: long.
 FORWARD_PATH_SHARE = 0.1
 PATH_SAMPLES = 8
-#: Up to this many dense entries and products the Schur blocks of new forward columns are
-#: taken with those columns made dense (see :func:`contactfem.kernel.columns.cross`).
-DENSE_CROSS_ENTRIES = 2**19
 #: What a factorisation step costs beyond the numeric factorisation, in full solves: the
 #: masking of the changed rows, the singularity probe and the first block of solves.
 FACTORIZATION_EXTRA_SOLVES = 3.0
@@ -51,6 +48,11 @@ def factor_figures(factorizer: Factorizer) -> tuple[float, float]:
     factorisation of ``factorizer``, from its counted cost (:class:`contactfem.linalg.FactorCost`)."""
     cost = factorizer.costs[-1]
     return MODEL.solve_seconds(cost, 1), MODEL.factorize_seconds(cost)
+
+
+def backward_seconds(factorizer: Factorizer) -> float:
+    """Modelled seconds of the backward half of a full solve with the latest factorisation."""
+    return MODEL.backward_seconds(factorizer.costs[-1])
 
 
 def dense_seconds(changed: int) -> float:

@@ -73,7 +73,7 @@ class PathSolver:
         if self.steps == 0:
             return None
         if len(self.history) >= 2:
-            return extrapolated_active(self.history[-2:], factor, self.c)
+            return extrapolated_active(self.history[-2:], factor, self.c, apart=~self.active)
         return self.active
 
     def step(self, factor: float) -> KernelResult:
@@ -102,6 +102,15 @@ class PathSolver:
             self.history = [*kept[-1:], state]
         return result
 
+    def walk(self, factors: Sequence[float]) -> Iterator[KernelResult]:
+        """:meth:`step` at each of ``factors`` in turn, yielding each result as it is solved;
+        stops after the first step that does not converge."""
+        for factor in factors:
+            result = self.step(factor)
+            yield result
+            if result.status is not Status.CONVERGED:
+                return
+
 
 def solve_path(
     system: ContactSystem,
@@ -117,23 +126,37 @@ def solve_path(
     caller keeps what it needs: a long path need not hold every step). ``options`` are
     those of :func:`solve_contact`. Stops after the first step that does not converge.
     """
-    path = PathSolver(system, backend=backend, initial_active=initial_active, starts=starts, **options)
-    for factor in factors:
-        result = path.step(factor)
-        yield result
-        if result.status is not Status.CONVERGED:
-            return
+    return PathSolver(system, backend=backend, initial_active=initial_active, starts=starts, **options).walk(factors)
 
 
-def extrapolated_active(states: list[tuple[float, np.ndarray, np.ndarray]], factor: float, c: float) -> np.ndarray:
+#: The power of the distance from a smooth contact's edge with which the gap opens beyond it
+#: (δ^{3/2}: Hertz, and any elastic contact whose pressure falls like √δ inside its edge).
+EDGE_GAP_POWER = 1.5
+
+
+def extrapolated_active(states: list[tuple[float, np.ndarray, np.ndarray]], factor: float, c: float,
+                        apart: np.ndarray | None = None) -> np.ndarray:
     """The active set predicted at load ``factor`` from the last two solved ``states``
-    (factor, contact force Λ, slack d − G): both extrapolated linearly in the factor, a node
-    is predicted active where the indicator Λ + c (d − G) is positive. Along a path the
-    contact zone moves smoothly, so this is closer than the last set, which Newton's method
-    would otherwise first overshoot (every node penetrating at once) and then release a few
-    at a time."""
+    (factor, contact force Λ, slack d − G); ``apart``: the nodes not in the last state's
+    active set (by default those with a negative slack there).
+
+    A node in contact at the last step stays predicted active where the indicator
+    Λ + c (d − G), both extrapolated linearly in the factor, is positive. A node apart from
+    the obstacle joins where its gap closes, and beyond the edge of a growing zone the gap
+    opens like δ^{3/2} (:data:`EDGE_GAP_POWER`, δ the distance from the edge, which moves
+    steadily with the load): it is (G − d)^{2/3} that closes linearly, not the gap, whose
+    linear extrapolation reaches zero too early and predicted the nodes up to 0.7 of a
+    step's advance beyond the edge active (a Hertz platen at 247 000 unknowns, equal steps
+    of the zone's width: 84 nodes predicted wrong over 18 steps against 4). Both are closer
+    than the last set, which Newton's method would otherwise first overshoot (every node
+    penetrating at once) and then release a few at a time."""
     (f0, force0, slack0), (f1, force1, slack1) = states
     ratio = (factor - f1) / (f1 - f0) if f1 != f0 else 0.0
     force = force1 + ratio * (force1 - force0)
     slack = slack1 + ratio * (slack1 - slack0)
-    return force + c * slack > 0
+    active = force + c * slack > 0
+    opening0 = np.maximum(-slack0, 0.0) ** (1.0 / EDGE_GAP_POWER)
+    opening1 = np.maximum(-slack1, 0.0) ** (1.0 / EDGE_GAP_POWER)
+    closed = opening1 + ratio * (opening1 - opening0) <= 0.0
+    apart = slack1 < 0.0 if apart is None else np.asarray(apart, dtype=bool) & (slack1 < 0.0)
+    return np.where(apart, active & closed, active)

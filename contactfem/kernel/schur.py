@@ -217,11 +217,12 @@ class ActiveSetSolver(SchurColumns):
             columns = missing * (self.column_seconds or 0.0)
         update = columns + costs.dense_seconds(k)
         if self.forward:
-            # u itself: one full solve; the Schur blocks Wᵀ W of the missing columns against
+            # u itself: one full solve (its backward half alone where the backend has it);
+            # the Schur blocks Wᵀ W of the missing columns against
             # every stored one, at most a column's length each: its elimination-tree path,
             # counted on a sample before any column is stored (on a long strip the paths are
             # many times √n).
-            update += self.solve_seconds
+            update += self.combine_seconds
             n = len(self.free)
             if self.column_count:
                 path = self.forward_store.nnz / self.column_count
@@ -375,6 +376,10 @@ class ActiveSetSolver(SchurColumns):
         self.checks_paths = self.forward and n < costs.FORWARD_COLUMNS_FROM
         if self.checks_paths and self.path_share is not None:
             self.forward = self.path_share <= costs.FORWARD_PATH_SHARE
+        #: Whether u comes from the stored forward columns by a backward solve alone (see
+        #: SchurColumns._solve_changed_forward), and the modelled seconds of that solve.
+        self.backward = callable(getattr(self.factor, "backward", None))
+        self.combine_seconds = (costs.backward_seconds(self.factorizer) if self.backward else self.solve_seconds)
         if self.column_seconds is None:
             self.column_seconds = self.solve_seconds * (costs.FORWARD_COLUMN_SHARE if self.forward else 1.0)
         if self.scalable:

@@ -34,7 +34,7 @@ class _DenseStruct(ctypes.Structure):
 _SPARSE_P, _DENSE_P = ctypes.POINTER(_SparseStruct), ctypes.POINTER(_DenseStruct)
 # CHOLMOD's constants: CHOLMOD_INT, CHOLMOD_REAL, CHOLMOD_DOUBLE; solve systems A, L and P.
 _ITYPE_INT, _XTYPE_REAL, _DTYPE_DOUBLE = 0, 1, 0
-_SYS_A, _SYS_L, _SYS_P = 0, 4, 7
+_SYS_A, _SYS_L, _SYS_LT, _SYS_P, _SYS_PT = 0, 4, 5, 7, 8
 #: cholmod_common is allocated here (CHOLMOD 3 needs 2 664 bytes) and filled by cholmod_start.
 _COMMON_BYTES = 16384
 #: Fields of cholmod_common read or written here: (offset, C type, the value cholmod_start

@@ -163,6 +163,16 @@ class CvxoptCholmodFactor:
         self._cholmod.solve(self._factor, block)
         return np.array(block).reshape(shape)
 
+    def backward(self, rhs: np.ndarray) -> np.ndarray:
+        """x = Pᵀ L⁻ᵀ v for ``rhs`` v in the factor's order, (n,) or (n, k): with the scaled
+        columns D⁻¹ W of :meth:`forward_sparse`, A⁻¹ B y = backward(D⁻¹ W y), half a full solve."""
+        rhs = np.asarray(rhs, dtype=float)
+        shape = rhs.shape
+        block = self._dense(np.asfortranarray(rhs.reshape(shape[0], -1)))
+        self._cholmod.solve(self._factor, block, sys=5)
+        self._cholmod.solve(self._factor, block, sys=8)
+        return np.array(block).reshape(shape)
+
     def forward_sparse(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
         """W = L⁻¹ P B and D⁻¹ W for a sparse B (n, k), both sparse, so that
         Bᵀ A⁻¹ B = Wᵀ D⁻¹ W (D = I for CHOLMOD's supernodal LLᵀ, the diagonal of a

@@ -39,7 +39,9 @@ from contactfem.linalg.cholmod_ctypes import (
     _SPARSE_P,
     _SYS_A,
     _SYS_L,
+    _SYS_LT,
     _SYS_P,
+    _SYS_PT,
     _XTYPE_REAL,
     CholmodLibrary,
     _c_array,
@@ -59,7 +61,10 @@ class DirectAnalysis:
     copy of the symbolic factor after a solve with a sparse right-hand side, which converts
     its factor to a simplicial one in place (whose refactorisation would be a slow
     simplicial LDLᵀ), and refactorises the previous one in place otherwise; the previous
-    one is freed first, so two never coexist. Freed with it."""
+    one is freed first. Before the first such solve converts a supernodal factor, a copy
+    of it is kept for the dense solves (:meth:`keep_supernodal`: a supernodal solve runs
+    through BLAS, a simplicial one entry by entry), and serves as the next factorisation's
+    factor. Freed with it."""
 
     def __init__(self, library: CholmodLibrary, common: ctypes.Array, symbolic: int,
                  indptr: np.ndarray, indices: np.ndarray) -> None:
@@ -68,7 +73,10 @@ class DirectAnalysis:
         #: The numeric factor (0 when none) and how many have been made: a factorisation
         #: whose generation is not the latest was freed and may not be used.
         self.numeric, self.generation = ctypes.c_void_p(0), 0
-        weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric)
+        #: The supernodal copy of the numeric factor that the dense solves use once a
+        #: pattern solve converted the factor (0 when none).
+        self.solving = ctypes.c_void_p(0)
+        weakref.finalize(self, _free_analysis, library, common, symbolic, self.numeric, self.solving)
         size = len(indptr) - 1
         counted = factor_counts(symbolic, size)
         if counted is None:  # fields that do not read back as this factor's: the matrix's own counts
@@ -120,6 +128,10 @@ class DirectAnalysis:
             return self.numeric.value
         if self.numeric.value:
             functions.cholmod_free_factor(ctypes.byref(self.numeric), self.common)
+        if self.solving.value:  # the supernodal copy, already touched: numbered in place
+            self.numeric.value, self.solving.value = self.solving.value, None
+            self.simplicial, self.converted = False, False
+            return self.numeric.value
         copy = functions.cholmod_copy_factor(self.symbolic, self.common)
         if not copy:
             raise MemoryError("CHOLMOD could not copy its symbolic factor")
@@ -127,10 +139,31 @@ class DirectAnalysis:
         return copy
 
 
-def _free_analysis(library: CholmodLibrary, common: ctypes.Array, symbolic: int, numeric: ctypes.c_void_p) -> None:
+    def keep_supernodal(self) -> None:
+        """Keep a copy of the supernodal numeric factor that a pattern solve is about to
+        convert, for the dense solves, where it fits in :data:`SUPERNODAL_COPY_BYTES`: at
+        247 000 unknowns a backward solve took 49 ms with it against 56-63 ms with the
+        converted factor."""
+        if self.simplicial or self.solving.value or not self.numeric.value \
+                or 8 * self.cost.entries > SUPERNODAL_COPY_BYTES:
+            return
+        copy = self.library.library.cholmod_copy_factor(self.numeric.value, self.common)
+        self.solving.value = copy or None
+
+
+#: The largest supernodal factor (its stored entries' bytes) copied for the dense solves
+#: before a pattern solve converts it (see DirectAnalysis.keep_supernodal): 180 MB at
+#: 247 000 unknowns; a larger factor's solves go on with the converted one rather than
+#: hold a second copy.
+SUPERNODAL_COPY_BYTES = 2**28
+
+
+def _free_analysis(library: CholmodLibrary, common: ctypes.Array, symbolic: int, numeric: ctypes.c_void_p,
+                   solving: ctypes.c_void_p) -> None:
     functions = library.library
-    if numeric.value:
-        functions.cholmod_free_factor(ctypes.byref(numeric), common)
+    for factor in (numeric, solving):
+        if factor.value:
+            functions.cholmod_free_factor(ctypes.byref(factor), common)
     functions.cholmod_free_factor(ctypes.byref(ctypes.c_void_p(symbolic)), common)
     functions.cholmod_finish(common)
 
@@ -212,7 +245,10 @@ class DirectCholmodFactor:
         view = _DenseStruct(self.size, width, self.size * width, self.size, block.ctypes.data, None,
                             _XTYPE_REAL, _DTYPE_DOUBLE)
         library, common = self.analysis.library, self.analysis.common
-        result = library.library.cholmod_solve(system, self.factor, ctypes.byref(view), common)
+        factor = self.factor  # only the latest factorisation solves (raises otherwise)
+        # The supernodal copy while a pattern solve has converted the factor.
+        factor = self.analysis.solving.value or factor
+        result = library.library.cholmod_solve(system, factor, ctypes.byref(view), common)
         if not result:
             raise MemoryError("CHOLMOD could not allocate a solve's result")
         values = _c_array(result.contents.x, ctypes.c_double, width * self.size).reshape(width, self.size)
@@ -223,6 +259,13 @@ class DirectCholmodFactor:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         rhs = np.asarray(rhs, dtype=float)
         return self._dense_solve(_SYS_A, rhs).reshape(rhs.shape)
+
+    def backward(self, rhs: np.ndarray) -> np.ndarray:
+        """x = Pᵀ L⁻ᵀ v for ``rhs`` v in the factor's order, (n,) or (n, k): with W = L⁻¹ P B
+        from :meth:`forward_sparse`, A⁻¹ B y = backward(W y), half a full solve (one sweep of
+        the factor instead of two)."""
+        rhs = np.asarray(rhs, dtype=float)
+        return self._dense_solve(_SYS_PT, self._dense_solve(_SYS_LT, rhs)).reshape(rhs.shape)
 
     def solve_sparse(self, rhs: sp.csc_matrix) -> np.ndarray:
         n, k = rhs.shape
@@ -326,6 +369,8 @@ class DirectCholmodFactor:
         permuted.sort_indices()
         starts, all_rows, all_values = permuted.indptr, permuted.indices, permuted.data
         converting = not self.analysis.simplicial
+        if converting:
+            self.analysis.keep_supernodal()
         library, common = self.analysis.library.library, self.analysis.common
         dense = np.zeros(n)
         right = _DenseStruct(n, 1, n, n, dense.ctypes.data, None, _XTYPE_REAL, _DTYPE_DOUBLE)

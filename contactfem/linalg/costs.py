@@ -226,6 +226,11 @@ class CostModel:
             return 0.0
         return cost.entries / rates.solve_entries + (k - 1) * cost.entries / rates.block_solve_entries
 
+    def backward_seconds(self, cost: FactorCost) -> float:
+        """The backward half of a full solve with one right-hand side (x = Pᵀ L⁻ᵀ v): one
+        sweep of the factor's entries instead of two."""
+        return 0.5 * self.solve_seconds(cost, 1)
+
     def blocked_forward_seconds(self, cost: FactorCost, k: int) -> float:
         """``k`` forward columns W = L⁻¹ P B through the blocked sparse solve."""
         return k * cost.entries / self._rates(cost).blocked_forward_entries

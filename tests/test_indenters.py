@@ -1,0 +1,194 @@
+"""Rigid indenters: curved obstacles (circle, polyline, profile) and an obstacle driven by a
+prescribed advance or pushed by a force. What theory fixes is checked: a straight polyline
+or profile is the segment, a moved line is the line put there, force and displacement
+control are one problem, the reaction of a pushed obstacle is its force."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from conftest import case_from, make_runner
+
+from contactfem.cli import main
+from contactfem.solve import solve_case
+
+
+def block(obstacle: dict, divisions=(24, 8), **extra) -> dict:
+    """A 2 x 0.5 block, bottom clamped, top the contact part, pressed from above."""
+    return {
+        "title": "block under an indenter",
+        "geometry": {"rectangle": {"lower": [-1, -0.5], "upper": [1, 0]}},
+        "mesh": {"divisions": list(divisions)},
+        "material": {"E": 1.0e6, "nu": 0.3},
+        "boundary": {"bottom": "clamped", "left": "free", "right": "free", "top": "contact"},
+        "obstacle": obstacle,
+        **extra,
+    }
+
+
+def relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+def test_a_straight_polyline_and_a_straight_profile_are_the_segment():
+    """The polyline through the segment's two ends (and through a midpoint on it), and a
+    profile of constant height, pose the segment's discrete problem: same nodes, gaps and
+    normals, so the same solution to round-off."""
+    ends = [[0.6, -0.002], [-0.6, -0.002]]
+    segment = solve_case(case_from(block({"segment": ends})))
+    for obstacle in ({"polyline": ends}, {"polyline": [ends[0], [0.1, -0.002], ends[1]]},
+                     {"profile": {"heights": [0.002, 0.002, 0.002], "spacing": 0.6, "start": -0.6,
+                                  "direction": [-1, 0]}}):
+        other = solve_case(case_from(block(obstacle)))
+        np.testing.assert_array_equal(other.problem.contact.nodes, segment.problem.contact.nodes)
+        np.testing.assert_allclose(other.problem.contact.gap, segment.problem.contact.gap, rtol=0, atol=1e-15)
+        assert relative(other.solution.displacement, segment.solution.displacement) < 1e-10
+        assert relative(other.solution.contact.nodal_force, segment.solution.contact.nodal_force) < 1e-10
+
+
+def test_a_flat_obstacle_keeps_one_normal_in_every_frame():
+    """A flat obstacle's per-node normals are its one normal, bit for bit: the frames, and
+    so every flat result, are those of the single normal."""
+    result = solve_case(case_from(block({"points": [[1, 0.001], [-1, 0.001]], "motion": {"direction": [0, -1], "displacement": 0.003}})))
+    contact = result.problem.contact
+    assert np.array_equal(contact.normals, np.tile(contact.normal, (len(contact.nodes), 1)))
+    assert result.solution.contact.normals is None
+
+
+def test_a_moved_line_is_the_line_put_there():
+    """Small deformations: a line moved by δ d poses the line at its new place. The block's
+    field is the same to round-off, the report records the advance."""
+    moved = solve_case(case_from(block({"points": [[1, 0.001], [-1, 0.001]],
+                                        "motion": {"direction": [0, -1], "displacement": 0.003}})))
+    placed = solve_case(case_from(block({"points": [[1, -0.002], [-1, -0.002]]})))
+    assert relative(moved.solution.displacement, placed.solution.displacement) < 1e-10
+    np.testing.assert_allclose(moved.solution.contact.gap, placed.solution.contact.gap, rtol=0, atol=1e-15)
+
+
+def circle_case(motion: dict, **extra) -> dict:
+    return block({"circle": {"center": [0.0, 1.0], "radius": 1.0}, "motion": motion}, divisions=(40, 10), **extra)
+
+
+def test_force_and_displacement_control_agree_and_the_reaction_is_the_force():
+    driven = solve_case(case_from(circle_case({"direction": [0, -1], "displacement": 0.004})))
+    drive = driven.problem.drive
+    force = drive.reaction(driven.kernel.nodal_force, driven.problem.contact.normals)
+    assert force > 0 and driven.kernel.active.sum() >= 3
+    pushed = solve_case(case_from(circle_case({"direction": [0, -1], "force": force})))
+    reaction = pushed.problem.drive.reaction(pushed.kernel.nodal_force, pushed.problem.contact.normals)
+    assert abs(reaction - force) <= 1e-10 * force
+    assert abs(pushed.problem.drive.advance - 0.004) <= 1e-9 * 0.004
+    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-8
+    # Normals are the circle's at each node's closest point, pointing into the disk.
+    contact = driven.problem.contact
+    radial = contact.positions - np.array([0.0, 1.0])
+    np.testing.assert_allclose(contact.normals, -radial / np.hypot(*radial.T)[:, None], atol=1e-15)
+    np.testing.assert_allclose(contact.gap, np.hypot(*radial.T) - 1.0, atol=1e-15)
+
+
+def test_a_moving_obstacle_along_a_load_path_scales_its_advance(tmp_path):
+    """The advance is a prescribed value: a path's last step at factor 1 is the single solve."""
+    from contactfem.solve import solve_load_path
+
+    data = circle_case({"direction": [0, -1], "displacement": 0.004}, load_path={"factors": [0.5, 1.0]})
+    path = solve_load_path(case_from(data))
+    single = solve_case(case_from(circle_case({"direction": [0, -1], "displacement": 0.004})))
+    assert relative(path.steps[-1].solution.displacement, single.solution.displacement) < 1e-10
+    assert path.steps[0].problem.drive.advance == 0.002
+
+
+def test_the_circle_solve_writes_its_obstacle(tmp_path):
+    from contactfem.io import read_hdf5
+
+    path = tmp_path / "indenter.yaml"
+    path.write_text(yaml.safe_dump(circle_case({"direction": [0, -1], "displacement": 0.004})), encoding="utf-8")
+    out = tmp_path / "out"
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(out), "--quiet", "--plot"])
+    assert result.exit_code == 0, result.stderr
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    assert report["obstacle"]["kind"] == "circle" and report["obstacle"]["small_deformations"] is True
+    assert report["obstacle"]["motion"]["advance"] == 0.004
+    contact = read_hdf5(out / "solution.h5")["contact"]
+    q, x = contact["obstacle_points"], read_hdf5(out / "solution.h5")["mesh"]["points"][contact["nodes"]]
+    np.testing.assert_allclose(np.hypot(*(q - [0.0, 1.0]).T), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", q - x, contact["normals"]) - 0.004 * contact["normals"][:, 1],
+                               contact["gap"], atol=1e-12)
+    header = (out / "contact.csv").read_text(encoding="utf-8").splitlines()[0]
+    assert all(name in header for name in ("obstacle_x", "obstacle_y", "normal_x", "normal_y"))
+
+
+@pytest.mark.parametrize("obstacle, fragment", [
+    ({"circle": {"center": [0, 1], "radius": 0}}, "obstacle.circle.radius"),
+    ({"circle": {"center": [0, 1], "radius": -1}}, "obstacle.circle.radius"),
+    ({"polyline": [[1, 0.1], [-1, 0.1], [0, -0.1], [0, 0.5]]}, "obstacle.polyline"),
+    ({"polyline": [[1, 0.1], [1, 0.1], [-1, 0.1]]}, "obstacle.polyline"),
+    ({"circle": {"center": [0, -2], "radius": 1}}, "obstacle.circle: no contact node"),
+    ({"polyline": [[5, 0.1], [3, 0.1]]}, "obstacle"),
+    ({"polyline": [[0.5, 0.0], [0.0, -0.5 * 0.25 + 0.0], [-0.5, 0.0]][::-1]}, "equidistant"),
+    ({"circle": {"center": [0, 1], "radius": 1}, "motion": {"direction": [0, 0], "displacement": 1}},
+     "obstacle.motion.direction"),
+    ({"circle": {"center": [0, 1], "radius": 1}, "motion": {"direction": [0, -1], "force": 1, "displacement": 1}},
+     "obstacle.motion"),
+    ({"circle": {"center": [0, 1.1], "radius": 1}, "motion": {"direction": [0, 1], "force": 1}},
+     "obstacle.motion.direction"),
+    ({"polyline": [[1, 0.1], [-1, 0.1]], "motion": {"direction": [1, 0], "displacement": 0.2}},
+     "obstacle.motion.direction"),
+])
+def test_bad_indenters_are_refused_naming_the_key(tmp_path, obstacle, fragment):
+    path = tmp_path / "indenter.yaml"
+    path.write_text(yaml.safe_dump(block(obstacle)), encoding="utf-8")
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, (result.output, result.stderr)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and "indenter.yaml" in lines[0] and fragment in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("extra, args, fragment", [
+    ({"load_path": {"factors": [0.5, 1]}}, [], "load_path"),
+])
+def test_what_a_pushed_or_curved_obstacle_does_not_pose_is_refused(tmp_path, extra, args, fragment):
+    path = tmp_path / "indenter.yaml"
+    path.write_text(yaml.safe_dump(circle_case({"direction": [0, -1], "force": 10.0}, **extra)), encoding="utf-8")
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(tmp_path / "out"), *args])
+    assert result.exit_code == 2, (result.output, result.stderr)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and "indenter.yaml" in lines[0] and fragment in lines[0], lines
+
+
+def test_the_distributed_solve_refuses_a_curved_or_moving_obstacle():
+    """Checked before PETSc is asked for: the ranks' frames take one normal."""
+    from contactfem.distributed import refuse_indenter
+    from contactfem.errors import CaseError
+
+    with pytest.raises(CaseError, match=r"test.yaml: solver.backend = petsc: a circle obstacle is solved serially"):
+        refuse_indenter(case_from(circle_case({"direction": [0, -1], "displacement": 0.001})))
+    with pytest.raises(CaseError, match=r"a moving obstacle \(obstacle.motion\)"):
+        refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]],
+                                         "motion": {"direction": [0, -1], "displacement": 0.003}})))
+    refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]]})))
+
+
+def test_the_archive_reader_checks_a_curved_obstacles_normals(tmp_path):
+    """solution.h5 is untrusted input: non-unit normals, or normals without their closest
+    points, are refused naming the dataset."""
+    import h5py
+
+    from contactfem.errors import ArchiveError
+    from contactfem.io import read_hdf5
+
+    path = tmp_path / "indenter.yaml"
+    path.write_text(yaml.safe_dump(circle_case({"direction": [0, -1], "displacement": 0.004})), encoding="utf-8")
+    out = tmp_path / "out"
+    assert make_runner().invoke(main, ["solve", str(path), "--out", str(out), "--quiet"]).exit_code == 0
+    with h5py.File(out / "solution.h5", "r+") as f:
+        f["/contact/normals"][0] = (2.0, 0.0)
+    with pytest.raises(ArchiveError, match="/contact/normals"):
+        read_hdf5(out / "solution.h5")
+    with h5py.File(out / "solution.h5", "r+") as f:
+        del f["/contact/obstacle_points"]
+    with pytest.raises(ArchiveError, match="/contact/obstacle_points"):
+        read_hdf5(out / "solution.h5")
