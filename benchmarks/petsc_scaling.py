@@ -84,20 +84,37 @@ def single(refine: int, solver: str, method: str, mesh: str = "pieces") -> None:
                       **({"solve_peak_rss_gb": rank["solve_peak_rss_bytes"] / GB}
                          if "solve_peak_rss_bytes" in rank else {})} for rank in per_rank],
         "max_peak_rss_gb": outcome.parallel["max_peak_rss_bytes"] / GB,
+        "blas_libraries": blas_libraries(),
     }
     print(RECORD_PREFIX + json.dumps(record), flush=True)
 
 
-def _environment() -> dict[str, str]:
+def blas_libraries() -> list[str]:
+    """The BLAS and LAPACK shared objects this process mapped (which of Debian's alternatives
+    PETSc and MUMPS run on: the reference one or OpenBLAS), from /proc/self/maps."""
+    try:
+        maps = Path("/proc/self/maps").read_text().splitlines()
+    except OSError:
+        return []
+    paths = {line.split()[-1] for line in maps if line.split()[-1].startswith("/")}
+    return sorted(os.path.realpath(path) for path in paths
+                  if any(name in Path(path).name for name in ("libblas.so", "liblapack.so", "libopenblas")))
+
+
+def _environment(extra: dict[str, str] | None = None) -> dict[str, str]:
     env = dict(os.environ)
     env.update({"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                 # Open MPI refuses root and more ranks than slots unless told; other MPIs ignore these.
                 "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
                 "OMPI_MCA_rmaps_base_oversubscribe": "1"})
+    env.update(extra or {})
     return env
 
 
-def run(refine: int, ranks: int, solver: str, method: str, timeout: float, mesh: str = "pieces") -> dict:
+def run(refine: int, ranks: int, solver: str, method: str, timeout: float, mesh: str = "pieces",
+        environment: dict[str, str] | None = None) -> dict:
+    """One ``mpiexec -n ranks`` job; ``environment`` adds to its variables (PETSC_OPTIONS, a
+    library path)."""
     mpiexec = shutil.which("mpiexec")
     if mpiexec is None:
         return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh, "error": "no mpiexec on the PATH"}
@@ -105,7 +122,7 @@ def run(refine: int, ranks: int, solver: str, method: str, timeout: float, mesh:
                "--solver", solver, "--method", method, "--mesh", mesh]
     started = time.perf_counter()
     try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment())
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment(environment))
     except subprocess.TimeoutExpired:
         return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh, "error": f"timed out after {timeout:.0f} s"}
     for line in done.stdout.splitlines():

@@ -57,6 +57,7 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
+from contactfem.distributed_mumps import mumps_figures, mumps_ordering
 from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
@@ -448,7 +449,7 @@ class _DistributedSolver:
         self.factorizations = 0
         self.column_solves = 0  # every step factorises its own active set: no Schur columns
         self.factor_seconds: list[float] = []
-        #: MUMPS's account of the last factorisation (see :func:`_mumps_figures`); empty for GAMG.
+        #: MUMPS's account of the last factorisation (:func:`distributed_mumps.mumps_figures`); none for GAMG.
         self.factor_figures: dict = {}
         #: Iterations of each solve (1 for a direct solve: one substitution).
         self.linear_iterations: list[int] = []
@@ -467,6 +468,12 @@ class _DistributedSolver:
             ksp.setType("preonly")
             pc.setType("cholesky")
             pc.setFactorSolverType("mumps")
+            # PETSc 3.18 sets MUMPS's ICNTL from the options database at the symbolic
+            # factorisation (a value set on the factor before is reset): the ordering goes there,
+            # unless the user chose one (PETSC_OPTIONS="-mat_mumps_icntl_7 N").
+            options = PETSc.Options()
+            if not options.hasName("mat_mumps_icntl_7"):
+                options["mat_mumps_icntl_7"] = mumps_ordering(PETSc)
             # PETSc options (PETSC_OPTIONS="-mat_mumps_icntl_14 50 ...") reach MUMPS from here.
             ksp.setFromOptions()
         else:
@@ -589,7 +596,7 @@ class _DistributedSolver:
         self.factor_seconds.append(time.perf_counter() - started)
         self.factorizations += 1
         if self.solver_name == "mumps":
-            self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
+            self.factor_figures = mumps_figures(self.ksp.getPC().getFactorMatrix())
         self.base = self.linear_solve(base_rhs)
         self.checks.append(self._probe(active))
         self._factorized = active.copy()
@@ -721,17 +728,6 @@ class _DistributedSolver:
         """:meth:`contactfem.kernel.ActiveSetSolver.certify` with u's non-finite entries counted over all ranks."""
         return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
                                  tolerance, self.condition)
-
-
-def _mumps_figures(factor) -> dict:
-    """What MUMPS reports of a factorisation (its user guide's INFO/INFOG/RINFOG): entries of
-    the factors over all ranks (INFOG(29), negative in millions), flops of the elimination
-    (RINFOG(3)), the ordering it chose (INFOG(7): 2 AMF... 5 METIS, 7 automatic), and this
-    rank's megabytes allocated (INFO(16)) and used (INFO(22)) by the factorisation."""
-    entries = int(factor.getMumpsInfog(29))
-    return {"factor_entries": entries if entries >= 0 else -entries * 10**6,
-            "flops": float(factor.getMumpsRinfog(3)), "ordering": int(factor.getMumpsInfog(7)),
-            "allocated_mb": int(factor.getMumpsInfo(16)), "used_mb": int(factor.getMumpsInfo(22))}
 
 
 def _reason_name(PETSc, reason: int) -> str:

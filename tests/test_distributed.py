@@ -75,6 +75,8 @@ import sys
 import numpy as np
 from contactfem.case import load_case
 from contactfem.distributed import distributed_report, solve_distributed
+from contactfem.distributed_mumps import mumps_ordering
+from petsc4py import PETSc
 
 out = sys.argv[1]
 fields = {}
@@ -97,6 +99,8 @@ for name, path, method in [item.split(":") for item in sys.argv[2:]]:
         fields[key + "_first_active"] = np.array(report["newton"][0]["active"])
         fields[key + "_levels"] = np.array(report["solver"]["sequencing"].get("levels", 0))
         fields[key + "_proposed"] = np.array([step["proposed"] for step in report["newton"]])
+        fields[key + "_ordering"] = np.array([r["factor"].get("ordering", -1) for r in report["parallel"]["per_rank"]])
+        fields[key + "_chosen_ordering"] = np.array(mumps_ordering(PETSc))
 if fields:
     np.savez(out, **fields)
 """
@@ -178,6 +182,31 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     # report.json's figures come from K u computed across the ranks: the balance still closes.
     assert float(distributed[key + "_residual"]) < 1e-10
     assert len(distributed[key + "_rss"]) == RANKS and (distributed[key + "_rss"] > 0).all()
+    # MUMPS used, on every rank, the ordering contactfem asked its library for (or, when the
+    # library has neither METIS nor SCOTCH, one of its own choice, the same on every rank).
+    chosen, used = int(distributed[key + "_chosen_ordering"]), distributed[key + "_ordering"].tolist()
+    assert used == [chosen] * RANKS if chosen != 7 else used == [used[0]] * RANKS and used[0] in (0, 2, 4, 6)
+
+
+@needs_mpi
+def test_mumps_orders_with_the_best_ordering_its_library_has():
+    """METIS (ICNTL(7) = 5), else SCOTCH (3), else MUMPS's automatic choice (7): asked of the
+    library, not timed. An ordering the library lacks falls back to the automatic choice, so
+    the one chosen is the first whose analysis reports using it, and every ordering before it
+    in the preference reports another; PORD (4), built into every MUMPS, reports itself."""
+    from petsc4py import PETSc
+
+    from contactfem.distributed_mumps import MUMPS_AUTOMATIC, MUMPS_ORDERINGS, _mumps_used, mumps_ordering
+
+    assert _mumps_used(PETSc, 4) == 4
+    chosen = mumps_ordering(PETSc)
+    preference = (*MUMPS_ORDERINGS, MUMPS_AUTOMATIC)
+    assert chosen in preference
+    if chosen != MUMPS_AUTOMATIC:
+        assert _mumps_used(PETSc, chosen) == chosen
+    for better in preference[:preference.index(chosen)]:
+        assert _mumps_used(PETSc, better) != better
+    assert not PETSc.Options().hasName("contactfem_ordering_probe_mat_mumps_icntl_7")  # the probe leaves nothing
 
 
 def test_module_imports_and_refuses_clearly_without_petsc(monkeypatch):

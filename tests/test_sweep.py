@@ -606,7 +606,7 @@ def test_a_point_too_large_for_its_worker_is_refused_against_the_workers_limit(t
         assert client.submit(sweeps.worker_memory_limit).result().bytes == 2**30
         big, small = client.gather(client.map(sweeps.solve_point, tasks, pure=False))
     assert big["status"] == "invalid", big
-    assert "more than this sweep worker's memory limit of 1 GiB" in big["message"]
+    assert "more than this Dask worker's memory limit of 1 GiB" in big["message"]
     assert big["seconds"]["total"] < 30
     assert small["status"] == "ok", small
 
