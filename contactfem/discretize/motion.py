@@ -31,8 +31,8 @@ class ObstacleDrive:
     direction: np.ndarray
     advance: float
     force: float | None = None
-    #: Whether the advance is still the unknown of a pushed obstacle (False once a trial
-    #: advance is set: :meth:`contactfem.discretize.problem.DiscreteProblem.advanced`).
+    #: Whether the advance is still the unknown of a pushed obstacle (False once the solve
+    #: has found it: :meth:`contactfem.discretize.frames.ReducedSystem.settled`).
     free: bool = False
 
     @property
