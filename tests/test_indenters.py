@@ -130,6 +130,40 @@ def test_a_pushed_obstacle_balances_its_force_with_the_body_loaded_too():
     assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-9
 
 
+def rollers(data: dict) -> dict:
+    data["boundary"].update(bottom={"displacement": [None, 0.0]}, left={"displacement": [0.0, None]})
+    return data
+
+
+def half_block(data: dict) -> dict:
+    data["geometry"] = {"rectangle": {"lower": [0, -0.5], "upper": [1, 0]}}
+    data["boundary"]["left"] = "symmetry"
+    return data
+
+
+def lifted(data: dict) -> dict:
+    data["obstacle"]["circle"]["center"] = [0.0, 1.01]
+    return data
+
+
+@pytest.mark.parametrize("direction, pose, force", [
+    ([-0.3, -1.0], lambda data: data, 2000.0),  # held components along x and y both follow
+    ([-0.3, -1.0], rollers, 2000.0),  # each held node one component, of either axis
+    ([0.0, -1.0], half_block, 1000.0),  # a symmetry line along the motion
+    ([0.0, -1.0], lifted, 2000.0),  # every gap open at rest: contact alone holds the push
+])
+def test_a_pushed_obstacle_is_the_driven_one_at_its_advance(direction, pose, force):
+    """Whichever held components carry the advance, the pushed obstacle's reaction is its
+    force and the advance it finds, prescribed, gives the same field."""
+    pushed = solve_case(case_from(pose(circle_case({"direction": direction, "force": force}))))
+    drive = pushed.problem.drive
+    assert abs(drive.reaction(pushed.kernel.nodal_force, pushed.problem.contact.normals) - force) <= 1e-10 * force
+    assert drive.advance > 0 and pushed.kernel.factorizations == 1
+    driven = solve_case(case_from(pose(circle_case({"direction": direction, "displacement": drive.advance}))))
+    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-9
+    np.testing.assert_array_equal(pushed.kernel.active, driven.kernel.active)
+
+
 def test_a_pushed_obstacle_along_a_load_path_is_each_single_solve():
     """The force is scaled along the path like every prescribed value: each of 5 steps,
     one solve of the path with its one factorisation, is the single solve at its force."""
