@@ -8,10 +8,12 @@ Usage:
     mpiexec -n 2 python benchmarks/petsc_scaling.py --single 4 --solver mumps   # one run: a JSON record on stdout
 
 Each (refine, ranks, solver) runs as its own ``mpiexec -n P`` job, so that each rank's peak
-RSS (getrusage maxrss) is that run's. A run records, per rank: seconds of mesh (every rank
-meshes the whole case), assemble (loads, supports, contact and its share of the stiffness),
+RSS (getrusage maxrss) is that run's. A run records, per rank: seconds of mesh (its piece,
+or the whole case), assemble (loads, supports, contact and its share of the stiffness),
 solve (mesh sequencing and the Newton steps), gather (solution and K u to rank 0), and on
-rank 0 postprocess (stresses, contact fields); the factorisation seconds of each Newton
+rank 0 postprocess (stresses, contact fields; with ``--mesh pieces``, the default, each rank
+refines only its piece of the coarse mesh and rank 0 meshes the case whole for the writers
+after the solve, a memory peak its figure includes); the factorisation seconds of each Newton
 step, the iterations of each linear solve (1 for MUMPS) and what MUMPS reports of its
 factors (entries, flops, megabytes per rank); its peak RSS; and the totals: Newton steps,
 factorisations, wall time. BLAS threads are pinned
@@ -41,14 +43,15 @@ RECORD_PREFIX = "DISTRIBUTED-RECORD "
 GB = 1024.0**3
 
 
-def single(refine: int, solver: str, method: str) -> None:
+def single(refine: int, solver: str, method: str, mesh: str = "pieces") -> None:
     """One run on the ranks of this mpiexec job; rank 0 prints the record."""
     from contactfem.case import load_case
     from contactfem.distributed import solve_distributed
 
     started = time.perf_counter()
     case = load_case(CASE_FILE)
-    outcome = solve_distributed(case, method=method, refine=refine, solver=solver)
+    outcome = solve_distributed(case, method=method, refine=refine, solver=solver,
+                                distributed_mesh=mesh == "pieces")
     wall = time.perf_counter() - started
     if outcome.result is None:
         return
@@ -59,6 +62,7 @@ def single(refine: int, solver: str, method: str) -> None:
         "refine": refine,
         "divisions": 32 * 2**refine,
         "ranks": outcome.parallel["ranks"],
+        "mesh": outcome.parallel["mesh"],
         "solver": solver,
         "method": method,
         "unknowns": result.problem.n_unknowns,
@@ -76,32 +80,51 @@ def single(refine: int, solver: str, method: str) -> None:
         "per_rank": [{"rank": rank["rank"], "owned_unknowns": rank["owned_unknowns"],
                       "owned_triangles": rank["owned_triangles"], "peak_rss_gb": rank["peak_rss_bytes"] / GB,
                       "factor_s": rank["factor_seconds"], "linear_iterations": rank["linear_iterations"],
-                      "factor": rank["factor"], "seconds": rank["seconds"]} for rank in per_rank],
+                      "factor": rank["factor"], "seconds": rank["seconds"],
+                      **({"solve_peak_rss_gb": rank["solve_peak_rss_bytes"] / GB}
+                         if "solve_peak_rss_bytes" in rank else {})} for rank in per_rank],
         "max_peak_rss_gb": outcome.parallel["max_peak_rss_bytes"] / GB,
+        "blas_libraries": blas_libraries(),
     }
     print(RECORD_PREFIX + json.dumps(record), flush=True)
 
 
-def _environment() -> dict[str, str]:
+def blas_libraries() -> list[str]:
+    """The BLAS and LAPACK shared objects this process mapped (which of Debian's alternatives
+    PETSc and MUMPS run on: the reference one or OpenBLAS), from /proc/self/maps."""
+    try:
+        maps = Path("/proc/self/maps").read_text().splitlines()
+    except OSError:
+        return []
+    paths = {line.split()[-1] for line in maps if line.split()[-1].startswith("/")}
+    return sorted(os.path.realpath(path) for path in paths
+                  if any(name in Path(path).name for name in ("libblas.so", "liblapack.so", "libopenblas")))
+
+
+def _environment(extra: dict[str, str] | None = None) -> dict[str, str]:
     env = dict(os.environ)
     env.update({"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                 # Open MPI refuses root and more ranks than slots unless told; other MPIs ignore these.
                 "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
                 "OMPI_MCA_rmaps_base_oversubscribe": "1"})
+    env.update(extra or {})
     return env
 
 
-def run(refine: int, ranks: int, solver: str, method: str, timeout: float) -> dict:
+def run(refine: int, ranks: int, solver: str, method: str, timeout: float, mesh: str = "pieces",
+        environment: dict[str, str] | None = None) -> dict:
+    """One ``mpiexec -n ranks`` job; ``environment`` adds to its variables (PETSC_OPTIONS, a
+    library path)."""
     mpiexec = shutil.which("mpiexec")
     if mpiexec is None:
-        return {"refine": refine, "ranks": ranks, "solver": solver, "error": "no mpiexec on the PATH"}
+        return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh, "error": "no mpiexec on the PATH"}
     command = [mpiexec, "-n", str(ranks), sys.executable, str(Path(__file__).resolve()), "--single", str(refine),
-               "--solver", solver, "--method", method]
+               "--solver", solver, "--method", method, "--mesh", mesh]
     started = time.perf_counter()
     try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment())
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment(environment))
     except subprocess.TimeoutExpired:
-        return {"refine": refine, "ranks": ranks, "solver": solver, "error": f"timed out after {timeout:.0f} s"}
+        return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh, "error": f"timed out after {timeout:.0f} s"}
     for line in done.stdout.splitlines():
         if line.startswith(RECORD_PREFIX):
             record = json.loads(line[len(RECORD_PREFIX):])
@@ -110,22 +133,24 @@ def run(refine: int, ranks: int, solver: str, method: str, timeout: float) -> di
     # The Python error, not mpiexec's epilogue: the last line naming an error, else the tail.
     lines = (done.stderr + done.stdout).strip().splitlines()
     errors = [line for line in lines if "Error" in line]
-    return {"refine": refine, "ranks": ranks, "solver": solver,
+    return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh,
             "error": f"exit {done.returncode}: " + (errors[-1] if errors else " | ".join(lines[-5:]))}
 
 
 def table(records: list[dict]) -> str:
-    lines = ["| unknowns | ranks | solver | Newton | mesh s | assemble s | solve s | gather s | wall s "
+    lines = ["| unknowns | ranks | solver | mesh | Newton | mesh s | assemble s | solve s | gather s | wall s "
              "| factor s (each) | peak RSS per rank GB |",
-             "|---:|---:|---|---:|---:|---:|---:|---:|---:|---|---|"]
+             "|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---|---|"]
     for r in records:
         if "error" in r:
-            lines.append(f"| refine {r['refine']} | {r['ranks']} | {r['solver']} | {r['error']} |||||||")
+            lines.append(f"| refine {r['refine']} | {r['ranks']} | {r['solver']} | {r.get('mesh', '')} | {r['error']} "
+                         "|||||||")
             continue
         stages = r["stages_s"]
         factors = ", ".join(f"{s:.2f}" for s in r["per_rank"][0]["factor_s"])
         memory = " / ".join(f"{rank['peak_rss_gb']:.2f}" for rank in r["per_rank"])
-        lines.append(f"| {r['unknowns']:,} | {r['ranks']} | {r['solver']} | {r['newton_steps']} | "
+        lines.append(f"| {r['unknowns']:,} | {r['ranks']} | {r['solver']} | {r.get('mesh', 'replicated')} | "
+                     f"{r['newton_steps']} | "
                      f"{stages['mesh']:.2f} | {stages['assemble']:.2f} | {stages['solve']:.2f} | "
                      f"{stages['gather']:.2f} | {r['wall_s']:.2f} | {factors} | {memory} |")
     return "\n".join(lines)
@@ -138,12 +163,14 @@ def main() -> None:
     parser.add_argument("--solvers", nargs="+", default=["mumps"], choices=["mumps", "gamg"])
     parser.add_argument("--method", default="positive", choices=["positive", "standard"])
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    parser.add_argument("--mesh", default="pieces", choices=["pieces", "replicated"],
+                        help="each rank refines its piece of the coarse mesh, or meshes the whole case")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--single", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--solver", default="mumps", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.single is not None:
-        single(args.single, args.solver, args.method)
+        single(args.single, args.solver, args.method, args.mesh)
         return
 
     document = {"benchmark": "distributed", "case": str(CASE_FILE.relative_to(ROOT)),
@@ -151,11 +178,17 @@ def main() -> None:
                 "machine": {"python": platform.python_version(), "platform": platform.platform(),
                             "cpus": os.cpu_count()},
                 "records": []}
+    # Runs of other sizes, rank counts, solvers or meshes stay: each (refine, ranks, solver,
+    # mesh) has one record, the latest (records before the mesh option were replicated).
+    kept = json.loads(args.out.read_text(encoding="utf-8"))["records"] if args.out.exists() else []
+    planned = {(r, p, s, args.mesh) for r in args.refine for p in args.ranks for s in args.solvers}
+    document["records"] = [r for r in kept if (r.get("refine"), r.get("ranks"), r.get("solver"),
+                                               r.get("mesh", "replicated")) not in planned]
     for refine in args.refine:
         for solver in args.solvers:
             for ranks in args.ranks:
                 print(f"refine {refine}, {ranks} rank(s), {solver} ...", flush=True)
-                record = run(refine, ranks, solver, args.method, args.timeout)
+                record = run(refine, ranks, solver, args.method, args.timeout, args.mesh)
                 document["records"].append(record)
                 args.out.parent.mkdir(parents=True, exist_ok=True)
                 args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")

@@ -5,6 +5,7 @@ Usage:
     python benchmarks/rough.py --rounds 1               # each size once
     python benchmarks/rough.py --sizes 1000 4000 16000  # choose the sizes
     python benchmarks/rough.py --single 4000            # one size in this process: a JSON record on stdout
+    python benchmarks/rough.py --workers 2              # the sizes as tasks of a local Dask cluster
     python benchmarks/rough.py --write-surface          # rewrite cases/rough_surface.csv (4 001 points)
     python benchmarks/rough.py --scene outline          # a closed outline from a file instead (see below)
     python benchmarks/rough.py --write-outline          # rewrite cases/rough_rim.csv (2 001 vertices)
@@ -54,6 +55,7 @@ exponents p of stage time (and peak memory) ~ points^p, by least squares on the 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import resource
@@ -376,6 +378,7 @@ def table(records: list[dict]) -> str:
 
 def main() -> None:
     from performance import add_heap_option
+    from sizes import add_engine_options, run_sizes
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, default=DEFAULT_SIZES, help="profile points per run")
@@ -388,6 +391,7 @@ def main() -> None:
     parser.add_argument("--table", action="store_true", help="print the table of --out and stop")
     parser.add_argument("--single", type=int, metavar="N", help="measure N points in this process")
     add_heap_option(parser)
+    add_engine_options(parser)
     parser.add_argument("--write-surface", action="store_true", help=f"rewrite {SURFACE_FILE.relative_to(ROOT)}")
     parser.add_argument("--write-outline", action="store_true", help=f"rewrite {OUTLINE_FILE.relative_to(ROOT)}")
     args = parser.parse_args()
@@ -418,16 +422,21 @@ def main() -> None:
               "heap": "glibc defaults" if args.plain_heap else "kept for reuse, as the command runs (contactfem.heap)",
               "machine": machine_info(), "rounds": args.rounds, "records": []}
     runs: dict[int, list[dict]] = {points: [] for points in args.sizes}
+
+    def finished(record: dict) -> None:
+        runs[record["points"]].append(record)
+        result["records"] = [best_of_rounds(done) for done in runs.values() if done]
+        result["growth_exponents"] = scaling(result["records"])
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(result, indent=2) + "\n")
+        report_run(record["points"], record)
+
+    # Each size in its own subprocess, here one after another or as Dask tasks (--workers, --scheduler).
     for _ in range(max(args.rounds, 1)):
-        for points in args.sizes:
-            record = run_subprocess(points, args.method, args.timeout, keep_heap=not args.plain_heap,
-                                    scene=args.scene)
-            runs[points].append(record)
-            result["records"] = [best_of_rounds(done) for done in runs.values() if done]
-            result["growth_exponents"] = scaling(result["records"])
-            args.out.parent.mkdir(parents=True, exist_ok=True)
-            args.out.write_text(json.dumps(result, indent=2) + "\n")
-            report_run(points, record)
+        run_sizes(functools.partial(run_subprocess, method=args.method, timeout=args.timeout,
+                                    keep_heap=not args.plain_heap, scene=args.scene),
+                  args.sizes, scheduler=args.scheduler, workers=args.workers, finished=finished,
+                  lost=lambda points, reason: {"points": points, "method": args.method, "error": reason})
     print(table(result["records"]))
     print("growth exponents (time ~ points^p):", json.dumps(result["growth_exponents"]))
 

@@ -1,7 +1,9 @@
 """Square case of the README at N x N divisions, both methods: time per stage, Newton iterations, contact.
 
-Usage: python benchmarks/square_sweep.py [N ...] [--out FILE.json]
-Writes a JSON list with one record per (N, method) and prints a markdown table.
+Usage: python benchmarks/square_sweep.py [N ...] [--out FILE.json] [--workers W | --scheduler ADDRESS]
+Writes a JSON list with one record per (N, method) and prints a markdown table. Each N runs
+in a fresh subprocess (``--single N``), so that its peak RSS is its own; one after another,
+or as tasks of a Dask cluster with --workers or --scheduler (benchmarks/sizes.py).
 """
 
 from __future__ import annotations
@@ -9,6 +11,8 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -21,6 +25,7 @@ from contactfem.report import build_report
 from contactfem.solve import prepare, solve_case
 
 ROOT = Path(__file__).resolve().parents[1]
+RECORD_PREFIX = "SQUARE-RECORDS "
 
 
 def square_case(divisions: int):
@@ -64,12 +69,37 @@ def run(divisions: int) -> list[dict]:
     return records
 
 
+def run_subprocess(divisions: int) -> list[dict]:
+    """:func:`run` in a fresh interpreter: the records of both methods at ``divisions``."""
+    done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--single", str(divisions)],
+                          capture_output=True, text=True, check=False, cwd=ROOT)
+    for line in done.stdout.splitlines():
+        if line.startswith(RECORD_PREFIX):
+            return json.loads(line[len(RECORD_PREFIX):])
+    tail = " | ".join((done.stderr or done.stdout).strip().splitlines()[-3:])
+    raise RuntimeError(f"N = {divisions}: exit code {done.returncode}: {tail}")
+
+
 def main() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from sizes import add_engine_options, run_sizes
+
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("sizes", nargs="*", type=int, default=[64, 256])
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--single", type=int, default=None, help=argparse.SUPPRESS)
+    add_engine_options(parser)
     args = parser.parse_args()
-    records = [record for n in args.sizes for record in run(n)]
+    if args.single is not None:
+        print(RECORD_PREFIX + json.dumps(run(args.single)), flush=True)
+        return
+
+    def lost(divisions: int, reason: str) -> list[dict]:
+        raise SystemExit(f"square_sweep: N = {divisions} did not run: {reason}")
+
+    records = [record for per_size in run_sizes(run_subprocess, args.sizes, scheduler=args.scheduler,
+                                                workers=args.workers, lost=lost)
+               for record in per_size]
     if args.out:
         args.out.write_text(json.dumps(records, indent=2) + "\n")
     print("| N | method | unknowns | Newton | mesh s | assemble s | solve s | write s | contact force | zone |")

@@ -272,11 +272,11 @@ def _nearest_request(problem: DiscreteProblem):
     keeps more than :data:`NEAREST_SHARE` of the unknowns (a mesh graded onto ΓC keeps about
     half of them); None when neither can be made within it."""
     from contactfem.sequencing import coarser
-    from contactfem.solve import _estimated_unknowns
+    from contactfem.coarse_levels import estimated_unknowns
 
     for factor in (2, 4):
         coarse = coarser(problem.mesh_request, problem.refinements, factor=factor)
-        if coarse is not None and _estimated_unknowns(problem, *coarse) <= NEAREST_SHARE * problem.n_unknowns:
+        if coarse is not None and estimated_unknowns(problem, *coarse) <= NEAREST_SHARE * problem.n_unknowns:
             return coarse
     return None
 

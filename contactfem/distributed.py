@@ -57,6 +57,7 @@ from contactfem.distributed_assembly import (  # noqa: F401
     element_stiffness,
     node_order,
 )
+from contactfem.distributed_mumps import mumps_figures, mumps_ordering
 from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
@@ -168,7 +169,7 @@ class SolutionProduct:
 
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
                       progress: Progress | None = None, accept_uncertified: bool = False,
-                      sequencing: bool = True) -> DistributedResult:
+                      sequencing: bool = True, distributed_mesh: bool = True) -> DistributedResult:
     """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
 
     Parameters
@@ -183,6 +184,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         Start from the active set a coarser mesh predicts, when that pays (as the serial
         solve does; the coarse levels are solved across the ranks too); False starts from
         the nodes inside the obstacle.
+    distributed_mesh : bool
+        Let each rank refine only its piece of the coarse mesh when the case allows it (see
+        :mod:`contactfem.distributed_problem`); False meshes the whole case on every rank.
 
     Raises
     ------
@@ -201,14 +205,22 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     method_name = method or case.solver.method
     timings: dict[str, float] = {}
 
+    from contactfem.distributed_problem import PieceProblem, gather_coordinates, piece_problem, whole_problem
+
     clock = time.perf_counter()
-    say(f"meshing (each of {ranks} ranks)")
-    mesh = build_mesh(case, refine=refine)
-    timings["mesh"] = time.perf_counter() - clock
     refinements = case.mesh.refine if refine is None else refine
-    clock = time.perf_counter()
-    problem = _problem_without_stiffness(case, mesh, refinements)
-    problem_seconds = time.perf_counter() - clock
+    # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
+    problem = piece_problem(case, mpi, refine) if distributed_mesh else None
+    say(f"meshing ({'a piece on each' if problem is not None else 'each'} of {ranks} ranks)")
+    problem_seconds = 0.0
+    if problem is None:
+        mesh = build_mesh(case, refine=refine)
+        timings["mesh"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        problem = _problem_without_stiffness(case, mesh, refinements)
+        problem_seconds = time.perf_counter() - clock
+    else:  # the piece, its boundary, loads, supports and contact
+        timings["mesh"] = time.perf_counter() - clock
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
@@ -219,7 +231,9 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
+    coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
     timings["gather"] = time.perf_counter() - clock
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
@@ -229,8 +243,14 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     clock = time.perf_counter()
     from contactfem.solve import SolveResult
 
+    if coordinates is not None:  # the mesh for the writers, now that the solver's memory is freed
+        problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
     timings["postprocess"] = time.perf_counter() - clock
+    first = parallel["per_rank"][0]
+    first["solve_peak_rss_bytes"] = first["peak_rss_bytes"]
+    first["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
+    parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
     return DistributedResult(result=result, parallel=parallel, rank=rank)
@@ -255,7 +275,8 @@ def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, f
                            "peak_rss_bytes": _peak_rss(),
                            "seconds": dict(timings)}, root=0)
     per_rank = mpi.bcast(per_rank, root=0)
-    return {"ranks": mpi.Get_size(), "solver": solver, "per_rank": per_rank,
+    mesh = "replicated" if hasattr(system.layout, "order") else "pieces"
+    return {"ranks": mpi.Get_size(), "solver": solver, "mesh": mesh, "per_rank": per_rank,
             "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
             "factorizations": factorizations}
 
@@ -296,8 +317,14 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     contact_method = get_method(method_name)
     clock = time.perf_counter()
     say("assembling")
-    layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
-    system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
+    from contactfem.distributed_problem import PieceProblem, assemble_piece_system
+
+    if isinstance(problem, PieceProblem):
+        system = assemble_piece_system(PETSc, comm, problem, contact_method)
+        layout = system.layout
+    else:
+        layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
+        system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
     timings["assemble"] = time.perf_counter() - clock
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
         f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")
@@ -327,13 +354,21 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
 
 def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, c: float, solver: str,
                           say: Progress) -> tuple[np.ndarray | None, dict]:
-    """:func:`contactfem.solve.predict_from_coarser` with the coarse levels solved across the
+    """:func:`contactfem.coarse_levels.predict_from_coarser` with the coarse levels solved across the
     ranks too (a serial coarse solve would put a quarter-size matrix on every rank). Every
     decision is taken from data all ranks share, so they all recurse alike."""
     from contactfem.result import ContactFields
-    from contactfem.solve import SEQUENCING_METHOD, CoarseSolve, predict_from_coarser
+    from contactfem.coarse_levels import CoarseSolve, predict_from_coarser
+    from contactfem.solve import SEQUENCING_METHOD
 
     def prepare_coarse(request: MeshRequest, refine: int) -> DiscreteProblem:
+        from contactfem.distributed_problem import PieceProblem, piece_problem
+
+        # Fewer refinements of the same request: in pieces too (a rectangle's fewer divisions are not).
+        if isinstance(problem, PieceProblem) and request is problem.mesh_request:
+            pieces = piece_problem(case, comm.tompi4py(), refine)
+            if pieces is not None:
+                return pieces
         return _problem_without_stiffness(case, build_mesh(case, refine=refine, request=request), refine, request)
 
     def solve_coarse(coarse_problem: DiscreteProblem) -> CoarseSolve:
@@ -414,7 +449,7 @@ class _DistributedSolver:
         self.factorizations = 0
         self.column_solves = 0  # every step factorises its own active set: no Schur columns
         self.factor_seconds: list[float] = []
-        #: MUMPS's account of the last factorisation (see :func:`_mumps_figures`); empty for GAMG.
+        #: MUMPS's account of the last factorisation (:func:`distributed_mumps.mumps_figures`); none for GAMG.
         self.factor_figures: dict = {}
         #: Iterations of each solve (1 for a direct solve: one substitution).
         self.linear_iterations: list[int] = []
@@ -433,6 +468,12 @@ class _DistributedSolver:
             ksp.setType("preonly")
             pc.setType("cholesky")
             pc.setFactorSolverType("mumps")
+            # PETSc 3.18 sets MUMPS's ICNTL from the options database at the symbolic
+            # factorisation (a value set on the factor before is reset): the ordering goes there,
+            # unless the user chose one (PETSC_OPTIONS="-mat_mumps_icntl_7 N").
+            options = PETSc.Options()
+            if not options.hasName("mat_mumps_icntl_7"):
+                options["mat_mumps_icntl_7"] = mumps_ordering(PETSc)
             # PETSc options (PETSC_OPTIONS="-mat_mumps_icntl_14 50 ...") reach MUMPS from here.
             ksp.setFromOptions()
         else:
@@ -555,7 +596,7 @@ class _DistributedSolver:
         self.factor_seconds.append(time.perf_counter() - started)
         self.factorizations += 1
         if self.solver_name == "mumps":
-            self.factor_figures = _mumps_figures(self.ksp.getPC().getFactorMatrix())
+            self.factor_figures = mumps_figures(self.ksp.getPC().getFactorMatrix())
         self.base = self.linear_solve(base_rhs)
         self.checks.append(self._probe(active))
         self._factorized = active.copy()
@@ -687,17 +728,6 @@ class _DistributedSolver:
         """:meth:`contactfem.kernel.ActiveSetSolver.certify` with u's non-finite entries counted over all ranks."""
         return build_certificate(self.non_finite(u), self.normals(u) - self.gap, multiplier, nodal_force, scales,
                                  tolerance, self.condition)
-
-
-def _mumps_figures(factor) -> dict:
-    """What MUMPS reports of a factorisation (its user guide's INFO/INFOG/RINFOG): entries of
-    the factors over all ranks (INFOG(29), negative in millions), flops of the elimination
-    (RINFOG(3)), the ordering it chose (INFOG(7): 2 AMF... 5 METIS, 7 automatic), and this
-    rank's megabytes allocated (INFO(16)) and used (INFO(22)) by the factorisation."""
-    entries = int(factor.getMumpsInfog(29))
-    return {"factor_entries": entries if entries >= 0 else -entries * 10**6,
-            "flops": float(factor.getMumpsRinfog(3)), "ordering": int(factor.getMumpsInfog(7)),
-            "allocated_mb": int(factor.getMumpsInfo(16)), "used_mb": int(factor.getMumpsInfo(22))}
 
 
 def _reason_name(PETSc, reason: int) -> str:

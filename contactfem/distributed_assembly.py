@@ -127,18 +127,8 @@ class _DistributedSystem:
         frames = _frames(problem, supported)
         blocks = np.stack([frames.a, frames.b], axis=2)  # (k, 2, 2), columns a and b
         stiffness, owned = _assemble_stiffness(PETSc, comm, problem, layout, frames, blocks)
-        indptr, indices, values = stiffness.getValuesCSR()
-        n_local = layout.last - layout.first
-        absolute = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
-                                         csr=(indptr, indices, np.abs(values)), comm=comm)
-        from mpi4py import MPI
-
-        mpi = comm.tompi4py()
-        longest_row = mpi.allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
-        del indptr, indices, values
-        diagonal = stiffness.getDiagonal()
-        largest_diagonal = mpi.allreduce(float(np.abs(diagonal.getArray()).max(initial=0.0)), op=MPI.MAX)
-        diagonal.destroy()
+        absolute, longest_row, largest_diagonal = matrix_scales(PETSc, comm, stiffness, layout.last - layout.first,
+                                                                n_dof)
 
         # Qᵀ F in rotated unknowns, as ReducedSystem builds it: each framed node's [a b]ᵀ F,
         # and a platen's advance the sum of its nodes' a · F (its column of Q).
@@ -204,6 +194,23 @@ class _DistributedSystem:
         values = _gather_entries(diagonal, self.normal_dofs)
         diagonal.destroy()
         return float(np.mean(values))
+
+
+def matrix_scales(PETSc, comm, stiffness, n_local: int, n_dof: int):
+    """|K| (entry by entry, the same pattern), the longest row's stored entries and the largest
+    |diagonal entry| over all ranks: what the round-off bounds and the force unit are made of."""
+    from mpi4py import MPI
+
+    indptr, indices, values = stiffness.getValuesCSR()
+    absolute = PETSc.Mat().createAIJ(size=((n_local, n_dof), (n_local, n_dof)), bsize=2,
+                                     csr=(indptr, indices, np.abs(values)), comm=comm)
+    mpi = comm.tompi4py()
+    longest_row = mpi.allreduce(int(np.diff(indptr).max(initial=0)), op=MPI.MAX)
+    del indptr, indices, values
+    diagonal = stiffness.getDiagonal()
+    largest_diagonal = mpi.allreduce(float(np.abs(diagonal.getArray()).max(initial=0.0)), op=MPI.MAX)
+    diagonal.destroy()
+    return absolute, longest_row, largest_diagonal
 
 
 def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, frames, blocks: np.ndarray):

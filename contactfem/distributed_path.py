@@ -254,7 +254,8 @@ class _CoarsePath:
 def _coarse_path(PETSc, MPI, comm, case: Case, problem, c: float, solver: str, accelerators) -> _CoarsePath | None:
     """The coarser levels of a distributed load path on ``problem`` (its indicator weighted
     by ``c``), as :func:`contactfem.solve._coarse_path` chooses them, or None."""
-    from contactfem.solve import SEQUENCING_METHOD, coarser_level
+    from contactfem.coarse_levels import coarser_level
+    from contactfem.solve import SEQUENCING_METHOD
 
     started = time.perf_counter()
     coarse_problem = coarser_level(problem, lambda request, refine: _problem_without_stiffness(

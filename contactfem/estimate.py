@@ -22,19 +22,77 @@ from pathlib import Path
 
 REFERENCE_UNKNOWNS = 2.1e6
 # petsc: MUMPS on one rank (benchmarks/results/petsc_scaling.json: 26.6 s, 4.35 GB at 2.1M).
-# The size guard uses the one-rank figure whatever the ranks: it cannot know how many of
-# them share this machine's memory, and on one machine they need about as much in all.
-FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0, "petsc": 26.6}
-PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9}
+# On P ranks each needs (1 + RANK_OVERHEAD (P − 1)) / P of it (see :func:`estimate_cost`).
+# amg: CG with smoothed aggregation, every Newton step an iterative solve (benchmarks/amg.py,
+# benchmarks/results/amg.json: 2.95 GB peak at 2.1M unknowns); its "factorisation" is one
+# step's set-up and CG.
+FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0, "petsc": 26.6, "amg": 60.0}
+PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9, "amg": 3.2e9}
 GROWTH = 1.1
+#: What each further rank adds to a distributed solve's memory, as a share of the one-rank
+#: peak: the interfaces' rows and MUMPS's separators held twice, the libraries per process.
+#: benchmarks/results/petsc_scaling.json, square at 2.1M unknowns, MUMPS: the largest rank
+#: needs 0.59–0.60 of the one-rank peak on two ranks (0.18) and 0.35–0.36 on four (0.14):
+#: the larger share keeps the guard on the safe side.
+RANK_OVERHEAD = 0.18
+#: ``auto`` keeps the fastest direct backend while its estimated peak is at most this share
+#: of the memory the process may use; beyond, it solves iteratively (see :func:`choose_backend`).
+#: The quarter left is the model's margin (±25% between meshes of one kind: 18.25 GB
+#: measured for CHOLMOD on the square at 8.4M unknowns against 18.7 GiB modelled) and room
+#: for whatever else the machine runs.
+DIRECT_MEMORY_SHARE = 0.75
 
 
-def estimate_cost(unknowns: int, backend: str) -> dict[str, float]:
-    """Seconds and bytes a solve of ``unknowns`` is expected to take with ``backend``."""
+def estimate_cost(unknowns: int, backend: str, ranks: int = 1) -> dict[str, float]:
+    """Seconds and bytes a solve of ``unknowns`` is expected to take with ``backend``; with
+    ``ranks`` > 1 (petsc, each rank holding its piece of the mesh), the bytes of one rank."""
     scale = max(unknowns, 1) / REFERENCE_UNKNOWNS
     seconds = 1.3 * FACTOR_SECONDS[backend] * scale**GROWTH * 1.25
-    peak = PEAK_BYTES[backend] * scale + 0.15e9  # the interpreter and libraries
+    share = (1 + RANK_OVERHEAD * (ranks - 1)) / ranks
+    peak = PEAK_BYTES[backend] * scale * share + 0.15e9  # the interpreter and libraries
     return {"seconds": seconds, "bytes": peak}
+
+
+@dataclass(frozen=True)
+class BackendChoice:
+    """The backend a solve of a given size uses, and why (``reason``, for report.json and ``check``)."""
+
+    name: str
+    reason: str
+
+
+def choose_backend(unknowns: int, requested: str, limit: "MemoryLimit", iterative: bool = True) -> BackendChoice:
+    """The backend that solves ``unknowns`` unknowns when the case asks for ``requested``.
+
+    A named backend is taken as named. ``auto`` takes the fastest direct backend installed
+    while the cost model (:func:`estimate_cost`: counted unknowns at measured rates, never
+    the clock) puts its peak within :data:`DIRECT_MEMORY_SHARE` of ``limit``; beyond, it
+    takes ``amg`` (CG with algebraic multigrid, which holds no factor) when ``iterative``
+    (a solve that can run iteratively: not a load path) and pyamg is installed.
+
+    Raises
+    ------
+    SolverError
+        For a backend that is not installed (from :func:`contactfem.linalg.resolve_backend`).
+    """
+    from contactfem.linalg import iterative_available, resolve_backend
+
+    backend = resolve_backend(requested)
+    if requested != "auto":
+        return BackendChoice(backend, f"solver.backend = {requested}")
+    direct = estimate_cost(unknowns, backend)["bytes"]
+    share = f"{DIRECT_MEMORY_SHARE:.0%} of {limit.source}"
+    if direct <= DIRECT_MEMORY_SHARE * limit.bytes:
+        return BackendChoice(backend, f"auto: the fastest direct backend installed; its factorisation needs about "
+                                      f"{direct / 2**30:.3g} GiB, within {share}")
+    if not iterative or not iterative_available():
+        why = "a load path is solved by factorisations" if not iterative else "pyamg is not installed"
+        return BackendChoice(backend, f"auto: a factorisation with {backend} needs about {direct / 2**30:.3g} GiB, "
+                                      f"more than {share}, but {why}")
+    iterative_bytes = estimate_cost(unknowns, "amg")["bytes"]
+    return BackendChoice("amg", f"auto: a factorisation with {backend} needs about {direct / 2**30:.3g} GiB, more "
+                                f"than {share}; CG with algebraic multigrid needs about "
+                                f"{iterative_bytes / 2**30:.3g} GiB")
 
 
 #: The fewest stiffness nonzeros per displacement unknown of a P1 mesh: two unknowns per node,

@@ -81,6 +81,8 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
         "unknowns": {"displacement": problem.n_unknowns, "multiplier": int(len(contact.nodes))},
         "solver": {
             "backend": result.backend,
+            "backend_reason": result.backend_reason or f"solver.backend = {case.solver.backend}",
+            "linear": dict(result.linear) or None,
             "status": kernel.status.value,
             "message": kernel.message,
             "iterations": kernel.iterations,

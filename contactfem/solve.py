@@ -20,13 +20,15 @@ import numpy as np
 from contactfem.assembly import shape_gradients, stresses, von_mises
 from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh, build_problem
-from contactfem.discretize.meshing import MeshRequest, estimate_triangles
+from contactfem.discretize.meshing import MeshRequest
 from contactfem.discretize.frames import ReducedSystem
-from contactfem.errors import CaseError, ContactFemError, FactorCapacityError, SolverError
+from contactfem.estimate import choose_backend, memory_limit
+from contactfem.errors import CaseError, FactorCapacityError, SolverError
 from contactfem.kernel import (
     Accelerators,
     ActiveSetSolver,
     Iteration,
+    IterativeSetSolver,
     KernelResult,
     STALL_ITERATIONS,
     PathSolver,
@@ -34,20 +36,13 @@ from contactfem.kernel import (
     default_c,
     solve_contact,
 )
-from contactfem.linalg import DISTRIBUTED_BACKENDS, resolve_backend
-from contactfem.mesh import Mesh
-from contactfem.mesh.transfer import interpolate_p1
+from contactfem.linalg import DISTRIBUTED_BACKENDS, ITERATIVE_BACKENDS, resolve_backend
 from contactfem.methods import get_method
 from contactfem.result import ContactFields, Solution
+from contactfem.coarse_levels import CoarseSolve, coarser_level, correct_in_layer, meshing_pays, predict_from_coarser
 from contactfem.sequencing import (
-    LAYER_SAMPLES,
-    coarse_level_pays,
     coarser,
-    contact_layer,
-    layer_depth,
-    layer_pays,
     PredictedStarts,
-    patch_count,
     predict_active_set,
     prediction_first,
     starting_set,
@@ -81,7 +76,12 @@ class SolveResult:
     kernel : KernelResult
         The kernel's account: status, iterations, history, factorisations.
     backend : str
-        The sparse direct solver used.
+        The linear solver of the Newton steps: a sparse direct backend, or ``amg``.
+    backend_reason : str
+        Why that one (:func:`contactfem.estimate.choose_backend`).
+    linear : mapping
+        The iterative solver's account (CG iterations and residuals of each step, the
+        hierarchies built; :attr:`IterativeSetSolver.figures`); empty for a direct backend.
     timings : mapping of str to float
         Seconds per stage: ``mesh`` and ``assemble`` (when this solve built the
         problem), ``solve`` (sequencing and kernel) and ``postprocess``.
@@ -102,6 +102,8 @@ class SolveResult:
     timings: Mapping[str, float] = field(default_factory=dict)
     sequencing: Mapping = field(default_factory=dict)
     coarse_levels: Mapping = field(default_factory=dict, repr=False)
+    backend_reason: str = ""
+    linear: Mapping = field(default_factory=dict)
 
 
 def prepare(
@@ -182,14 +184,20 @@ def solve_case(
     say = progress or (lambda message: None)
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
-    backend = _serial_backend(case)
+    _serial_backend(case)
     timings: dict[str, float] = {}
     kept = {} if coarse_levels is None else coarse_levels
     if problem is None:
         problem = prepare(case, refine=refine, progress=say, timings=timings)
+    choice = choose_backend(problem.n_unknowns, case.solver.backend, memory_limit())
+    backend = choice.name
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
-    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators)
+    if backend in ITERATIVE_BACKENDS:
+        say(f"  {choice.reason}")
+    linear: dict = {}
+    reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators,
+                                                 linear)
     timings["solve"] = time.perf_counter() - clock
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
@@ -200,15 +208,17 @@ def solve_case(
     solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
     timings["postprocess"] = time.perf_counter() - clock
     return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
-                       timings=timings, sequencing=sequencing, coarse_levels=kept)
+                       timings=timings, sequencing=sequencing, coarse_levels=kept, backend_reason=choice.reason,
+                       linear=linear)
 
 
 def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend: str, say: Progress,
                    coarse_levels: dict | None = None, accelerators: Accelerators | None = None,
-                   ) -> tuple[ReducedSystem, KernelResult, dict]:
+                   linear_figures: dict | None = None) -> tuple[ReducedSystem, KernelResult, dict]:
     """The kernel's view of ``problem``, its contact solve (the active set predicted from
     coarser meshes, kept in or taken from ``coarse_levels``: see :func:`solve_case`) and
-    what the prediction cost: what a fine solve and a coarse level share."""
+    what the prediction cost: what a fine solve and a coarse level share. An iterative
+    ``backend`` writes its account into ``linear_figures``."""
     tolerance = case.solver.tolerance
     accelerators = case_accelerators(case) if accelerators is None else accelerators
     kept = {} if coarse_levels is None else coarse_levels
@@ -230,8 +240,11 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
             reduced = problem.contact_system(contact_method)
             return reduced, case.solver.c if case.solver.c is not None else default_c(reduced.system)
 
-        def solver() -> ActiveSetSolver:
-            return ActiveSetSolver(fine_soon.result()[0].system, backend, tolerance=tolerance,
+        def solver() -> ActiveSetSolver | IterativeSetSolver:
+            reduced = fine_soon.result()[0]
+            if backend in ITERATIVE_BACKENDS:
+                return IterativeSetSolver(reduced.system, reduced.rigid_motions(), tolerance=tolerance)
+            return ActiveSetSolver(reduced.system, backend, tolerance=tolerance,
                                    schur_updates=accelerators.schur_updates)
 
         if problem.n_unknowns >= BESIDE_COARSER_FROM:
@@ -277,6 +290,8 @@ def _contact_solve(case: Case, problem: DiscreteProblem, contact_method, backend
         stalled_guess=stalled_guess if initial_active is None and sequenced else None,
         linear=linear,
     )
+    if isinstance(linear, IterativeSetSolver) and linear_figures is not None:
+        linear_figures.update(linear.figures)
     return reduced, kernel, sequencing
 
 
@@ -293,7 +308,7 @@ def _worth_meshing(problem: DiscreteProblem, kept: dict) -> bool:
     case is kept in ``kept`` for :func:`coarser_level`."""
     if "coarser" not in kept:
         kept["coarser"] = coarser(problem.mesh_request, problem.refinements)
-    return kept["coarser"] is not None and _meshing_pays(problem, *kept["coarser"])
+    return kept["coarser"] is not None and meshing_pays(problem, *kept["coarser"])
 
 
 class _InPlace:
@@ -370,6 +385,9 @@ def solve_load_path(
     method_name = method or case.solver.method
     contact_method = get_method(method_name)
     backend = _serial_backend(case)
+    if case.solver.backend in ITERATIVE_BACKENDS:
+        raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: a load path is solved by "
+                        "factorisations carried from step to step, not iteratively; use auto or a direct backend")
     factors = case.load_path.factors
     timings: dict[str, float] = {}
     problem = prepare(case, refine=refine, progress=say, timings=timings)
@@ -501,8 +519,6 @@ def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
     """Refuse, before solving, a path whose steps' fields (displacement, stresses, von Mises,
     contact fields), all kept, would not fit in a quarter of memory (``contactfem solve``
     writes each step as it is solved and keeps none)."""
-    from contactfem.estimate import memory_limit
-
     mesh = problem.mesh
     per_step = 8 * (2 * mesh.n_points + 5 * mesh.n_triangles + 6 * len(problem.contact.nodes))
     steps = len(case.load_path.factors)
@@ -516,28 +532,16 @@ def _refuse_oversized_path(case: Case, problem: DiscreteProblem) -> None:
 
 
 def _serial_backend(case: Case) -> str:
-    """The case's backend, which must run in this process (petsc runs under mpiexec)."""
+    """The case's direct backend, which must run in this process (petsc runs under mpiexec):
+    what coarse levels, layers and load paths factorise with (``amg`` and ``auto`` give the
+    fastest direct backend installed; the fine level's is :func:`contactfem.estimate.choose_backend`'s)."""
     backend = resolve_backend(case.solver.backend)
     if backend in DISTRIBUTED_BACKENDS:
         raise CaseError(f"{case.source.name}: solver.backend = {backend}: runs a solve across MPI ranks, as "
                         "`mpiexec -n P contactfem solve CASE --backend petsc`; this command solves in one "
-                        "process (use auto, cholmod, pardiso or superlu)")
-    return backend
+                        "process (use auto, cholmod, pardiso, superlu or amg)")
+    return resolve_backend("auto") if backend in ITERATIVE_BACKENDS else backend
 
-
-@dataclass(frozen=True, eq=False)
-class CoarseSolve:
-    """What a coarse level hands the prediction: its contact fields and its solve's account,
-    and its mesh and displacement where the fine level corrects the prediction in a layer
-    along ΓC (a serial solve; None across MPI ranks)."""
-
-    contact: ContactFields
-    kernel: KernelResult
-    sequencing: Mapping
-    mesh: Mesh | None = None
-    displacement: np.ndarray | None = None
-    #: Whether an earlier solve of the same fine problem meshed and solved this level.
-    reused: bool = False
 
 
 def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[], tuple[ReducedSystem, float]],
@@ -575,165 +579,6 @@ def _predict_from_coarser(case: Case, problem: DiscreteProblem, fine: Callable[[
 
     return predict_from_coarser(problem, lambda: fine()[1], say, prepare_coarse, solve_coarse, correct, forced,
                                 kept.get("coarser"))
-
-
-def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.ndarray, c: float, tolerance: float,
-                     max_iterations: int | None, backend: str) -> tuple[np.ndarray, dict]:
-    """The predicted ``active`` set corrected on the fine mesh in a layer along ΓC, and what
-    that cost; ``active`` itself (and an empty record) when the layer is not expected to
-    pay (:func:`contactfem.sequencing.layer_pays`) or its solve fails.
-
-    A coarse level that decimated a rough profile, or whose elements are wider than the
-    asperities, misplaces the fine zone at asperity scale, while further from ΓC its
-    solution is right. So the fine system is solved, with contact, on the nodes within
-    :func:`contactfem.sequencing.layer_depth` of ΓC, every unknown outside fixed at the
-    coarse displacement; its active set is the fine prediction.
-    """
-    started = time.perf_counter()
-    problem = reduced.problem
-    fine_unknowns = problem.n_unknowns
-    patches = patch_count(active)
-    if coarse.mesh is None or coarse.displacement is None or not layer_pays(fine_unknowns, 0, patches):
-        return active, {}
-    points, boundary = problem.mesh.points, problem.mesh.points[problem.contact.nodes]
-    depth = layer_depth(problem.mesh)
-    # The layer's share from an even sample of the nodes first: on a mesh graded onto ΓC
-    # it is most of the mesh, and finding every node of it would be wasted. Near an even
-    # sample of the contact nodes is within the layer too: that lower bound refuses such a
-    # mesh without a search among all of them (11-22 ms from 52 000 to 209 000 unknowns
-    # on a rough profile's graded mesh, 95% of whose nodes are in the layer).
-    sample = points[::max(1, len(points) // LAYER_SAMPLES)]
-    few = boundary[::max(1, len(boundary) // LAYER_SAMPLES)]
-    for nearby in (few, boundary) if len(few) < len(boundary) else (boundary,):
-        share = float(contact_layer(sample, nearby, depth).mean())
-        if not layer_pays(fine_unknowns, int(0.9 * share * fine_unknowns), patches):
-            return active, {}
-    nodes = contact_layer(points, boundary, depth)
-    keep = np.repeat(nodes, 2)
-    if not layer_pays(fine_unknowns, int(keep.sum()), patches):
-        return active, {}
-    system = reduced.system
-    outside = system.coupled_outside(keep)
-    if len(outside) == 0:
-        return active, {}  # the layer is the whole body: nothing to gain
-    rim = np.unique(outside // 2)
-    displacement = np.zeros((problem.mesh.n_points, 2))
-    displacement[rim] = interpolate_p1(coarse.mesh, coarse.displacement, problem.mesh.points[rim])
-    layer = system.restricted(keep, reduced.reduce(displacement.ravel()))
-    try:
-        result = solve_contact(layer, c=c, initial_active=active, tolerance=tolerance,
-                               max_iterations=max_iterations, backend=backend)
-    except SolverError:
-        return active, {}
-    # A set that settled is a prediction whether or not its iterate passes the certificate.
-    if result.status not in (Status.CONVERGED, Status.NOT_CERTIFIED):
-        return active, {}
-    return result.active, {
-        "layer_unknowns": int(keep.sum()),
-        "layer_iterations": result.iterations,
-        "layer_factorizations": result.factorizations,
-        "layer_changes": int(np.count_nonzero(result.active != active)),
-        "layer_seconds": time.perf_counter() - started,
-    }
-
-
-def coarser_level(problem: DiscreteProblem, prepare_coarse: Callable[[MeshRequest, int], DiscreteProblem],
-                  forced: bool = False, coarse: tuple[MeshRequest, int] | None = None) -> DiscreteProblem | None:
-    """The coarser level that predicts ``problem``'s active set (its problem, from
-    ``prepare_coarse`` on the coarser mesh request that :func:`contactfem.sequencing.coarser`
-    derives from ``problem.mesh_request``), or None when the problem is small, no coarser
-    mesh exists, the mesher or the contact checks refuse the decimated boundary, or the level
-    is not expected to pay for itself (:func:`contactfem.sequencing.coarse_level_pays`,
-    decided before it is meshed from an estimate of its unknowns, and again from them once
-    it is). ``forced``: whatever the size and the cost model (a cold start that stalled), as
-    long as the coarser mesh is smaller. ``coarse``: the coarser request and its
-    refinements, when already made."""
-    if not forced and not worth_sequencing(problem.n_unknowns):
-        return None
-    coarse = coarser(problem.mesh_request, problem.refinements) if coarse is None else coarse
-    if coarse is None:
-        return None
-    request, coarse_refine = coarse
-    if not forced and not _meshing_pays(problem, request, coarse_refine):
-        return None  # not worth meshing: a tread's teeth keep 38% of the unknowns at every level
-    try:
-        coarse_problem = prepare_coarse(request, coarse_refine)
-    except ContactFemError:
-        return None
-    if not (coarse_level_pays(problem.n_unknowns, coarse_problem.n_unknowns)
-            or forced and coarse_problem.n_unknowns < problem.n_unknowns):
-        return None
-    return coarse_problem
-
-
-def _meshing_pays(problem: DiscreteProblem, request: MeshRequest, coarse_refine: int) -> bool:
-    """Whether the coarser level ``request`` is worth meshing: the cost model, meshing
-    included, on its :func:`_estimated_unknowns`."""
-    return coarse_level_pays(problem.n_unknowns, _estimated_unknowns(problem, request, coarse_refine), meshed=False)
-
-
-def _estimated_unknowns(problem: DiscreteProblem, request: MeshRequest, coarse_refine: int) -> int:
-    """The coarser level's unknowns before it is meshed: ``problem``'s in the ratio of the two
-    meshes' estimated triangles (:func:`contactfem.discretize.meshing.estimate_triangles`);
-    a sixteenth where nothing is estimated."""
-    fine = estimate_triangles(problem.mesh_request, problem.refinements)
-    coarse = estimate_triangles(request, coarse_refine)
-    if fine <= 0 or coarse <= 0:
-        return problem.n_unknowns // 16
-    return int(problem.n_unknowns * min(coarse / fine, 1.0))
-
-
-def predict_from_coarser(problem: DiscreteProblem, c: Callable[[], float], say: Progress,
-                         prepare_coarse: Callable[[MeshRequest, int], DiscreteProblem],
-                         solve_coarse: Callable[[DiscreteProblem], CoarseSolve],
-                         correct: Callable[[CoarseSolve, np.ndarray], tuple[np.ndarray, dict]] | None = None,
-                         forced: bool = False, coarse: tuple[MeshRequest, int] | None = None,
-                         ) -> tuple[np.ndarray | None, dict]:
-    """Mesh sequencing with the given ways to assemble and solve the coarse level (in this
-    process, or across MPI ranks), and optionally to ``correct`` its prediction on the
-    fine mesh: the predicted active set and what it cost. ``c`` gives the fine kernel's c,
-    asked for once the coarse level has solved.
-
-    (None, {}) when there is no :func:`coarser_level` (``forced``: see there) or solving it
-    fails: a prediction is only a starting point, and without one the kernel starts cold.
-    ``coarse``: the coarser mesh request and its refinements, when already made (:func:`coarser`).
-    """
-    started = time.perf_counter()
-    coarse_problem = coarser_level(problem, prepare_coarse, forced, coarse)
-    if coarse_problem is None:
-        return None, {}
-    try:
-        coarse_result = solve_coarse(coarse_problem)
-    except SolverError:
-        return None, {}
-    coarse_kernel = coarse_result.kernel
-    settled = coarse_kernel.status is Status.CONVERGED
-    # A coarse level that stopped unsettled (its own cap, a cycle) still predicts, if its last
-    # iterate is finite: a prediction is only a start, which the fine level corrects and
-    # certifies. A strip 1 x 0.001 peeling off, 800 x 2 cells, whose 400 x 1 level creeps
-    # past its own cap, went on cold without one and did not settle in 800 steps.
-    if not settled and not (forced and np.isfinite(coarse_kernel.displacement).all()
-                            and np.isfinite(coarse_kernel.multiplier).all()):
-        return None, {}
-    active = predict_active_set(problem.contact, coarse_result.contact, c(), problem.law)
-    say(f"  predicted {int(active.sum())} active nodes from {coarse_problem.n_unknowns} unknowns")
-    corrected: dict = {}
-    if correct is not None:
-        active, corrected = correct(coarse_result, active)
-        if corrected:
-            say(f"  corrected {corrected['layer_changes']} of them in a layer of {corrected['layer_unknowns']} "
-                "unknowns along the contact boundary")
-    return active, {
-        "coarse_unknowns": coarse_problem.n_unknowns,
-        "coarse_iterations": coarse_result.kernel.iterations,
-        "coarse_factorizations": coarse_result.kernel.factorizations,
-        "predicted_active": int(active.sum()),
-        "levels": 1 + coarse_result.sequencing.get("levels", 0),
-        **({} if settled else {"coarse_status": coarse_kernel.status.value}),
-        **({"coarse_reused": True} if coarse_result.reused else {}),
-        **corrected,
-        "seconds": time.perf_counter() - started,
-    }
 
 
 def _solution(method: str, problem: DiscreteProblem, displacement: np.ndarray, kernel: KernelResult,

@@ -6,10 +6,24 @@ Nothing here prints or writes; the command line renders the returned dictionarie
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from contactfem.case import Case
+from contactfem.discretize import DiscreteProblem
+from contactfem.engines import in_order
+from contactfem.errors import (
+    ArchiveError,
+    CaseError,
+    ContactFemError,
+    FactorCapacityError,
+    MeshCapError,
+    MeshError,
+    OutputError,
+    SolverError,
+)
 from contactfem.methods import METHOD_NAMES
 from contactfem.norms import (
     NORM_NAMES,
@@ -19,6 +33,7 @@ from contactfem.norms import (
     observed_rates,
 )
 from contactfem.report import case_record, contact_zone, sign_conditions
+from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, prepare, solve_case
 
 #: Version of compare.json's layout (contactfem/schemas/compare.schema.json).
@@ -101,19 +116,116 @@ def _total_variation(values: np.ndarray, mask: np.ndarray) -> float:
     return float(np.abs(np.diff(values))[both].sum()) if len(values) > 1 else 0.0
 
 
-def _estimates(case: Case, outcome, earlier: list) -> dict:
+@dataclass(frozen=True)
+class Reference:
+    """The nested reference of a convergence study, computed once and read by every level:
+    per method its solution and the problem it solved (``solved``), the positive method's
+    λ (``multiplier``, λ_ref for both methods) and its refinement of the case's mesh."""
+
+    solved: dict[str, tuple[Solution, DiscreteProblem]]
+    multiplier: np.ndarray
+    refine: int
+
+
+def nested_reference(case: Case, refine: int, methods: tuple[str, ...],
+                     progress: Progress | None = None) -> Reference:
+    """The solutions of ``case`` on its mesh refined ``refine`` times, for each method."""
+    problem = prepare(case, refine=refine, progress=progress)
+    outcomes = {name: solve_case(case, method=name, problem=problem, progress=progress) for name in methods}
+    positive = outcomes.get("positive") or solve_case(case, method="positive", problem=problem)
+    # What nested_errors reads of a problem; the loads and the exact solution may hold
+    # compiled expressions, which do not travel to other processes.
+    solved = {name: (o.solution, replace(o.problem, loads=None, exact=None, mesh_request=None))
+              for name, o in outcomes.items()}
+    return Reference(solved=solved, multiplier=nodal_multiplier(positive.solution), refine=refine)
+
+
+def study_level(task: dict, reference: Reference | None, progress: Progress | None = None) -> dict:
+    """One level of a convergence study (``task``: the case's ``text``, ``source`` and
+    ``digest``, the ``index`` of the level, its ``refine`` and the ``methods``), wherever the
+    engine runs it: its rows without the estimates that need the other levels, the energy
+    estimate and contact quantities of each method, and the solutions; or the ``failure``
+    ``(kind, message)`` that stopped it (kind: the name of a ContactFemError class, or
+    ``"memory"``), so that the caller raises the same kind of error naming the level.
+    ``progress``: the stages of its mesh and solves, when it runs in the caller's process."""
+    from contactfem.accuracy import energy_estimate, quantities
+    from contactfem.case import parse_case
+    from contactfem.engines import worker_budget
+
+    level = task["index"]
+    if progress is not None:
+        progress(f"level {level} of {task['levels'] - 1}")
+    detail = None if progress is None else (lambda message: progress("  " + message.strip()))
+    try:
+        case = parse_case(task["text"], source=task["source"])
+        if case.digest != task["digest"]:
+            files = ", ".join(path.name for path in case.data_files)
+            raise CaseError(f"{Path(task['source']).name}: a data file it reads ({files}) changed during the study")
+        timings: dict[str, float] = {}
+        started = time.perf_counter()
+        with worker_budget():
+            problem = prepare(case, refine=task["refine"], timings=timings, progress=detail)
+            setup = time.perf_counter() - started
+            rows, energy, contact, solutions = [], {}, {}, {}
+            for name in task["methods"]:
+                outcome = solve_case(case, method=name, problem=problem, progress=detail)
+                if problem.exact is not None:
+                    errors = exact_errors(outcome.solution, problem, problem.exact)
+                else:
+                    solution, fine = reference.solved[name]
+                    errors = nested_errors(outcome.solution, solution, fine, levels=reference.refine - task["refine"],
+                                           reference_multiplier=reference.multiplier)
+                rows.append({
+                    "level": level,
+                    "method": name,
+                    "h": float(problem.mesh.triangle_diameters().max()),
+                    "unknowns": problem.n_unknowns,
+                    "contact_nodes": int(len(problem.contact.nodes)),
+                    "iterations": outcome.kernel.iterations,
+                    "mesh_seconds": timings["mesh"],
+                    "assemble_seconds": timings["assemble"],
+                    "solve_seconds": outcome.timings["solve"],
+                    "total_seconds": setup + outcome.timings["solve"] + outcome.timings["postprocess"],
+                    **errors,
+                })
+                energy[name] = energy_estimate(outcome)
+                contact[name] = quantities(outcome.problem, outcome.solution.contact)
+                solutions[name] = outcome.solution
+    except ContactFemError as error:
+        return {"level": level, "failure": (type(error).__name__, str(error))}
+    except MemoryError:
+        return {"level": level, "failure": ("memory", "out of memory while solving this level")}
+    return {"level": level, "rows": rows, "energy": energy, "quantities": contact, "solutions": solutions}
+
+
+#: A level's failure is raised as the nearest of these to its own kind (the exit code follows it).
+_FAILURE_KINDS = (MeshCapError, MeshError, CaseError, ArchiveError, FactorCapacityError, SolverError, OutputError)
+
+
+def _level_failure(level: int, refine: int, kind: str, message: str) -> ContactFemError:
+    """The error of a level that did not solve, naming it; of the kind the level raised."""
+    where = f"converge level {level} (refine {refine})"
+    if kind == "memory":
+        return FactorCapacityError(f"{where}: {message}; use fewer levels, or give each worker more memory")
+    found = next((k for k in _FAILURE_KINDS if k.__name__ == kind), None)
+    if found is MeshCapError or found is None:
+        found = MeshError if found is MeshCapError else ContactFemError
+    return found(f"{where}: {message}")
+
+
+def _estimated(fine: dict, energy: dict, earlier: list) -> dict:
     """A level's estimated errors, as a solve's report.json gives them (none a bound): η and
     η / ‖u_h‖_a, and each contact quantity's Richardson estimate from the study's previous
-    two levels (h twice and four times as large, for nothing); ``earlier`` gains this level."""
-    from contactfem.accuracy import Level, accuracy_figures, quantities
+    two levels (h twice and four times as large, for nothing); ``earlier`` gains this level
+    (its unknowns and quantities: ``fine``)."""
+    from contactfem.accuracy import Level, quantity_estimates
 
     levels = [Level(ratio=2.0 ** (len(earlier) - j), unknowns=unknowns, source="earlier step", quantities=values)
               for j, (unknowns, values) in reversed(list(enumerate(earlier)))][:2]
-    figures = accuracy_figures(case, outcome, history=levels)
-    earlier.append((outcome.problem.n_unknowns, quantities(outcome.problem, outcome.solution.contact)))
-    energy = figures["energy"]
+    estimates = quantity_estimates(fine["quantities"], levels, "no earlier mesh to compare with")
+    earlier.append((fine["unknowns"], fine["quantities"]))
     return {"estimated_energy": energy["estimate"], "estimated_energy_relative": energy.get("relative"),
-            **{f"estimated_{name}": entry["estimate"] for name, entry in figures["quantities"].items()}}
+            **{f"estimated_{name}": entry["estimate"] for name, entry in estimates.items()}}
 
 
 def convergence_study(
@@ -123,68 +235,76 @@ def convergence_study(
     extra: int = 1,
     methods: tuple[str, ...] = METHOD_NAMES,
     progress: Progress | None = None,
-    on_outcome=None,
+    on_solution=None,
+    engine=None,
 ) -> dict:
     """Solve on ``levels`` nested meshes (the case's mesh refined 0 … levels−1 times).
 
     The reference is the case's exact solution when it has one, otherwise the solution on
     the mesh ``extra`` refinements finer than the last level (its positive-method λ is
-    λ_ref for both methods). Each row carries h, unknowns, seconds per stage, Newton
-    iterations and every error norm; ``rates`` holds the observed rate between levels.
+    λ_ref for both methods), computed once here and shared with every level. The levels are
+    tasks of ``engine`` (:mod:`contactfem.engines`; default: this process, one after another)
+    and are put back in level order, so the figures do not depend on where they ran. Each
+    row carries h, unknowns, seconds per stage, Newton iterations and every error norm;
+    ``rates`` holds the observed rate between levels. ``on_solution(level, method,
+    solution)`` receives every level's solution, in order. Each level validates the case's
+    text (``case.text``) again, as a worker must: a case changed after it was parsed is
+    solved as its text says.
+
+    Raises
+    ------
+    ContactFemError
+        Of the kind the failing level raised, naming the level.
     """
+    from contactfem.engines import SerialEngine
+
+    engine = engine if engine is not None else SerialEngine()
     say = progress or (lambda message: None)
-
-    def detail(message: str) -> None:
-        say("  " + message.strip())
-
     base_refine = case.mesh.refine
     reference = None
     if case.exact is None:  # no exact solution: the reference is a finer nested solve
-        finest = base_refine + levels - 1 + extra
         say(f"reference: {extra} refinement(s) beyond the last level")
-        reference_problem = prepare(case, refine=finest, progress=detail)
-        reference = {
-            name: solve_case(case, method=name, problem=reference_problem, progress=detail) for name in methods
-        }
-        reference_lambda = nodal_multiplier(
-            (reference.get("positive") or solve_case(case, method="positive", problem=reference_problem)).solution
-        )
+        reference = nested_reference(case, base_refine + levels - 1 + extra, methods,
+                                     progress=lambda message: say("  " + message.strip()))
+    tasks = [{"index": level, "levels": levels, "refine": base_refine + level, "methods": tuple(methods),
+              "text": case.text,
+              "source": str(Path(case.source).absolute()), "digest": case.digest} for level in range(levels)]
+
+    def lost(task: dict, reason: str) -> dict:
+        return {"level": task["index"], "failure": ("SolverError", reason)}
+
+    finished_levels: dict[int, dict] = {}
+
+    def finished(task: dict, value: dict, done: int, total: int) -> None:
+        finished_levels[task["index"]] = value
+        if "failure" in value:
+            say(f"[{done}/{total}] level {task['index']}: failed, {value['failure'][1]}")
+        else:
+            # In this process the level's own stages came first: its rows are their details.
+            where = "  " if engine.kind == "serial" else f"[{done}/{total}] "
+            for row in value["rows"]:
+                say(f"{where}level {row['level']} {row['method']}: h = {row['h']:.4g}, {row['unknowns']} "
+                    f"unknowns, H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
+        # The study stops at its lowest failing level, as one run after another would: once
+        # every level below a failure has finished (the levels still running are cancelled).
+        failed = min((level for level, v in finished_levels.items() if "failure" in v), default=None)
+        if failed is not None and all(level in finished_levels for level in range(failed)):
+            raise _level_failure(failed, base_refine + failed, *finished_levels[failed]["failure"])
+
+    with engine.shared(reference) as shared:
+        # Run here, a level reports its stages as it goes; a worker's would not reach this terminal.
+        level = study_level if engine.kind != "serial" or progress is None else (
+            lambda task, reference: study_level(task, reference, progress=say))
+        results = in_order(engine, level, tasks, shared, lost=lost, name="level", progress=finished)
     rows = []
     earlier: dict[str, list] = {name: [] for name in methods}  # (unknowns, quantities) per level
-    for level in range(levels):
-        timings: dict[str, float] = {}
-        started = time.perf_counter()
-        say(f"level {level} of {levels - 1}")
-        problem = prepare(case, refine=base_refine + level, timings=timings, progress=detail)
-        setup = time.perf_counter() - started
-        for name in methods:
-            outcome = solve_case(case, method=name, problem=problem, progress=detail)
-            if on_outcome is not None:  # on_outcome(level, method, outcome), e.g. to keep the fields
-                on_outcome(level, name, outcome)
-            if problem.exact is not None:
-                errors = exact_errors(outcome.solution, problem, problem.exact)
-            else:
-                errors = nested_errors(
-                    outcome.solution, reference[name].solution, reference[name].problem,
-                    levels=finest - base_refine - level, reference_multiplier=reference_lambda,
-                )
-            row = {
-                "level": level,
-                "method": name,
-                "h": float(problem.mesh.triangle_diameters().max()),
-                "unknowns": problem.n_unknowns,
-                "contact_nodes": int(len(problem.contact.nodes)),
-                "iterations": outcome.kernel.iterations,
-                "mesh_seconds": timings["mesh"],
-                "assemble_seconds": timings["assemble"],
-                "solve_seconds": outcome.timings["solve"],
-                "total_seconds": setup + outcome.timings["solve"] + outcome.timings["postprocess"],
-                **errors,
-                **_estimates(case, outcome, earlier[name]),
-            }
-            rows.append(row)
-            detail(f"level {level} {name}: h = {row['h']:.4g}, {row['unknowns']} unknowns, "
-                   f"H1 error {row['displacement_h1']:.3e}, {row['total_seconds']:.2f} s")
+    for result in results:
+        for row in result["rows"]:
+            name = row["method"]
+            fine = {"unknowns": row["unknowns"], "quantities": result["quantities"][name]}
+            rows.append({**row, **_estimated(fine, result["energy"][name], earlier[name])})
+            if on_solution is not None:
+                on_solution(result["level"], name, result["solutions"][name])
     rates = {}
     for name in methods:
         mine = [r for r in rows if r["method"] == name]

@@ -21,7 +21,7 @@ the data files it reads (the case's digest) names the point's stored record
 and a point whose profile, outline or mesh file changed anew.
 
 Each point is solved by :func:`solve_point`, in this process one after another or on a
-Dask cluster (an optional dependency, imported only by :func:`open_engine`). Nothing here
+Dask cluster (:mod:`contactfem.engines`, Dask an optional dependency imported there). Nothing here
 writes or prints: :func:`run_sweep` hands every finished point to the caller's callbacks
 (the command line stores it at once and prints a line) and returns the table.
 
@@ -41,20 +41,32 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager, nullcontext
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from contactfem import __version__
-from contactfem.case import parse_case, shortened
-from contactfem.errors import ArchiveError, CaseError, ContactFemError, FactorCapacityError, MeshError, SolverError
-from contactfem.estimate import MemoryLimit, memory_budget
+from contactfem.case import parse_case
+from contactfem.errors import ArchiveError, CaseError, ContactFemError, FactorCapacityError, MeshError
+# Re-exported: the engines were first written for sweeps.
+from contactfem.engines import (  # noqa: F401
+    CONNECT_TIMEOUT,
+    INSTALL_HINT,
+    RETRIES,
+    SINGLE_THREADED,
+    DaskEngine,
+    DaskMissing,
+    SerialEngine,
+    dask_setup,
+    local_cluster_size,
+    open_engine,
+    worker_budget,
+    worker_memory_limit,
+)
 from contactfem.report import build_report
 from contactfem.solve import solve_case
 # Re-exported: the plan and the table are part of this module's interface.
@@ -91,35 +103,9 @@ POINTS_DIR = "points"
 STATUSES = ("ok", "not_certified", "invalid", "failed", "error")
 #: What a later run reuses: a deterministic outcome. An ``error`` is tried again.
 STORED_STATUSES = ("ok", "not_certified", "invalid", "failed")
-#: Dask re-runs a point whose task raised this many times (a worker that dies is handled by
-#: the scheduler itself: it reschedules the point on another worker, up to
-#: ``distributed.scheduler.allowed-failures`` deaths).
-RETRIES = 2
-#: Solves run one per worker process: BLAS and OpenMP threads would only compete.
-SINGLE_THREADED = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-                   "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1"}
-INSTALL_HINT = "pip install -e '.[dask]'"
-#: How long to wait for an existing scheduler to answer.
-CONNECT_TIMEOUT = "10s"
 
 
 # --------------------------------------------------------------------------- one point
-
-
-def worker_memory_limit() -> MemoryLimit | None:
-    """The memory limit of the Dask worker running this point (None: not in a worker, or it
-    has none). Its nanny kills a worker past it, so the size guard refuses against it: a
-    point too large for its worker is recorded as invalid at once instead of killing three
-    workers in turn."""
-    try:
-        from distributed import get_worker
-
-        limit = get_worker().memory_manager.memory_limit
-    except (ImportError, ValueError, AttributeError):
-        return None
-    if not limit:
-        return None
-    return MemoryLimit(int(limit), f"this sweep worker's memory limit of {limit / 2**30:.3g} GiB")
 
 
 def solve_point(task: Mapping[str, Any]) -> dict:
@@ -143,7 +129,7 @@ def solve_point(task: Mapping[str, Any]) -> dict:
                 record.update(failure("error", f"{Path(task['source']).name}: a data file it reads ({files}) "
                                                "changed since the sweep was planned; run the sweep again"))
             else:
-                with memory_budget(limit) if (limit := worker_memory_limit()) is not None else nullcontext():
+                with worker_budget():
                     result = solve_case(case, accept_uncertified=True)
                 report = build_report(case, result)
                 record.update(_figures(case, result, report))
@@ -256,161 +242,10 @@ def finished_points(points_dir: Path, sweep: Sweep, read: Callable[[Path], dict]
     return found
 
 
-# --------------------------------------------------------------------------- engines
-
-
-class DaskMissing(ImportError):
-    """Dask (distributed) is not installed."""
-
-
-class SerialEngine:
-    """The points one after another in this process."""
-
-    kind = "serial"
-    scheduler = None
-    workers = 1
-    note: str | None = None
-    startup_seconds = 0.0
-
-    def map(self, function: Callable[[dict], dict], tasks: list[dict]) -> Iterator[tuple[dict, dict]]:
-        for task in tasks:
-            try:
-                record = function(task)
-            except Exception as error:  # noqa: BLE001 - as on a Dask worker: the point's message
-                record = _lost(task, "error", f"{type(error).__name__}: {error}")
-            yield task, record
-
-
-class DaskEngine:
-    """The points as Dask tasks on ``client``'s cluster, yielded as they finish."""
-
-    kind = "dask"
-    note: str | None = None
-
-    def __init__(self, client, scheduler: str | None = None, retries: int = RETRIES,
-                 startup_seconds: float = 0.0) -> None:
-        self.client = client
-        self.scheduler = scheduler
-        self.retries = retries
-        self.startup_seconds = startup_seconds
-
-    @property
-    def workers(self) -> int:
-        return len(self.client.scheduler_info().get("workers", {}))
-
-    def map(self, function: Callable[[dict], dict], tasks: list[dict]) -> Iterator[tuple[dict, dict]]:
-        from distributed import KilledWorker, as_completed
-
-        token = os.urandom(4).hex()
-        futures = {self.client.submit(function, task, key=f"contactfem-point-{task['index']}-{token}",
-                                      retries=self.retries, pure=False): task for task in tasks}
-        try:
-            for future in as_completed(list(futures), loop=self.client.loop):
-                task = futures.pop(future)
-                try:
-                    record = future.result()
-                except KilledWorker:
-                    record = _lost(task, "error", "every worker that ran this point died (killed, or over its "
-                                                  "memory limit); it is tried again when the sweep is rerun")
-                except Exception as error:  # noqa: BLE001 - any task exception becomes the point's message
-                    record = _lost(task, "error", f"{type(error).__name__}: {error}")
-                future.release()
-                yield task, record
-        finally:
-            if futures:  # interrupted: nothing left should keep running on the cluster
-                self.client.cancel(list(futures))
-
-
-def _lost(task: dict, status: str, reason: str) -> dict:
+def _lost(task: dict, reason: str) -> dict:
+    """The record of a point whose task raised, or whose every worker died: tried again by the next run."""
     return {"schema_version": POINT_SCHEMA_VERSION, "contactfem_version": __version__, "digest": task["digest"],
-            "case_text": task["text"], **failure(status, f"{Path(task['source']).name}: {reason}")}
-
-
-def dask_setup(worker) -> None:
-    """Dask's preload hook, run in each worker of the local cluster as it starts (a restarted one
-    too): Ctrl-C on a terminal reaches the whole process group, but stopping is the command's
-    job (it cancels the points and closes the cluster); a worker that took it would print its
-    own traceback."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def local_cluster_size(workers: int | None, pending: int) -> tuple[int, int]:
-    """Workers and bytes of memory each for a cluster on this machine: ``workers`` or one per
-    core, at most one per point to solve, the machine's memory shared out among them."""
-    from dask.system import CPU_COUNT
-    from distributed.system import MEMORY_LIMIT
-
-    count = max(1, min(workers if workers is not None else CPU_COUNT, pending))
-    return count, int(MEMORY_LIMIT // count)
-
-
-@contextmanager
-def open_engine(scheduler: str | None = None, workers: int | None = None,
-                pending: int = 1) -> Iterator[SerialEngine | DaskEngine]:
-    """The engine a sweep runs on: a LocalCluster of ``workers`` processes by default (one thread
-    each, single-threaded BLAS, a memory limit each), the cluster at ``scheduler`` if given,
-    and this process if Dask is not installed (``engine.note`` then says how to install it).
-
-    Raises
-    ------
-    CaseError
-        ``scheduler`` is given but Dask is not installed or the scheduler does not answer.
-    """
-    try:
-        import dask
-        import distributed
-    except ImportError:
-        if scheduler is not None:
-            raise CaseError(f"--scheduler {shortened(scheduler, 80)}: Dask is not installed; "
-                            f"expected Dask for a cluster ({INSTALL_HINT})") from None
-        engine = SerialEngine()
-        engine.note = (f"Dask is not installed: the points run one after another in this process "
-                       f"({INSTALL_HINT} runs them in parallel)")
-        yield engine
-        return
-    import logging
-
-    clock = time.perf_counter()
-    if scheduler is not None:
-        from distributed.comm.addressing import parse_address, parse_host_port
-
-        try:
-            scheme, location = parse_address(scheduler)
-            if scheme in ("tcp", "tls", "ws", "wss"):
-                parse_host_port(location)
-        except (ValueError, TypeError) as error:
-            raise CaseError(f"--scheduler {shortened(scheduler, 80)}: {' '.join(str(error).split())}; expected the "
-                            "address of a running Dask scheduler, e.g. tcp://host:8786") from None
-        try:
-            client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT, set_as_default=False)
-        except (OSError, TimeoutError, ValueError, TypeError) as error:
-            reason = " ".join(str(error).split()) or type(error).__name__
-            raise CaseError(f"--scheduler {shortened(scheduler, 80)}: cannot connect ({shortened(reason, 160)}); "
-                            "expected the address of a running Dask scheduler, e.g. tcp://host:8786") from None
-        try:
-            yield DaskEngine(client, scheduler=scheduler, startup_seconds=time.perf_counter() - clock)
-        finally:
-            client.close()
-        return
-    count, memory = local_cluster_size(workers, pending)
-    environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **SINGLE_THREADED}
-    try:
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
-            cluster = distributed.LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                               memory_limit=memory, dashboard_address=None, env=SINGLE_THREADED,
-                                               silence_logs=logging.ERROR, preload=[__name__])
-    except (OSError, RuntimeError, TimeoutError) as error:
-        reason = " ".join(str(error).split()) or type(error).__name__
-        raise SolverError(f"cannot start a local Dask cluster of {count} worker(s) ({shortened(reason, 160)}); "
-                          "a script that calls this must guard its entry point with if __name__ == '__main__'") from None
-    try:
-        client = distributed.Client(cluster, set_as_default=False)
-        try:
-            yield DaskEngine(client, startup_seconds=time.perf_counter() - clock)
-        finally:
-            client.close()
-    finally:
-        cluster.close()
+            "case_text": task["text"], **failure("error", f"{Path(task['source']).name}: {reason}")}
 
 
 # --------------------------------------------------------------------------- the sweep's run
@@ -454,7 +289,7 @@ def run_sweep(
         elif point.digest in finished:
             finish(point, finished[point.digest], reused=True)
     tasks = sweep.pending(finished)
-    for task, record in engine.map(solve_point, tasks):
+    for task, record in engine.map(solve_point, tasks, lost=_lost, name="point"):
         records[task["digest"]] = record
         if store is not None and storable(record):
             store(record)

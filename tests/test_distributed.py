@@ -4,7 +4,8 @@ and on punches pressed into the block over their whole face (the flat punch, whi
 from its overlap, and a tilted one that releases half of it, which then asks the coarse
 levels solved across the ranks for its second guess). Platens (force and displacement), a
 body held by contact alone and a 10-step load path agree to 1e-10, the path also through
-the solve command.
+the solve command. Refined cases, each rank refining only its piece of the coarse mesh (a
+square, a graded quarter disk, a flat punch), agree to 1e-10 as well.
 
 Skipped unless petsc4py and mpi4py import and an ``mpiexec`` is on the PATH (see README:
 the petsc extra needs PETSc itself, e.g. Debian's petsc-dev, and PETSC_DIR to build).
@@ -30,7 +31,9 @@ RANKS = 2
 AGREEMENT = 1e-8
 SOLVES = [(name, method) for name in ("square", "hole") for method in ("positive", "standard")] + [
     ("flat_punch", "positive"), ("tilted_punch", "standard"), ("strip", "positive"),
-    ("platen_force", "positive"), ("platen_displacement", "standard"), ("held", "positive")]
+    ("platen_force", "positive"), ("platen_displacement", "standard"), ("held", "positive"),
+    ("square_pieces", "positive"), ("hertz_pieces", "standard"), ("punch_pieces", "positive"),
+    ("platen_refined", "positive"), ("hertz_levels_pieces", "positive")]
 #: The features the serial path reduces to more unknowns or to rigid motions agree tighter.
 TIGHT = 1e-10
 #: The Hertz quarter disk of cases/hertz_platen.yaml at one load on a small mesh (2 838
@@ -50,6 +53,17 @@ VARIANTS = {"platen_force": ("hertz_platen", {}),
 TILTED_PUNCH = {"obstacle": {"segment": [[1.05, -4e-3], [-1.05, -2e-4]]},
                 "mesh": {"size": 0.25, "contact_size": 0.01, "grading": 0.3}}
 
+#: Refined once: each rank refines only its piece of the coarse mesh (a structured square; the
+#: graded quarter disk with its symmetry axis, prescribed top and curved rim; the flat punch)
+#: and agrees with the serial solve to 1e-10; a platen keeps the replicated mesh, and agrees too.
+PIECES = {"square_pieces": ("square", {"mesh": {"divisions": 16, "diagonal": "right", "refine": 1}}),
+          "hertz_pieces": ("hertz_quarter", {"mesh": {**SMALL_HERTZ["mesh"], "refine": 1}}),
+          "punch_pieces": ("flat_punch", {"mesh": {"size": 1.0, "contact_size": 0.08, "grading": 0.15, "refine": 1}}),
+          "platen_refined": ("hertz_platen", {"mesh": {**SMALL_HERTZ["mesh"], "refine": 1}}),
+          # Refined 3 times (35 000 unknowns): its coarser sequencing level (refined once) is in pieces too.
+          "hertz_levels_pieces": ("hertz_quarter", {"mesh": {"size": 0.2, "contact_size": 0.03, "grading": 0.3,
+                                                             "refine": 3}})}
+
 _have_petsc = all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
 _mpiexec = shutil.which("mpiexec")
 needs_mpi = pytest.mark.skipif(not (_have_petsc and _mpiexec),
@@ -61,6 +75,8 @@ import sys
 import numpy as np
 from contactfem.case import load_case
 from contactfem.distributed import distributed_report, solve_distributed
+from contactfem.distributed_mumps import mumps_ordering
+from petsc4py import PETSc
 
 out = sys.argv[1]
 fields = {}
@@ -76,12 +92,15 @@ for name, path, method in [item.split(":") for item in sys.argv[2:]]:
         fields[key + "_force"] = solution.contact.nodal_force
         fields[key + "_active"] = solution.contact.active
         fields[key + "_ranks"] = np.array(report["parallel"]["ranks"])
+        fields[key + "_mesh"] = np.array(report["parallel"]["mesh"])
         fields[key + "_rss"] = np.array([r["peak_rss_bytes"] for r in report["parallel"]["per_rank"]])
         fields[key + "_residual"] = np.array(report["equilibrium"]["relative_force_residual"])
         fields[key + "_status"] = np.array(report["solver"]["status"])
         fields[key + "_first_active"] = np.array(report["newton"][0]["active"])
         fields[key + "_levels"] = np.array(report["solver"]["sequencing"].get("levels", 0))
         fields[key + "_proposed"] = np.array([step["proposed"] for step in report["newton"]])
+        fields[key + "_ordering"] = np.array([r["factor"].get("ordering", -1) for r in report["parallel"]["per_rank"]])
+        fields[key + "_chosen_ordering"] = np.array(mumps_ordering(PETSc))
 if fields:
     np.savez(out, **fields)
 """
@@ -106,6 +125,12 @@ def case_files(tmp_path_factory) -> dict[str, Path]:
         data = yaml.safe_load((CASES / f"{base}.yaml").read_text(encoding="utf-8"))
         data.pop("load_path", None)
         data.update(changes if name == "tilted_punch" else {**SMALL_HERTZ, **changes})
+        written[name] = directory / f"{name}.yaml"
+        written[name].write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    for name, (base, changes) in PIECES.items():
+        data = yaml.safe_load((CASES / f"{base}.yaml").read_text(encoding="utf-8"))
+        data.pop("load_path", None)
+        data.update(changes)
         written[name] = directory / f"{name}.yaml"
         written[name].write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     return {name: written.get(name, CASES / f"{name}.yaml") for name, _ in SOLVES}
@@ -134,6 +159,8 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     key = f"{name}_{method}"
     if name in ("flat_punch", "tilted_punch"):  # both start from the whole face pressed in
         assert solved.kernel.history[0].active == int(distributed[key + "_first_active"]) == len(serial.contact.active)
+    if name == "hertz_levels_pieces":  # the coarse level predicted the start, on both sides
+        assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     if name == "tilted_punch":  # which releases half of it: the coarse levels give the second guess
         assert solved.sequencing["levels"] >= 1 and int(distributed[key + "_levels"]) >= 1
     if name == "strip":  # peeling off in bending: its creep is extrapolated alike on every rank
@@ -144,7 +171,9 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     if name in VARIANTS:  # the platen's advance, or the rigid motion contact alone holds
         assert bool(solved.problem.platens) == name.startswith("platen")
         assert (solved.problem.free_modes is not None) == (name != "platen_displacement")
-    agreement = TIGHT if name in VARIANTS else AGREEMENT
+    # Each rank refines only its piece when the case is refined and held by its supports.
+    assert str(distributed[key + "_mesh"]) == ("pieces" if name.endswith("_pieces") else "replicated")
+    agreement = TIGHT if name in VARIANTS or name in PIECES else AGREEMENT
     np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
     u = distributed[key + "_u"]
     assert np.abs(u - serial.displacement).max() <= agreement * np.abs(serial.displacement).max()
@@ -153,6 +182,31 @@ def test_two_ranks_agree_with_the_serial_solve(distributed, case_files, name, me
     # report.json's figures come from K u computed across the ranks: the balance still closes.
     assert float(distributed[key + "_residual"]) < 1e-10
     assert len(distributed[key + "_rss"]) == RANKS and (distributed[key + "_rss"] > 0).all()
+    # MUMPS used, on every rank, the ordering contactfem asked its library for (or, when the
+    # library has neither METIS nor SCOTCH, one of its own choice, the same on every rank).
+    chosen, used = int(distributed[key + "_chosen_ordering"]), distributed[key + "_ordering"].tolist()
+    assert used == [chosen] * RANKS if chosen != 7 else used == [used[0]] * RANKS and used[0] in (0, 2, 4, 6)
+
+
+@needs_mpi
+def test_mumps_orders_with_the_best_ordering_its_library_has():
+    """METIS (ICNTL(7) = 5), else SCOTCH (3), else MUMPS's automatic choice (7): asked of the
+    library, not timed. An ordering the library lacks falls back to the automatic choice, so
+    the one chosen is the first whose analysis reports using it, and every ordering before it
+    in the preference reports another; PORD (4), built into every MUMPS, reports itself."""
+    from petsc4py import PETSc
+
+    from contactfem.distributed_mumps import MUMPS_AUTOMATIC, MUMPS_ORDERINGS, _mumps_used, mumps_ordering
+
+    assert _mumps_used(PETSc, 4) == 4
+    chosen = mumps_ordering(PETSc)
+    preference = (*MUMPS_ORDERINGS, MUMPS_AUTOMATIC)
+    assert chosen in preference
+    if chosen != MUMPS_AUTOMATIC:
+        assert _mumps_used(PETSc, chosen) == chosen
+    for better in preference[:preference.index(chosen)]:
+        assert _mumps_used(PETSc, better) != better
+    assert not PETSc.Options().hasName("contactfem_ordering_probe_mat_mumps_icntl_7")  # the probe leaves nothing
 
 
 def test_module_imports_and_refuses_clearly_without_petsc(monkeypatch):
@@ -283,3 +337,18 @@ def test_a_load_path_on_two_ranks_agrees_with_the_serial_path(tmp_path, case_fil
             u, mu = step.solution.displacement, step.solution.contact.multiplier
             assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
             assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()
+
+
+@needs_mpi
+def test_a_mesh_too_large_for_the_ranks_is_refused_per_rank(tmp_path):
+    """The size guard estimates each rank's share when each refines its piece: the square at
+    --refine 8 (134M unknowns, about 155 GiB on each of 2 ranks) is refused on every rank,
+    in one line naming the ranks, with exit 2 and nothing written."""
+    out = tmp_path / "out"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, "-m", "contactfem.cli", "solve", str(CASES / "square.yaml"),
+               "--backend", "petsc", "--refine", "8", "--out", str(out), "--quiet"]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 2, run.stdout[-2000:] + run.stderr[-4000:]
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and f"on each of {RANKS} ranks" in errors[0], run.stderr
+    assert not out.exists()

@@ -337,9 +337,9 @@ def test_alias_chains_of_any_size(results, width, depth, leaf, use):
     last = f"*a{depth - 1}"
     closing = "}" * use.count("{")
     text = dump(BASE).replace("title: fuzz\n", "") + "\n".join(chain) + f"\n{use}: {last}{closing}\n"
-    started = time.perf_counter()
+    started = time.process_time()
     check(results, text, None)
-    assert time.perf_counter() - started < 10
+    assert time.process_time() - started < 10
 
 
 KEY_LINE = __import__("re").compile(r"^\s*[A-Za-z_][A-Za-z_]*:( |$)")

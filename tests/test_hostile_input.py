@@ -99,9 +99,9 @@ def substitute(old: str, new: str) -> str:
 def test_dev_zero_is_refused_without_reading_it():
     if not os.path.exists("/dev/zero"):
         pytest.skip("no /dev/zero")
-    started = time.perf_counter()
+    started = time.process_time()
     assert_one_line(invoke("check", "/dev/zero"), "/dev/zero", "character device", "not a regular file")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path):
@@ -172,10 +172,10 @@ BOMB = "".join(
 
 def test_billion_laughs_is_refused_quickly(tmp_path):
     assert len(BOMB) < 1000  # 9**9 = 387 million strings once expanded
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, BOMB, "aliases expanded", str(MAX_YAML_VALUES))
     refuse_text(tmp_path, square(title="x") + BOMB.replace("i: &i", "title: &i"), "aliases expanded")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_billion_laughs_through_parse_case():
@@ -193,9 +193,9 @@ def test_billion_laughs_through_parse_case():
     ("title: *nothing\n", ("undefined alias",)),
 ], ids=["recursive-list", "recursive-map", "deep", "deep-by-alias", "too-many-values", "undefined-alias"])
 def test_yaml_structure_is_bounded(tmp_path, text, fragments):
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, text, *fragments)
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 @pytest.mark.parametrize(("old", "new", "fragments"), [
@@ -390,16 +390,16 @@ def balanced(items: list[str], op: str) -> str:
         "one-over-zero", "log-zero", "power-of-zoo", "huge-number", "tiny-number", "power-tower", "imaginary",
         "deep", "long", "many-signs", "big-gradient", "floor", "sliding"])
 def test_exact_block_corner_cases(tmp_path, ux, fragments):
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, exact_case(ux), "exact", *fragments)
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 def test_a_tower_of_exponentials_in_both_components_is_refused_before_deriving(tmp_path):
     tower = "exp(" * 45 + "x*y" + ")" * 45
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, exact_case(tower, tower), "exact.displacement", "gradient")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
 
 
 @pytest.mark.parametrize(("ux", "fragments"), [
@@ -468,10 +468,10 @@ def test_too_many_polygon_vertices(tmp_path, monkeypatch):
     monkeypatch.setattr("contactfem.case.limits.MAX_POLYGON_VERTICES", INLINE_LIMIT)
     n = INLINE_LIMIT + 1
     vertices = [[i, 0] for i in range(n)]
-    started = time.perf_counter()
+    started = time.process_time()
     refuse_text(tmp_path, polygon_case(None, vertices, ["e"] * n), "geometry.polygon.vertices",
                 f"at most {INLINE_LIMIT}")
-    assert time.perf_counter() - started < 5
+    assert time.process_time() - started < 5
     assert MAX_POLYGON_VERTICES >= 100_000
 
 
@@ -586,7 +586,8 @@ def test_a_sliver_that_needs_far_more_triangles_than_its_size_says_is_refused_wi
 @pytest.mark.parametrize("refine", [3, 4, 5, 6, 7])
 def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeypatch, refine):
     """check refuses exactly the meshes whose estimated peak memory (the figure it prints for
-    the others) exceeds the machine's memory; here a machine of 4 GiB."""
+    the others) exceeds the machine's memory with the backend auto takes for them (amg
+    where a factorisation would not fit); here a machine of 4 GiB."""
     import json
 
     memory = 4 * 2**30
@@ -594,15 +595,17 @@ def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeyp
     path = tmp_path / CASE_NAME
     path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32"), encoding="utf-8")
     result = invoke("check", path, "--refine", refine, "--json")
-    from contactfem.estimate import estimate_cost
-    from contactfem.linalg import resolve_backend
+    from contactfem.estimate import MemoryLimit, choose_backend, estimate_cost
 
-    expected = estimate_cost(2 * 32 * 32 * 4**refine, resolve_backend("auto"))["bytes"]
+    unknowns = 2 * 32 * 32 * 4**refine
+    backend = choose_backend(unknowns, "auto", MemoryLimit(memory, "a machine of 4 GiB")).name
+    expected = estimate_cost(unknowns, backend)["bytes"]
     if expected > memory:
         assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB")
     else:
         assert result.exit_code == 0, result.stderr
         estimate = json.loads(result.stdout)["estimate"]
+        assert estimate["backend"] == backend and estimate["bytes"] == pytest.approx(expected, rel=1e-2)
         assert estimate["bytes"] <= memory == estimate["limit_bytes"]
         assert estimate["limit"] == "this machine's 4 GiB"
 
@@ -664,7 +667,8 @@ def test_a_cgroup_limit_refuses_a_mesh_the_machine_could_hold(tmp_path, monkeypa
     monkeypatch.setattr(estimate, "_cgroup_limit", lambda proc, cgroups: 2**30)
     monkeypatch.setattr(estimate, "_address_space_limit", lambda: None)
     path = tmp_path / CASE_NAME
-    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 512"), encoding="utf-8")
+    # 2.1M unknowns: more than 1 GiB whatever the backend, amg included.
+    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 1024"), encoding="utf-8")
     assert_one_line(invoke("check", path), CASE_NAME, "more than this process's cgroup memory limit of 1 GiB")
     out = tmp_path / "out"
     assert_one_line(invoke("solve", path, "--out", out), CASE_NAME, "cgroup memory limit")

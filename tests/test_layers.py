@@ -24,7 +24,7 @@ CORE_MAY_IMPORT = CORE + ("contactfem.errors", "contactfem.mesh.topology", "cont
 PIPELINE = ("contactfem.case", "contactfem.discretize", "contactfem.solve", "contactfem.sequencing",
             "contactfem.result", "contactfem.report", "contactfem.estimator", "contactfem.norms",
             "contactfem.studies", "contactfem.adaptive", "contactfem.exact", "contactfem.expressions",
-            "contactfem.mesh", "contactfem.sweep")
+            "contactfem.mesh", "contactfem.sweep", "contactfem.engines")
 #: Writers, pictures and the terminal: only the command line calls them.
 WRITERS = ("contactfem.io", "contactfem.render", "contactfem.plots", "contactfem.cli", "contactfem.progress")
 #: All the case package may import besides the standard library: NumPy, PyYAML, and of the

@@ -50,14 +50,14 @@ def test_halving_the_contact_mesh_alone_brings_the_hertz_half_width_closer():
     from contactfem.solve import prepare, solve_case
     from contactfem.validation import hertz_comparison
 
-    started = time.perf_counter()
+    started = time.process_time()
     errors = []
     for contact_size in (0.004, 0.002):
         case = variant("hertz_quarter.yaml", size=0.05, contact_size=contact_size)
         outcome = solve_case(case, problem=prepare(case))
         errors.append(abs(hertz_comparison(outcome, radius=1.0, symmetry_axis=0.0)["half_width_error"]))
     assert errors[1] < 0.8 * errors[0] and errors[1] < 0.015, errors
-    assert time.perf_counter() - started < 30
+    assert time.process_time() - started < 30
 
 
 @pytest.mark.parametrize("name, mesh", [

@@ -149,9 +149,9 @@ def test_plot_draws_a_result_files_control_characters_and_megabytes_quickly(stud
         for row in content["rows"]:
             row["method"] = "$" + row["method"] + "\x1b"
     (directory / study).write_text(json.dumps(content), encoding="utf-8")
-    started = time.perf_counter()
+    started = time.process_time()
     _ok("plot", directory, "--quiet")
-    assert time.perf_counter() - started < 30
+    assert time.process_time() - started < 30
     for png in ("compare.png",) if name == "c" else ("convergence_h.png", "convergence_time.png"):
         assert _is_png(directory / png)
 
@@ -166,10 +166,10 @@ def test_a_solution_files_huge_title_is_drawn_quickly_and_cut(studies, tmp_path)
     data = load_result(studies / "s")
     data["attrs"] = {**data["attrs"], "title": HUGE, "length_unit": "$x^$", "stress_unit": "\\frac{",
                      "method": "$\\frac{"}
-    started = time.perf_counter()
+    started = time.process_time()
     render_deformed(data, tmp_path / "deformed.png", size=(800, 600))
     plot_result_profile(tmp_path / "contact_profile.png", data, size=(800, 600), title=HUGE)
-    assert time.perf_counter() - started < 30
+    assert time.process_time() - started < 30
     assert _is_png(tmp_path / "deformed.png") and _is_png(tmp_path / "contact_profile.png")
 
 

@@ -376,16 +376,16 @@ def test_the_checks_scale_like_k_log_k():
         assert polygon_problems(v) is None  # warm
     times = []
     for v in (small, large):
-        started = time.perf_counter()
+        started = time.process_time()
         assert polygon_problems(v) is None
-        times.append(time.perf_counter() - started)
+        times.append(time.process_time() - started)
     assert times[1] < 1.5, times  # 0.1 s measured; the pairs took 146 s at 16 000
     assert times[1] < 40 * max(times[0], 1e-3), times  # 10x the vertices: about 10x the time, not 100x
 
     comb = stacked_teeth(5000)
-    started = time.perf_counter()
+    started = time.process_time()
     assert polygon_problems(comb) is None
-    assert time.perf_counter() - started < 3.0
+    assert time.process_time() - started < 3.0
     broken = comb.copy()
     broken[2000, 1] = broken[2004, 1] + 0.2 / 5000  # a tooth's corner pushed into the next tooth
     assert polygon_problems(broken).startswith("edges ")
@@ -421,9 +421,9 @@ def test_graded_points_of_many_edges_match_the_one_edge_rule():
     x = np.linspace(0, 1, 4001)
     starts = np.column_stack([x[:-1], np.zeros(4000)])
     ends = np.column_stack([x[1:], np.zeros(4000)])
-    started = time.perf_counter()
+    started = time.process_time()
     points, counts = _lines_points(starts, ends, 0.05, size)
-    assert time.perf_counter() - started < 0.2
+    assert time.process_time() - started < 0.2
     assert np.all(counts == 1) and np.array_equal(points, starts)
 
 
@@ -431,9 +431,9 @@ def test_meshing_a_rough_profile_is_triangle_bound():
     v = profile_polygon(16_000)
     loop = Loop(v, ("base",) * 15_999 + ("right", "top", "left"))
     triangulate_domain(loop, [], max_edge=0.05)  # warm
-    started = time.perf_counter()
+    started = time.process_time()
     mesh = triangulate_domain(loop, [], max_edge=0.05)
-    seconds = time.perf_counter() - started
+    seconds = time.process_time() - started
     assert len(mesh.nodes_of("base")) == 16_000
     assert seconds < 0.15 * mesh.n_triangles / 1e4 + 0.5, (seconds, mesh.n_triangles)  # measured 0.1 s for 89k
 
@@ -557,9 +557,9 @@ def test_contact_zone_of_a_rough_profile_takes_one_sort():
     m = 200_000
     active = (np.arange(m) // 4) % 2 == 0
     pairs = np.column_stack([np.arange(m - 1), np.arange(1, m)])
-    started = time.perf_counter()
+    started = time.process_time()
     first, last, counts = contact_patches(np.arange(m, dtype=float), active, pairs)
-    elapsed = time.perf_counter() - started
+    elapsed = time.process_time() - started
     assert len(first) == 25_000 and np.all(counts == 4) and np.all(last - first == 3)
     assert np.array_equal(first, np.arange(0, m, 8))
     assert elapsed < 0.5

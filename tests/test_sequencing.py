@@ -152,6 +152,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     import sys
     from pathlib import Path
 
+    import contactfem.coarse_levels as coarse_levels
     import contactfem.solve as solve_module
     from contactfem.kernel import Status
 
@@ -162,7 +163,7 @@ def test_a_coarse_level_that_keeps_the_teeth_of_a_tread_is_not_meshed(monkeypatc
     problem = solve_module.prepare(case)
     assert problem.n_unknowns > SEQUENCING_THRESHOLD
     request, refine = coarser(problem.mesh_request, problem.refinements)
-    estimated = solve_module._estimated_unknowns(problem, request, refine)
+    estimated = coarse_levels.estimated_unknowns(problem, request, refine)
     assert 0.25 < estimated / problem.n_unknowns < 0.45
     meshed, workers = [], []
     original = solve_module.prepare
@@ -286,7 +287,8 @@ def test_the_layer_corrects_a_fragmented_prediction_at_asperity_scale(monkeypatc
     import contactfem.sequencing as sequencing
     from contactfem.kernel import Status, default_c, solve_contact
     from contactfem.methods import get_method
-    from contactfem.solve import CoarseSolve, correct_in_layer, prepare, solve_case
+    from contactfem.coarse_levels import CoarseSolve, correct_in_layer
+    from contactfem.solve import prepare, solve_case
 
     # The size threshold and share bound are the cost model's (tested below), not the mechanism's.
     monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
@@ -316,13 +318,14 @@ def test_a_layer_holding_most_of_a_graded_mesh_is_refused_from_a_sample_of_the_c
     of ΓC: the nodes near every few contact nodes already exceed the layer's share, so the
     prediction is kept without a search among all contact nodes (a lower bound: a node near
     some of them is near one of them)."""
+    import contactfem.coarse_levels as coarse_levels
     import contactfem.sequencing as sequencing
-    import contactfem.solve as solve
     from contactfem.methods import get_method
-    from contactfem.solve import CoarseSolve, correct_in_layer, prepare
+    from contactfem.coarse_levels import CoarseSolve, correct_in_layer
+    from contactfem.solve import prepare
 
     monkeypatch.setattr(sequencing, "LAYER_THRESHOLD", 0)
-    monkeypatch.setattr(solve, "LAYER_SAMPLES", 500)
+    monkeypatch.setattr(coarse_levels, "LAYER_SAMPLES", 500)
     case = rough_polygon_case(2000)
     # Grading 0.25 (steep): h reaches size within a few layer depths of ΓC, so that the
     # layer holds 0.88 of the nodes. The rule's grading at this contact_size (0.05) spreads
@@ -338,7 +341,7 @@ def test_a_layer_holding_most_of_a_graded_mesh_is_refused_from_a_sample_of_the_c
         searched.append(len(nearby))
         return sequencing.contact_layer(points, nearby, depth)
 
-    monkeypatch.setattr(solve, "contact_layer", recording)
+    monkeypatch.setattr(coarse_levels, "contact_layer", recording)
     predicted = np.zeros(len(boundary), dtype=bool)
     predicted[::4] = True
     level = CoarseSolve(None, None, {}, problem.mesh, np.zeros((problem.mesh.n_points, 2)))

@@ -588,17 +588,16 @@ def test_a_data_file_changed_after_planning_is_not_stored_under_the_plan(tmp_pat
 def test_a_point_too_large_for_its_worker_is_refused_against_the_workers_limit(tmp_path):
     """A worker's nanny kills it past its memory limit, a limit no cgroup or rlimit of its
     process shows. The size guard refuses against it: in a worker of 1 GiB the square at
-    512 x 512 (about 1.6 GiB estimated, less than this machine's memory) is an invalid
-    point naming that limit, at once; the square at 6 x 6 solves there; outside a worker
-    there is no such limit."""
+    768 x 768 (about 1.8 GiB estimated even with amg, which auto takes where a factorisation
+    would not fit; less than this machine's memory) is an invalid point naming that limit,
+    at once; the square at 6 x 6 solves there; outside a worker there is no such limit."""
     from distributed import Client, LocalCluster
 
     from contactfem.estimate import estimate_cost, memory_limit
-    from contactfem.linalg import resolve_backend
 
-    big_estimate = estimate_cost(2 * 512 * 512, resolve_backend("auto"))["bytes"]
+    big_estimate = estimate_cost(2 * 768 * 768, "amg")["bytes"]
     assert 2**30 < big_estimate < memory_limit().bytes
-    path = write_sweep(tmp_path, {"points": [{"mesh.divisions": 512}, {"mesh.divisions": 6}]})
+    path = write_sweep(tmp_path, {"points": [{"mesh.divisions": 768}, {"mesh.divisions": 6}]})
     points = sweeps.load_sweep(path).points
     tasks = [{"text": p.text, "source": p.source, "digest": p.digest} for p in points]
     assert sweeps.worker_memory_limit() is None
@@ -607,7 +606,7 @@ def test_a_point_too_large_for_its_worker_is_refused_against_the_workers_limit(t
         assert client.submit(sweeps.worker_memory_limit).result().bytes == 2**30
         big, small = client.gather(client.map(sweeps.solve_point, tasks, pure=False))
     assert big["status"] == "invalid", big
-    assert "more than this sweep worker's memory limit of 1 GiB" in big["message"]
+    assert "more than this Dask worker's memory limit of 1 GiB" in big["message"]
     assert big["seconds"]["total"] < 30
     assert small["status"] == "ok", small
 

@@ -12,8 +12,9 @@ from __future__ import annotations
 #: The contact methods (``contactfem.methods.METHOD_NAMES``), in the order reports list them.
 METHOD_NAMES = ("positive", "standard")
 #: What ``solver.backend`` may name (``contactfem.linalg.BACKEND_CHOICES``): auto (the
-#: fastest installed), the backends of one process, and petsc across MPI ranks.
-BACKEND_CHOICES = ("auto", "cholmod", "pardiso", "superlu", "petsc")
+#: fastest installed), the direct backends of one process, amg (CG with algebraic
+#: multigrid) and petsc across MPI ranks.
+BACKEND_CHOICES = ("auto", "cholmod", "pardiso", "superlu", "amg", "petsc")
 #: The output formats (``contactfem.io.registry.FORMAT_NAMES``), in the order written.
 FORMAT_NAMES = ("vtu", "h5", "xdmf", "csv", "path", "json")
 #: Written unless the case lists its own (``contactfem.io.registry.DEFAULT_FORMATS``).

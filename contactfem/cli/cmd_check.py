@@ -81,6 +81,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     cost = summary["estimate"]
     click.echo(f"  estimate   about {cost['seconds']:.2g} s and {cost['bytes'] / 2**30:.2g} GiB with "
                f"{cost['backend']} (measured on 2 cores; ±50%), of {cost['limit']}")
+    click.echo(f"  backend    {cost['backend']}: {cost['backend_reason']}")
 
 
 def _output_figures(case) -> dict:
@@ -93,12 +94,11 @@ def _output_figures(case) -> dict:
 
 
 def _estimate(case, problem) -> dict:
-    from contactfem.estimate import estimate_cost, memory_limit
-    from contactfem.linalg import resolve_backend
+    from contactfem.estimate import choose_backend, estimate_cost, memory_limit
 
-    backend = resolve_backend(case.solver.backend)
     limit = memory_limit()
-    return {"backend": backend, **estimate_cost(problem.n_unknowns, backend),
+    choice = choose_backend(problem.n_unknowns, case.solver.backend, limit, case.load_path is None)
+    return {"backend": choice.name, "backend_reason": choice.reason, **estimate_cost(problem.n_unknowns, choice.name),
             "limit_bytes": limit.bytes, "limit": limit.source}
 
 

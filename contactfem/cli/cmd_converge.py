@@ -6,9 +6,24 @@ from pathlib import Path
 
 import click
 
-from contactfem.cli.common import _end_progress, _load, _progress, _writable_by_vtk, _write_series
+from contactfem.cli.common import (
+    _check_engine_options,
+    _end_progress,
+    _engine,
+    _load,
+    _progress,
+    _writable_by_vtk,
+    _write_series,
+)
 from contactfem.cli.exits import _fail, _interruptible, _shown
-from contactfem.cli.options import _CheckedPath, case_argument, json_option, overwrite_option, quiet_option
+from contactfem.cli.options import (
+    _CheckedPath,
+    case_argument,
+    engine_options,
+    json_option,
+    overwrite_option,
+    quiet_option,
+)
 from contactfem.errors import ContactFemError
 from contactfem.io.registry import CONVERGENCE_CSV, CONVERGENCE_JSON, CONVERGENCE_PNGS, to_json
 from contactfem.methods import METHOD_NAMES
@@ -24,21 +39,25 @@ from contactfem.methods import METHOD_NAMES
               help="Method(s) to study; default both.")
 @click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Where convergence.json/.csv and the PNGs go. Default: <output.directory>-convergence.")
+@engine_options(default="this process, one level after another", tasks="levels")
 @quiet_option
 @json_option
 @overwrite_option
 @_interruptible
 def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...], out_dir: Path | None,
-             quiet: bool, as_json: bool, overwrite: bool) -> None:
+             scheduler: str | None, workers: int | None, quiet: bool, as_json: bool, overwrite: bool) -> None:
     """Convergence and cost study of CASE on nested meshes, both methods.
 
     For each level: h, unknowns, seconds per stage, Newton iterations, every error norm
     and the observed rate between levels; writes convergence.json, convergence.csv and
     PNGs of error against h (with the h^1 slope of the a priori estimate) and against time.
+    With --workers or --scheduler the levels run as tasks on Dask (the reference is solved
+    here once and handed to the workers); the figures are the same either way.
 
     \b
-    Example:
+    Examples:
       contactfem converge cases/square.yaml --levels 4
+      contactfem converge cases/square.yaml --levels 5 --workers 2
     """
     from contactfem.io import atomic_write_text
     from contactfem.io.atomic import claimed_directory
@@ -46,13 +65,17 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
     from contactfem.studies import convergence_study
 
     try:
+        _check_engine_options(scheduler, workers, "levels")
         case = _load(case_file)
         directory = out_dir if out_dir is not None else Path(f"{case.output.directory}-convergence")
-        kept: list = []  # (label, solution) of every level and method, for convergence-*.pvd
+        kept: list = []  # (level, method, solution) of every level and method, for convergence-*.pvd
         with claimed_directory(directory, markers=(CONVERGENCE_JSON,), overwrite=overwrite) as claim:
-            study = convergence_study(case, levels, extra=extra, methods=methods or METHOD_NAMES,
-                                      progress=_progress(quiet),
-                                      on_outcome=lambda level, name, o: kept.append((level, name, o.solution)))
+            progress = _progress(quiet)
+            say = progress or (lambda message: None)
+            with _engine(scheduler, workers, levels, say, "levels", local=False) as engine:
+                study = convergence_study(case, levels, extra=extra, methods=methods or METHOD_NAMES,
+                                          progress=progress, engine=engine,
+                                          on_solution=lambda level, name, field: kept.append((level, name, field)))
             with claim.stage(last=CONVERGENCE_JSON) as staged, _writable_by_vtk(staged) as staging:
                 atomic_write_text(staging / CONVERGENCE_JSON, to_json(study))
                 atomic_write_text(staging / CONVERGENCE_CSV, _csv(study["rows"]))

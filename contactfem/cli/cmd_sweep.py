@@ -7,9 +7,10 @@ from pathlib import Path
 import click
 
 from contactfem.cli.exits import _fail, _interruptible, _printable
-from contactfem.cli.options import _CheckedPath, overwrite_option, quiet_option
+from contactfem.cli.common import _check_engine_options, _engine
+from contactfem.cli.options import _CheckedPath, engine_options, overwrite_option, quiet_option
 from contactfem.cli.sweep_report import _plot_sweep, _sweep_summary
-from contactfem.errors import CaseError, ContactFemError
+from contactfem.errors import ContactFemError
 from contactfem.io.registry import shown_data, to_json
 
 
@@ -17,10 +18,7 @@ from contactfem.io.registry import shown_data, to_json
 @click.argument("sweep_file", metavar="SWEEP", type=_CheckedPath(dir_okay=False))
 @click.option("--out", "out_dir", type=_CheckedPath(file_okay=False, output=True), default=None,
               help="Output directory. Default: the sweep file's output.directory (results/<sweep file name>).")
-@click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786. Default: a local cluster.")
-@click.option("--workers", type=click.IntRange(1, 4096), default=None,
-              help="Worker processes of the local cluster. Default: one per core, at most one per point.")
+@engine_options(default="a local cluster", tasks="points")
 @quiet_option
 @click.option("--json", "as_json", is_flag=True, help="Print sweep.json on stdout.")
 @overwrite_option
@@ -43,8 +41,6 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
       contactfem sweep cases/sweeps/square.yaml --workers 1 --out results/sweep-1
       contactfem sweep study.yaml --scheduler tcp://10.0.0.5:8786 --overwrite
     """
-    from contextlib import nullcontext
-
     from contactfem import sweep as sweeps
     from contactfem.errors import SolverError
     from contactfem.io.atomic import (
@@ -69,9 +65,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
         say(f"[{done}/{total}] point {row['index']} {row['label']}: {row['status']}{timing}{size}{reason}")
 
     try:
-        if scheduler is not None and workers is not None:
-            raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
-                            "(the cluster's own workers run the points)")
+        _check_engine_options(scheduler, workers, "points")
         plan = sweeps.load_sweep(sweep_file, progress=say)
         directory = Path(out_dir if out_dir is not None else plan.directory)
         with claimed_directory(directory, markers=(sweeps.SWEEP_JSON,), overwrite=overwrite) as claim:
@@ -81,14 +75,7 @@ def sweep(sweep_file: Path, out_dir: Path | None, scheduler: str | None, workers
             if done:
                 reused = sum(p.digest in done for p in plan.points)
                 say(f"{reused} of {len(plan.points)} points are already solved in {points}; not solving them again")
-            engine_context = (sweeps.open_engine(scheduler, workers, len(pending)) if pending
-                              else nullcontext(sweeps.SerialEngine()))
-            with engine_context as engine:
-                if engine.note:
-                    say(f"note: {engine.note}")
-                if pending and engine.kind == "dask":
-                    where = f"the cluster at {scheduler}" if scheduler else "a local cluster"
-                    say(f"solving {len(pending)} points on {engine.workers} Dask workers of {where}")
+            with _engine(scheduler, workers, len(pending), say, "points") as engine:
                 ensure_directory(points)
                 remove_leftover_temporaries(points)  # a killed run's unfinished writes, only those
                 # Messages naming a file whose name is not UTF-8 are stored and shown as text.

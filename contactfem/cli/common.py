@@ -39,6 +39,34 @@ def _end_progress() -> None:
         reporter.close()
 
 
+def _check_engine_options(scheduler: str | None, workers: int | None, tasks: str) -> None:
+    """--scheduler and --workers together are bad input."""
+    if scheduler is not None and workers is not None:
+        raise CaseError(f"--workers {workers}: sizes the local cluster; expected no --workers with --scheduler "
+                        f"(the cluster's own workers run the {tasks})")
+
+
+@contextmanager
+def _engine(scheduler: str | None, workers: int | None, pending: int, say, tasks: str, local: bool = True):
+    """Where a command's ``pending`` independent ``tasks`` (points, levels) run
+    (:func:`contactfem.engines.open_engine`): the cluster of --scheduler, a local cluster of
+    --workers processes (by default too when ``local``), else this process; ``say`` is told
+    once how to install Dask when it is missing, and where the tasks run. Check the two
+    options first with :func:`_check_engine_options`, before anything is written."""
+    from contactfem import engines
+
+    if not pending or not (local or scheduler is not None or workers is not None):
+        yield engines.SerialEngine()
+        return
+    with engines.open_engine(scheduler, workers, pending) as engine:
+        if engine.note:
+            say(f"note: {engine.note}")
+        if engine.kind == "dask":
+            where = f"the cluster at {scheduler}" if scheduler else "a local cluster"
+            say(f"solving {pending} {tasks} on {engine.workers} Dask workers of {where}")
+        yield engine
+
+
 def _load(case_file: Path, backend: str | None = None, distributed: bool = False):
     """The validated case, with --backend applied; a backend that is not installed is bad input,
     and so is one that runs across MPI ranks for a command that does not (all but ``solve``)."""

@@ -64,6 +64,18 @@ overwrite_option = click.option("--overwrite", is_flag=True,
                                 help="Replace the results already in the output directory (refused otherwise).")
 
 
+def engine_options(default: str, tasks: str):
+    """--scheduler and --workers, as every command that runs independent solves on Dask spells
+    them (``default``: where the ``tasks`` run without either)."""
+    scheduler = click.option("--scheduler", metavar="ADDRESS", default=None,
+                             help=f"Run the {tasks} on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786. "
+                                  f"Default: {default}.")
+    workers = click.option("--workers", type=click.IntRange(1, 4096), default=None,
+                           help=f"Worker processes of a local Dask cluster. Default: one per core, at most one "
+                                f"per {tasks[:-1]}.")
+    return lambda command: scheduler(workers(command))
+
+
 class _RelativeTarget(click.ParamType):
     """A relative accuracy: 0.5% or 0.005 (see :func:`contactfem.case.relative_target`)."""
 

@@ -114,6 +114,15 @@ class ReducedSystem:
         """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
         return (self.rotation @ reduced).reshape(-1, 2)
 
+    def rigid_motions(self) -> np.ndarray:
+        """The body's rigid motions in the kernel's unknowns (n, 3): the translations along x
+        and y and the rotation about the origin, (−y, x), as the constraints carry them."""
+        points = self.problem.mesh.points
+        motions = np.zeros((len(points), 2, 3))
+        motions[:, 0, 0] = motions[:, 1, 1] = 1.0
+        motions[:, 0, 2], motions[:, 1, 2] = -points[:, 1], points[:, 0]
+        return self.reduce(motions.reshape(-1, 3))
+
     def reduce(self, displacement: np.ndarray) -> np.ndarray:
         """The kernel's unknowns of mesh displacements (2 n_points,) or (2 n_points, j) that
         the constraints allow (a rigid motion a platen follows): the inverse of :meth:`displacement`."""

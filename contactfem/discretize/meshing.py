@@ -311,11 +311,20 @@ def _mesh_origin(shape: MeshRequest) -> str:
     return "the mesh"
 
 
-def _backend(case: Case) -> str:
+def _backend(case: Case, unknowns: int | None = None, limit: MemoryLimit | None = None) -> str:
+    """The backend whose memory a mesh is measured against: the one
+    :func:`~contactfem.estimate.choose_backend` takes for ``unknowns`` within ``limit``, or
+    without a count the one that fits the most (``amg`` where ``auto`` may choose it)."""
     from contactfem.errors import SolverError
-    from contactfem.linalg import resolve_backend
+    from contactfem.estimate import choose_backend
+    from contactfem.linalg import iterative_available, resolve_backend
 
+    iterative = case.load_path is None
     try:
+        if unknowns is not None:
+            return choose_backend(unknowns, case.solver.backend, limit or memory_limit(), iterative).name
+        if case.solver.backend == "auto" and iterative and iterative_available():
+            return "amg"
         return resolve_backend(case.solver.backend)
     except SolverError as error:
         raise CaseError(f"{case.source.name}: solver.backend = {case.solver.backend}: {error}") from None
@@ -333,8 +342,8 @@ def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit:
         triangles = estimate_triangles(shape, refine)
     else:
         triangles = base * 4 ** (shape.mesh.refine if refine is None else refine)
-    backend = _backend(case)
     unknowns = unknowns_of_triangles(triangles)
+    backend = _backend(case, unknowns, limit)
     needed = estimate_cost(unknowns, backend)["bytes"]
     if needed > limit.bytes:
         raise CaseError(

@@ -11,6 +11,9 @@ Layout, one concern a module:
 - :mod:`~contactfem.kernel.schur`: the linear solver, Schur-complement updates of one
   factorisation (:class:`ActiveSetSolver`), with :mod:`~contactfem.kernel.columns`,
   :mod:`~contactfem.kernel.masking` and its cost model :mod:`~contactfem.kernel.costs`;
+- :mod:`~contactfem.kernel.iterative`: the linear solver where a factorisation would not
+  fit in memory, CG with algebraic multigrid (:class:`IterativeSetSolver`), measuring its
+  iterates as the Schur solver does (:mod:`~contactfem.kernel.measures`);
 - :mod:`~contactfem.kernel.paths`: load paths (:func:`solve_path`);
 - :mod:`~contactfem.kernel.cycles`, :mod:`~contactfem.kernel.modes`,
   :mod:`~contactfem.kernel.starts`: the safeguards and starts of the iteration.
@@ -29,6 +32,7 @@ from contactfem.kernel.certificate import (
     roundoff_bound,
 )
 from contactfem.kernel.fronts import MAX_OVERSHOOTS, ZoneFronts
+from contactfem.kernel.iterative import IterativeSetSolver
 from contactfem.kernel.newton import (
     MIN_ITERATIONS,
     Iteration,
@@ -44,7 +48,7 @@ from contactfem.kernel.starts import translation_start
 from contactfem.kernel.system import ContactSystem, default_c
 
 __all__ = [
-    "Accelerators", "ActiveSetSolver", "EPS", "REFINEMENT_STEPS", "Certificate", "Check", "ContactSystem", "FORCE_RESOLUTION_LIMIT", "Iteration", "KernelResult", "MAX_OVERSHOOTS", "MIN_ITERATIONS", "PathSolver",
+    "Accelerators", "ActiveSetSolver", "EPS", "IterativeSetSolver", "REFINEMENT_STEPS", "Certificate", "Check", "ContactSystem", "FORCE_RESOLUTION_LIMIT", "Iteration", "KernelResult", "MAX_OVERSHOOTS", "MIN_ITERATIONS", "PathSolver",
     "PathStarts", "Proposer", "STALL_ITERATIONS", "Scales", "Status", "Step", "ZERO_FORCE_STRAIN", "ZoneFronts",
     "build_certificate", "default_c", "default_max_iterations", "extrapolated_active", "roundoff_bound",
     "solve_contact", "solve_path", "translation_start",

@@ -43,10 +43,12 @@ from contactfem.linalg.probe import (
 )
 from contactfem.linalg.registry import (
     DISTRIBUTED_BACKENDS,
+    ITERATIVE_BACKENDS,
     available_backends,
     backend_choices,
     backend_names,
     backend_provider,
+    iterative_available,
     register_backend,
     resolve_backend,
 )
@@ -68,6 +70,7 @@ __all__ = [
     "MODEL",
     "CostModel",
     "DISTRIBUTED_BACKENDS",
+    "ITERATIVE_BACKENDS",
     "SINGULARITY_LIMIT",
     "SUPERLU_FILL_GUESS",
     "SUPERLU_REMEDY",
@@ -81,6 +84,7 @@ __all__ = [
     "direct_cholmod",
     "direct_cholmod_enabled",
     "factorize",
+    "iterative_available",
     "probe_vector",
     "register_backend",
     "resolve_backend",

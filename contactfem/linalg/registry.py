@@ -30,6 +30,13 @@ PREFERENCE = ("cholmod", "pardiso", "superlu")
 DISTRIBUTED_BACKENDS = ("petsc",)
 #: Python packages each distributed backend needs.
 _DISTRIBUTED_MODULES = {"petsc": ("petsc4py", "mpi4py")}
+#: Backends that solve each Newton step iteratively (CG with algebraic multigrid,
+#: :class:`contactfem.kernel.iterative.IterativeSetSolver`), not a factorisation: what
+#: ``auto`` turns to when a factorisation would not fit in memory
+#: (:func:`contactfem.estimate.choose_backend`).
+ITERATIVE_BACKENDS = ("amg",)
+#: The Python package each iterative backend needs.
+_ITERATIVE_MODULES = {"amg": "pyamg"}
 #: The extra of contactfem's package that installs each optional backend.
 EXTRAS = {"cholmod": "cholmod", "pardiso": "pardiso", "petsc": "petsc"}
 
@@ -129,12 +136,20 @@ def available_backends() -> list[str]:
 
 
 def backend_choices() -> tuple[str, ...]:
-    """What a case or the command line may ask for: ``auto``, a registered name, or a distributed backend."""
-    return ("auto", *backend_names(), *DISTRIBUTED_BACKENDS)
+    """What a case or the command line may ask for: ``auto``, a registered name, an iterative
+    or a distributed backend."""
+    return ("auto", *backend_names(), *ITERATIVE_BACKENDS, *DISTRIBUTED_BACKENDS)
+
+
+def iterative_available(name: str = "amg") -> bool:
+    """Whether the iterative backend ``name`` can run here (its package is installed)."""
+    return installed(_ITERATIVE_MODULES[name])
 
 
 def resolve_backend(name: str = "auto") -> str:
-    """The backend that ``name`` selects: ``auto`` is the fastest available one.
+    """The backend that ``name`` selects: ``auto`` is the fastest available direct one (which
+    :func:`contactfem.estimate.choose_backend` may replace by ``amg`` for a system whose
+    factorisation would not fit in memory).
 
     Raises
     ------
@@ -150,6 +165,11 @@ def resolve_backend(name: str = "auto") -> str:
             raise SolverError(
                 f"solver backend {name!r} is not installed (needs petsc4py and mpi4py built against an "
                 "installed PETSc; see the README's section on PETSc)")
+        return name
+    if name in ITERATIVE_BACKENDS:
+        if not iterative_available(name):
+            raise SolverError(f"solver backend {name!r} is not installed (needs {_ITERATIVE_MODULES[name]}): "
+                              f"pip install {_ITERATIVE_MODULES[name]}")
         return name
     if name not in _REGISTRY:
         raise SolverError(f"unknown solver backend {name!r}; pick one of {', '.join(backend_choices())}")
