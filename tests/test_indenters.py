@@ -164,6 +164,20 @@ def test_a_pushed_obstacle_is_the_driven_one_at_its_advance(direction, pose, for
     np.testing.assert_array_equal(pushed.kernel.active, driven.kernel.active)
 
 
+def test_the_iterative_backend_finds_the_same_advance():
+    """CG with algebraic multigrid solves the same system, the advance among its unknowns:
+    the same advance and field as the factorisation, to CG's tolerance."""
+    pytest.importorskip("pyamg")
+    direct = solve_case(case_from(circle_case({"direction": [0, -1], "force": 2000.0})))
+    data = circle_case({"direction": [0, -1], "force": 2000.0})
+    data["solver"] = {"backend": "amg"}
+    iterative = solve_case(case_from(data))
+    drive = iterative.problem.drive
+    assert abs(drive.reaction(iterative.kernel.nodal_force, iterative.problem.contact.normals) - 2000.0) <= 1e-10 * 2000
+    assert abs(drive.advance - direct.problem.drive.advance) <= 1e-9 * direct.problem.drive.advance
+    assert relative(iterative.solution.displacement, direct.solution.displacement) < 1e-9
+
+
 def test_a_pushed_obstacle_along_a_load_path_is_each_single_solve():
     """The force is scaled along the path like every prescribed value: each of 5 steps,
     one solve of the path with its one factorisation, is the single solve at its force."""
