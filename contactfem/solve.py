@@ -43,7 +43,6 @@ from contactfem.coarse_levels import CoarseSolve, coarser_level, correct_in_laye
 from contactfem.sequencing import (
     coarser,
     PredictedStarts,
-    plane_strain_modulus,
     predict_active_set,
     prediction_first,
     starting_set,
@@ -192,13 +191,6 @@ def solve_case(
         problem = prepare(case, refine=refine, progress=say, timings=timings)
     choice = choose_backend(problem.n_unknowns, case.solver.backend, memory_limit())
     backend = choice.name
-    if problem.drive is not None and problem.drive.pushed:
-        from contactfem.indenter import solve_pushed
-
-        return solve_pushed(problem, lambda trial: solve_case(
-            case, method=method_name, problem=trial, progress=progress, accept_uncertified=accept_uncertified,
-            accelerators=accelerators), plane_strain_modulus(problem.law), say)[0]
-
     clock = time.perf_counter()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
     if backend in ITERATIVE_BACKENDS:
@@ -212,6 +204,7 @@ def solve_case(
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
     clock = time.perf_counter()
+    problem = reduced.settled(problem, kernel.displacement)  # a pushed obstacle at the advance found
     solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
     timings["postprocess"] = time.perf_counter() - clock
     return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
@@ -435,7 +428,7 @@ def solve_load_path(
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
         say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
             f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
-        scaled = problem.scaled(factor)
+        scaled = reduced.settled(problem.scaled(factor), kernel.displacement)
         post = time.perf_counter()
         solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel, gradients)
         step = SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel, backend=backend,

@@ -72,21 +72,130 @@ def circle_case(motion: dict, **extra) -> dict:
     return block({"circle": {"center": [0.0, 1.0], "radius": 1.0}, "motion": motion}, divisions=(40, 10), **extra)
 
 
-def test_force_and_displacement_control_agree_and_the_reaction_is_the_force():
+def counting_kernel_solves(monkeypatch) -> list:
+    """Every call of the contact kernel by :func:`solve_case`, recorded."""
+    import contactfem.solve as solve_module
+
+    calls = []
+    kernel = solve_module.solve_contact
+
+    def counted(*args, **kwargs):
+        result = kernel(*args, **kwargs)
+        calls.append(result)
+        return result
+
+    monkeypatch.setattr(solve_module, "solve_contact", counted)
+    return calls
+
+
+def test_force_and_displacement_control_agree_and_the_reaction_is_the_force(monkeypatch):
+    """The pushed obstacle's advance is one unknown of one solve, its equation the
+    obstacle's equilibrium: the reaction is the force to round-off, and the advance it
+    finds, prescribed, poses the same problem (same active set, same linear system)."""
     driven = solve_case(case_from(circle_case({"direction": [0, -1], "displacement": 0.004})))
     drive = driven.problem.drive
     force = drive.reaction(driven.kernel.nodal_force, driven.problem.contact.normals)
     assert force > 0 and driven.kernel.active.sum() >= 3
+    calls = counting_kernel_solves(monkeypatch)
     pushed = solve_case(case_from(circle_case({"direction": [0, -1], "force": force})))
+    assert len(calls) == 1 and pushed.kernel.factorizations == 1 and pushed.kernel.iterations <= 3
     reaction = pushed.problem.drive.reaction(pushed.kernel.nodal_force, pushed.problem.contact.normals)
     assert abs(reaction - force) <= 1e-10 * force
     assert abs(pushed.problem.drive.advance - 0.004) <= 1e-9 * 0.004
-    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-8
+    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-9
+    at_its_advance = solve_case(case_from(circle_case({"direction": [0, -1],
+                                                       "displacement": pushed.problem.drive.advance})))
+    assert relative(pushed.solution.displacement, at_its_advance.solution.displacement) < 1e-9
+    assert relative(pushed.kernel.nodal_force, at_its_advance.kernel.nodal_force) < 1e-9
     # Normals are the circle's at each node's closest point, pointing into the disk.
     contact = driven.problem.contact
     radial = contact.positions - np.array([0.0, 1.0])
     np.testing.assert_allclose(contact.normals, -radial / np.hypot(*radial.T)[:, None], atol=1e-15)
     np.testing.assert_allclose(contact.gap, np.hypot(*radial.T) - 1.0, atol=1e-15)
+
+
+def test_a_pushed_obstacle_balances_its_force_with_the_body_loaded_too():
+    """A traction on the body along the motion: the obstacle's own equilibrium still holds
+    (the contact force on it is its force, not the supports' reaction), and the advance
+    found, prescribed, gives the same field."""
+    def loaded(motion: dict) -> dict:
+        data = circle_case(motion)
+        data["boundary"]["left"] = {"traction": [0.0, -300.0]}
+        return data
+
+    pushed = solve_case(case_from(loaded({"direction": [0, -1], "force": 2500.0})))
+    drive = pushed.problem.drive
+    assert abs(drive.reaction(pushed.kernel.nodal_force, pushed.problem.contact.normals) - 2500.0) <= 1e-10 * 2500.0
+    driven = solve_case(case_from(loaded({"direction": [0, -1], "displacement": drive.advance})))
+    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-9
+
+
+def rollers(data: dict) -> dict:
+    data["boundary"].update(bottom={"displacement": [None, 0.0]}, left={"displacement": [0.0, None]})
+    return data
+
+
+def half_block(data: dict) -> dict:
+    data["geometry"] = {"rectangle": {"lower": [0, -0.5], "upper": [1, 0]}}
+    data["boundary"]["left"] = "symmetry"
+    return data
+
+
+def lifted(data: dict) -> dict:
+    data["obstacle"]["circle"]["center"] = [0.0, 1.01]
+    return data
+
+
+@pytest.mark.parametrize("direction, pose, force", [
+    ([-0.3, -1.0], lambda data: data, 2000.0),  # held components along x and y both follow
+    ([-0.3, -1.0], rollers, 2000.0),  # each held node one component, of either axis
+    ([0.0, -1.0], half_block, 1000.0),  # a symmetry line along the motion
+    ([0.0, -1.0], lifted, 2000.0),  # every gap open at rest: contact alone holds the push
+])
+def test_a_pushed_obstacle_is_the_driven_one_at_its_advance(direction, pose, force):
+    """Whichever held components carry the advance, the pushed obstacle's reaction is its
+    force and the advance it finds, prescribed, gives the same field."""
+    pushed = solve_case(case_from(pose(circle_case({"direction": direction, "force": force}))))
+    drive = pushed.problem.drive
+    assert abs(drive.reaction(pushed.kernel.nodal_force, pushed.problem.contact.normals) - force) <= 1e-10 * force
+    assert drive.advance > 0 and pushed.kernel.factorizations == 1
+    driven = solve_case(case_from(pose(circle_case({"direction": direction, "displacement": drive.advance}))))
+    assert relative(pushed.solution.displacement, driven.solution.displacement) < 1e-9
+    np.testing.assert_array_equal(pushed.kernel.active, driven.kernel.active)
+
+
+def test_the_iterative_backend_finds_the_same_advance():
+    """CG with algebraic multigrid solves the same system, the advance among its unknowns:
+    the same advance and field as the factorisation, to CG's tolerance."""
+    pytest.importorskip("pyamg")
+    direct = solve_case(case_from(circle_case({"direction": [0, -1], "force": 2000.0})))
+    data = circle_case({"direction": [0, -1], "force": 2000.0})
+    data["solver"] = {"backend": "amg"}
+    iterative = solve_case(case_from(data))
+    drive = iterative.problem.drive
+    assert abs(drive.reaction(iterative.kernel.nodal_force, iterative.problem.contact.normals) - 2000.0) <= 1e-10 * 2000
+    assert abs(drive.advance - direct.problem.drive.advance) <= 1e-9 * direct.problem.drive.advance
+    assert relative(iterative.solution.displacement, direct.solution.displacement) < 1e-9
+
+
+def test_a_pushed_obstacle_along_a_load_path_is_each_single_solve():
+    """The force is scaled along the path like every prescribed value: each of 5 steps,
+    one solve of the path with its one factorisation, is the single solve at its force."""
+    from contactfem.solve import solve_load_path
+
+    force, factors = 2500.0, [0.2, 0.4, 0.6, 0.8, 1.0]
+    path = solve_load_path(case_from(circle_case({"direction": [0, -1], "force": force},
+                                                 load_path={"factors": factors})))
+    assert path.factorizations == 1
+    for factor, step in zip(factors, path.steps):
+        single = solve_case(case_from(circle_case({"direction": [0, -1], "force": factor * force})))
+        drive = step.problem.drive
+        assert drive.force == factor * force
+        assert abs(drive.reaction(step.kernel.nodal_force, step.problem.contact.normals) - factor * force) \
+            <= 1e-10 * factor * force
+        assert abs(drive.advance - single.problem.drive.advance) <= 1e-9 * single.problem.drive.advance
+        assert relative(step.solution.displacement, single.solution.displacement) < 1e-9
+        np.testing.assert_array_equal(step.kernel.active, single.kernel.active)
 
 
 def test_a_moving_obstacle_along_a_load_path_scales_its_advance(tmp_path):
@@ -147,16 +256,22 @@ def test_bad_indenters_are_refused_naming_the_key(tmp_path, obstacle, fragment):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("extra, args, fragment", [
-    ({"load_path": {"factors": [0.5, 1]}}, [], "load_path"),
+@pytest.mark.parametrize("boundary, fragment", [
+    ({"left": {"platen": {"force": 1.0}}}, "obstacle.motion: a moving obstacle with a platen"),
+    ({"left": "symmetry"}, "crosses a symmetry line"),
 ])
-def test_what_a_pushed_or_curved_obstacle_does_not_pose_is_refused(tmp_path, extra, args, fragment):
+def test_what_a_pushed_obstacle_does_not_pose_is_refused(tmp_path, boundary, fragment):
+    """Supports that the advance cannot carry: a platen (an advance of its own), a symmetry
+    line the motion crosses."""
+    data = circle_case({"direction": [-1, -1], "force": 10.0}, load_path={"factors": [0.5, 1]})
+    data["boundary"].update(boundary)
     path = tmp_path / "indenter.yaml"
-    path.write_text(yaml.safe_dump(circle_case({"direction": [0, -1], "force": 10.0}, **extra)), encoding="utf-8")
-    result = make_runner().invoke(main, ["solve", str(path), "--out", str(tmp_path / "out"), *args])
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    result = make_runner().invoke(main, ["solve", str(path), "--out", str(tmp_path / "out")])
     assert result.exit_code == 2, (result.output, result.stderr)
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and "indenter.yaml" in lines[0] and fragment in lines[0], lines
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_distributed_solve_refuses_a_curved_or_moving_obstacle():

@@ -182,8 +182,8 @@ class Platen:
 @dataclass(frozen=True)
 class LoadPath:
     """Load factors applied in turn (``factors``, each > 0): every load, prescribed
-    displacement and platen drive of the case is multiplied by the factor; the obstacle
-    stays where it is."""
+    displacement and platen drive of the case, and a moving obstacle's advance or force, is
+    multiplied by the factor; an obstacle without motion stays where it is."""
 
     factors: tuple[float, ...]
 

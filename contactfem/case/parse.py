@@ -96,9 +96,6 @@ def parse_case(text: str, source: str | Path = "<case>") -> Case:
     if load_path is not None and exact is not None:
         raise r.fail("load_path", top["load_path"], "a manufactured solution (exact:) is the answer to one load; "
                                                     "drop load_path or the exact: block")
-    if load_path is not None and obstacle.motion is not None and obstacle.motion.control.value == "force":
-        raise r.fail("load_path", top["load_path"], "a pushed obstacle (obstacle.motion.force) is solved for one "
-                                                    "force; drop load_path, or drive the obstacle by displacement")
     if load_path is not None and "path" not in output.files:
         files = [name for name in output.files if name != "json"]
         output = replace(output, files=(*files, "path", *(("json",) if "json" in output.files else ())))

@@ -74,7 +74,7 @@ def check(case_file: Path, refine: int | None, as_json: bool, quiet: bool = Fals
     if case.load_path is not None:
         factors = case.load_path.factors
         click.echo(f"  load path  {len(factors)} steps, load factors {factors[0]:g} to {factors[-1]:g} "
-                   "(every load, prescribed displacement and platen drive times each factor)")
+                   "(every load, prescribed displacement, platen drive and obstacle motion times each factor)")
     output = summary["output"]
     click.echo(_printable(f"  output     {output['directory']}: {', '.join(output['files'])} "
                           f"(output.files: {', '.join(output['formats'])})"))

@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from contactfem.case import PlatenControl
+from contactfem.discretize.motion import PushedAdvance, pushed_advance
 from contactfem.kernel import ContactSystem
 from contactfem.mesh.core import coordinate_span
 from contactfem.methods import ContactMethod
@@ -39,6 +40,8 @@ class ReducedSystem:
     frame_nodes: np.ndarray
     frames: np.ndarray
     masters: np.ndarray
+    #: A pushed obstacle's advance among the unknowns (None: no obstacle is pushed).
+    pushed: PushedAdvance | None = None
 
     @classmethod
     def build(cls, problem: DiscreteProblem, method: ContactMethod) -> "ReducedSystem":
@@ -48,19 +51,24 @@ class ReducedSystem:
         supported[problem.dirichlet_dofs] = True
         frames = _frames(problem, supported)
         nodes, a, b = frames.nodes, frames.a, frames.b
+        pushed = _pushed(problem, nodes)
         # Each framed node's slots hold u · a (x slot) and u · b (y slot): Q's 2x2 block is
         # [a b]. E = Q − I lives on those nodes only, so QᵀKQ = K + EᵀK + KE + EᵀKE costs a
-        # few products with thin matrices instead of two full ones.
+        # few products with thin matrices instead of two full ones. A pushed obstacle's
+        # advance adds a column to E (its held components follow s_p: PushedAdvance).
         x, y = 2 * nodes, 2 * nodes + 1
         slaves = (frames.masters >= 0) & (nodes != frames.masters)
-        rows = np.concatenate([x, x, y, y, x[slaves], y[slaves]])
-        cols = np.concatenate([x, y, x, y, 2 * frames.masters[slaves], 2 * frames.masters[slaves]])
-        vals = np.concatenate([a[:, 0] - 1.0, b[:, 0], a[:, 1], b[:, 1] - 1.0, a[slaves, 0], a[slaves, 1]])
+        coupled = np.zeros(0, dtype=np.int64) if pushed is None else pushed.coupled
+        rows = np.concatenate([x, x, y, y, x[slaves], y[slaves], coupled])
+        cols = np.concatenate([x, y, x, y, 2 * frames.masters[slaves], 2 * frames.masters[slaves],
+                               np.full(len(coupled), 0 if pushed is None else pushed.slot)])
+        vals = np.concatenate([a[:, 0] - 1.0, b[:, 0], a[:, 1], b[:, 1] - 1.0, a[slaves, 0], a[slaves, 1],
+                               np.zeros(0) if pushed is None else pushed.ratios])
         shift = sp.csr_matrix((vals, (rows, cols)), shape=(n_dof, n_dof))
         shift.eliminate_zeros()
         stiffness = problem.stiffness
         blocks = np.stack([a, b], axis=2)
-        rotated = None if slaves.any() else _rotated_in_blocks(stiffness, nodes, blocks)
+        rotated = None if slaves.any() or pushed is not None else _rotated_in_blocks(stiffness, nodes, blocks)
         if rotated is None:
             k_shift = (stiffness @ shift).tocsr()
             # The three corrections live on the framed rows and columns: sum them first, then
@@ -68,14 +76,21 @@ class ReducedSystem:
             rotated = sp.csr_matrix(stiffness + (k_shift + k_shift.T + shift.T @ k_shift))
             rotated.sum_duplicates()
         rotation = (sp.identity(n_dof, format="csr") + shift).tocsr()
-        fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
-        fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
+        held_dofs, held_values = problem.dirichlet_dofs, problem.dirichlet_values
+        if pushed is not None:
+            held_dofs, held_values = pushed.fixed(held_values)
+        fixed_dofs = np.concatenate([held_dofs, frames.fixed_dofs])
+        fixed_values = np.concatenate([held_values, frames.fixed_values])
         order = np.argsort(fixed_dofs)
         load = rotation.T @ problem.load
         np.add.at(load, frames.force_dofs, frames.forces)
         free_modes = None
         if problem.free_modes is not None:
             free_modes = _reduce(problem.free_modes, nodes, blocks, frames.masters)
+        if pushed is not None:
+            load[pushed.slot] += pushed.load
+            free_modes = pushed.release(_reduce(pushed.mode(problem.drive.direction, problem.mesh.n_points),
+                                                nodes, blocks, frames.masters))[:, None]
         translation = None
         if free_modes is None and not np.any(load):
             translation = _prescribed_translation(problem, nodes, blocks, frames.masters)
@@ -93,7 +108,7 @@ class ReducedSystem:
             translation=translation,
         )
         return cls(system=system, rotation=rotation, problem=problem, frame_nodes=nodes, frames=blocks,
-                   masters=frames.masters)
+                   masters=frames.masters, pushed=pushed)
 
     def displacement(self, reduced: np.ndarray) -> np.ndarray:
         """Mesh displacement (n_points, 2) from the kernel's unknowns (in rotated coordinates)."""
@@ -111,7 +126,25 @@ class ReducedSystem:
     def reduce(self, displacement: np.ndarray) -> np.ndarray:
         """The kernel's unknowns of mesh displacements (2 n_points,) or (2 n_points, j) that
         the constraints allow (a rigid motion a platen follows): the inverse of :meth:`displacement`."""
-        return _reduce(displacement, self.frame_nodes, self.frames, self.masters)
+        reduced = _reduce(displacement, self.frame_nodes, self.frames, self.masters)
+        return reduced if self.pushed is None else self.pushed.release(reduced)
+
+    def settled(self, problem: DiscreteProblem, reduced: np.ndarray) -> DiscreteProblem:
+        """``problem`` (this system's own, or scaled along a path) with its pushed obstacle
+        at the advance the kernel's unknowns ``reduced`` found; itself when none is pushed."""
+        if self.pushed is None:
+            return problem
+        return problem.advanced(self.pushed.advance(reduced, problem.dirichlet_values))
+
+
+def _pushed(problem: DiscreteProblem, framed_nodes: np.ndarray) -> PushedAdvance | None:
+    """The coupling that makes a pushed obstacle's advance an unknown (None if none is pushed)."""
+    drive = problem.drive
+    if drive is None or not drive.pushed:
+        return None
+    framed = np.zeros(problem.mesh.n_points, dtype=bool)
+    framed[framed_nodes] = True
+    return pushed_advance(problem.dirichlet_dofs, drive.direction, drive.force, problem.load, framed)
 
 
 def _rotated_in_blocks(stiffness: sp.csr_matrix, nodes: np.ndarray, frames: np.ndarray) -> sp.csr_matrix | None:

@@ -79,7 +79,8 @@ class DiscreteProblem:
         )
 
     def advanced(self, advance: float) -> "DiscreteProblem":
-        """The problem with its moving obstacle advanced by ``advance`` (a pushed obstacle's trial)."""
+        """The problem with its moving obstacle advanced by ``advance`` (a pushed obstacle at
+        the advance its solve found)."""
         shift = advance - self.drive.advance
         dofs = self.dirichlet_dofs
         return replace(self, dirichlet_values=self.dirichlet_values - shift * self.drive.direction[dofs % 2],
