@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from contactfem.case import Case
+from contactfem.case import Case, PlatenControl
 from contactfem.discretize import DiscreteProblem, build_mesh
 from contactfem.discretize.meshing import MeshRequest
 # Some names are re-exported: the assembly lived here.
@@ -96,13 +96,15 @@ _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4p
 
 
 def refuse_indenter(case: Case) -> None:
-    """Refuse what the distributed solve does not pose: a curved obstacle (its per-node
-    normals are not passed to the ranks' frames) or a moving one."""
-    obstacle = case.obstacle
-    if not obstacle.flat or obstacle.motion is not None:
-        what = f"a {obstacle.shape} obstacle" if not obstacle.flat else "a moving obstacle (obstacle.motion)"
-        raise CaseError(f"{case.source.name}: solver.backend = petsc: {what} is solved serially only; expected a "
-                        "flat obstacle that stays where it is, or another backend (auto, cholmod, pardiso, superlu)")
+    """Refuse what the distributed solve does not pose: an obstacle pushed by a force (its
+    advance is not yet an unknown of the ranks' system). Curved obstacles (each contact
+    node's own normal in the ranks' frames) and obstacles moved by a prescribed displacement
+    (the supports shifted, data only) are solved across the ranks."""
+    motion = case.obstacle.motion
+    if motion is not None and motion.control is PlatenControl.FORCE:
+        raise CaseError(f"{case.source.name}: solver.backend = petsc: obstacle.motion.force: an obstacle pushed by a "
+                        "force is solved serially only; expected obstacle.motion.displacement, or another backend "
+                        "(auto, cholmod, pardiso, superlu)")
 
 
 def petsc_available() -> bool:
@@ -292,7 +294,9 @@ def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_Distributed
     kernel.displacement = layout.to_mesh(slots)
     displacement = system.mesh_vector(kernel.displacement)
     force = system.mesh_force(layout.to_mesh(internal))
-    problem = _with_stiffness(problem, SolutionProduct(displacement, force))
+    # A moving obstacle's field is moved back by its advance (a rigid translation: K u stays).
+    moved = displacement if problem.drive is None else problem.drive.moved(displacement.reshape(-1, 2)).ravel()
+    problem = _with_stiffness(problem, SolutionProduct(moved, force))
     return problem, _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
 
 

@@ -29,6 +29,7 @@ from contactfem.discretize.contact import contact_boundary
 from contactfem.discretize.exact_checks import exact_fields
 from contactfem.discretize.loads import Loads, _body_force, _natural_boundary, compile_loads
 from contactfem.discretize.meshing import MeshRequest
+from contactfem.discretize.motion import obstacle_drive
 from contactfem.discretize.supports import supports
 from contactfem.distributed_assembly import (
     ELEMENT_CHUNK,
@@ -114,6 +115,8 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     loads = Loads(body_force=_body_force(case), natural=_natural_boundary(case, boundary))
     held = supports(case, boundary)
     contact = contact_boundary(case, boundary, held)
+    # A moving obstacle shifts the supports (the coarse problem ran its checks).
+    drive, held = obstacle_drive(case, held)
     body = None
     if loads.body_force is not None:
         piece_loads = compile_loads(case, piece.as_mesh())
@@ -126,7 +129,7 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
         dirichlet_dofs=held.dirichlet_dofs, dirichlet_values=held.dirichlet_values, contact=contact, loads=loads,
         exact=exact_fields(case), refinements=times, symmetry_nodes=held.symmetry_nodes,
         symmetry_normals=held.symmetry_normals, free_modes=None, platens=held.platens,
-        mesh_request=MeshRequest.of(case), holds=held.holds, piece=piece, numbers=numbers, node_range=(first, last),
+        mesh_request=MeshRequest.of(case), holds=held.holds, drive=drive, piece=piece, numbers=numbers, node_range=(first, last),
         boundary_ids=ids, boundary_numbers=boundary_numbers, n_points_total=int(piece.global_counts[0]),
         body_load=body, preallocation=preallocation)
 
