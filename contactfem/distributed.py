@@ -199,6 +199,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     """
     if solver not in SOLVERS:
         raise SolverError(f"unknown petsc solver {solver!r}; pick one of {', '.join(SOLVERS)}")
+    refuse_indenter(case)
     PETSc, MPI = _petsc()
     comm = PETSc.COMM_WORLD
     mpi = comm.tompi4py()

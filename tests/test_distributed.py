@@ -363,17 +363,17 @@ def _block(obstacle: dict, divisions: tuple[int, int], refine: int = 0) -> dict:
             "obstacle": obstacle}
 
 
-#: Rigid indenters (2 210 unknowns each): a circle pressed 0.003 by its prescribed advance
+#: Rigid indenters (2 210 unknowns each): a circle pressed 0.02 by its prescribed advance
 #: (every contact node its own normal in the ranks' frames, the supports shifted by the
 #: advance), on the replicated mesh and refined once in pieces; a wedge (a polyline with a
-#: corner at its tip) in place, and moved down 0.002 in pieces.
-_CIRCLE = {"circle": {"center": [0, 0.5], "radius": 0.5}, "motion": {"direction": [0, -1], "displacement": 0.003}}
-_WEDGE = [[0.6, 0.05], [0.013, -0.002], [-0.6, 0.05]]  # its tip between two nodes
+#: corner at its tip) in place, and moved down 0.01 in pieces.
+_CIRCLE = {"circle": {"center": [0, 0.5], "radius": 0.5}, "motion": {"direction": [0, -1], "displacement": 0.02}}
+_WEDGE = [[0.6, 0.05], [0.013, -0.02], [-0.6, 0.05]]  # its tip between two nodes
 INDENTERS = {"circle_pressed": _block(_CIRCLE, (64, 16)),
              "circle_pieces": _block(_CIRCLE, (32, 8), refine=1),
              "wedge": _block({"polyline": _WEDGE}, (64, 16)),
              "wedge_moved_pieces": _block({"polyline": [[x, y + 0.002] for x, y in _WEDGE],
-                                           "motion": {"direction": [0, -1], "displacement": 0.004}}, (32, 8),
+                                           "motion": {"direction": [0, -1], "displacement": 0.01}}, (32, 8),
                                           refine=1)}
 
 
@@ -404,7 +404,7 @@ def test_two_ranks_agree_with_the_serial_solve_under_an_indenter(tmp_path, metho
             assert (solved.problem.drive is not None) == ("motion" in INDENTERS[name]["obstacle"])
             assert str(distributed[key + "_mesh"]) == ("pieces" if name.endswith("_pieces") else "replicated")
             assert str(distributed[key + "_status"]) == "converged"
-            assert len(serial.contact.active) > 3
+            assert serial.contact.active.sum() >= 5
             np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
             u = distributed[key + "_u"]
             assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
@@ -431,3 +431,33 @@ def test_an_obstacle_pushed_by_a_force_is_refused_on_petsc(tmp_path):
                 refuse_indenter(case)
         else:
             refuse_indenter(case)
+
+
+@needs_mpi
+def test_a_load_path_of_a_moved_indenter_on_two_ranks_agrees_with_the_serial_path(tmp_path):
+    """The circle pressed 0.02 in 3 steps: each step's advance is the factor times 0.02 (the
+    shifted supports scale with the other prescribed values), and 2 ranks reproduce every
+    serial step (active set, displacement moved back, multiplier) to 1e-10."""
+    import yaml
+
+    from contactfem.solve import solve_load_path
+
+    case_file = tmp_path / "indenter_path.yaml"
+    case_file.write_text(yaml.safe_dump({**INDENTERS["circle_pressed"], "load_path": {"steps": 3}}, sort_keys=False),
+                         encoding="utf-8")
+    script = tmp_path / "path.py"
+    script.write_text(PATH_SCRIPT)
+    out = tmp_path / "path.npz"
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), str(case_file), "mumps"],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    serial = solve_load_path(load_case(case_file)).steps
+    assert [step.problem.drive.advance for step in serial] == pytest.approx([0.02 / 3, 0.04 / 3, 0.02], rel=1e-15)
+    with np.load(out) as distributed:
+        assert len(distributed["u"]) == len(serial) == 3
+        assert serial[0].solution.contact.active.sum() < serial[-1].solution.contact.active.sum()
+        for index, step in enumerate(serial):
+            np.testing.assert_array_equal(distributed["active"][index], step.solution.contact.active)
+            u, mu = step.solution.displacement, step.solution.contact.multiplier
+            assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
+            assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()
