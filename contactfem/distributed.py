@@ -28,9 +28,10 @@ starting where the last settled, keeps its factorisation). The first active set 
 across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
 safeguards and certificate are the serial kernel's.
 
-Platens are assembled into the rotated unknowns as the serial
-:class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
-:mod:`contactfem.distributed_assembly`); a body held only by contact gives the kernel its
+Platens, and a pushed obstacle's advance, are assembled into the rotated unknowns as the
+serial :class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
+:mod:`contactfem.distributed_assembly`); curved obstacles give each contact node its own
+frame, a moved one shifts the supports; a body held only by contact gives the kernel its
 free rigid motions at the contact normals (every active set must hold them, as serially);
 load paths run in :mod:`contactfem.distributed_path`, one distributed solver (its MUMPS
 analysis, or GAMG's coarse spaces) carried across the steps.
@@ -46,7 +47,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from contactfem.case import Case, PlatenControl
+from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem, build_mesh
 from contactfem.discretize.meshing import MeshRequest
 # Some names are re-exported: the assembly lived here.
@@ -93,18 +94,6 @@ PROBE_RTOL = 1e-6
 
 _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
                  "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
-
-
-def refuse_indenter(case: Case) -> None:
-    """Refuse what the distributed solve does not pose: an obstacle pushed by a force (its
-    advance is not yet an unknown of the ranks' system). Curved obstacles (each contact
-    node's own normal in the ranks' frames) and obstacles moved by a prescribed displacement
-    (the supports shifted, data only) are solved across the ranks."""
-    motion = case.obstacle.motion
-    if motion is not None and motion.control is PlatenControl.FORCE:
-        raise CaseError(f"{case.source.name}: solver.backend = petsc: obstacle.motion.force: an obstacle pushed by a "
-                        "force is solved serially only; expected obstacle.motion.displacement, or another backend "
-                        "(auto, cholmod, pardiso, superlu)")
 
 
 def petsc_available() -> bool:
@@ -199,7 +188,6 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     """
     if solver not in SOLVERS:
         raise SolverError(f"unknown petsc solver {solver!r}; pick one of {', '.join(SOLVERS)}")
-    refuse_indenter(case)
     PETSc, MPI = _petsc()
     comm = PETSc.COMM_WORLD
     mpi = comm.tompi4py()
@@ -293,6 +281,9 @@ def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_Distributed
     slots, internal = gathered
     layout = system.layout
     kernel.displacement = layout.to_mesh(slots)
+    pushed = getattr(system, "pushed", None)
+    if pushed is not None:  # the pushed obstacle at the advance found
+        problem = problem.advanced(pushed.advance(kernel.displacement, problem.dirichlet_values))
     displacement = system.mesh_vector(kernel.displacement)
     force = system.mesh_force(layout.to_mesh(internal))
     # A moving obstacle's field is moved back by its advance (a rigid translation: K u stays).

@@ -377,6 +377,16 @@ INDENTERS = {"circle_pressed": _block(_CIRCLE, (64, 16)),
                                           refine=1)}
 
 
+#: The circle pushed by a force instead, and what rank 0 adds to the fields: its advance and reaction.
+PUSHED = dict(INDENTERS["circle_pressed"], obstacle={**_CIRCLE, "motion": {"direction": [0, -1], "force": 2.0e4}})
+_REPORT_LINE = """
+if fields:
+    motion = report["obstacle"]["motion"]
+    fields[key + "_motion"] = np.array([motion["advance"], motion["reaction"]])
+    np.savez(out, **fields)
+"""
+
+
 @needs_mpi
 @pytest.mark.parametrize("method", ["positive", "standard"])
 def test_two_ranks_agree_with_the_serial_solve_under_an_indenter(tmp_path, method):
@@ -413,38 +423,57 @@ def test_two_ranks_agree_with_the_serial_solve_under_an_indenter(tmp_path, metho
             assert float(distributed[key + "_residual"]) < 1e-10
 
 
-def test_an_obstacle_pushed_by_a_force_is_refused_on_petsc(tmp_path):
-    """What the ranks do not pose yet, a force-driven obstacle, is refused in one line (exit 2
-    at the command line); the shapes and a prescribed advance pass."""
+@needs_mpi
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_two_ranks_agree_with_the_serial_solve_under_a_pushed_indenter(tmp_path, method):
+    """The circle pushed by a force of 2e4 along −y: its advance is one more unknown, coupled
+    to the held components as a platen's nodes are to its advance. 2 ranks reproduce the
+    serial solve (field, multiplier, active set) and its advance to 1e-10; the contact
+    force holding the obstacle is the force given, to 1e-10."""
     import yaml
 
-    from contactfem.distributed import refuse_indenter
-    from contactfem.errors import CaseError
+    from contactfem.report import build_report
 
-    pushed = dict(INDENTERS["circle_pressed"], obstacle={**_CIRCLE, "motion": {"direction": [0, -1], "force": 50.0}})
-    for name, data in (("pushed", pushed), *INDENTERS.items()):
-        path = tmp_path / f"{name}.yaml"
-        path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-        case = load_case(path)
-        if name == "pushed":
-            with pytest.raises(CaseError, match=r"^pushed\.yaml: solver\.backend = petsc: obstacle\.motion\.force: "):
-                refuse_indenter(case)
-        else:
-            refuse_indenter(case)
+    path = tmp_path / "pushed.yaml"
+    path.write_text(yaml.safe_dump(PUSHED, sort_keys=False), encoding="utf-8")
+    script = tmp_path / "solve.py"
+    script.write_text(SCRIPT + _REPORT_LINE)
+    out = tmp_path / "fields.npz"
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), f"pushed:{path}:{method}"],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    case = load_case(path)
+    solved = solve_case(case, method=method)
+    serial, key = solved.solution, f"pushed_{method}"
+    motion = build_report(case, solved)["obstacle"]["motion"]
+    with np.load(out) as distributed:
+        assert str(distributed[key + "_mesh"]) == "replicated" and str(distributed[key + "_status"]) == "converged"
+        assert serial.contact.active.sum() >= 5
+        np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
+        u = distributed[key + "_u"]
+        assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
+        for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
+            assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
+        advance, reaction = distributed[key + "_motion"]
+        assert abs(advance - motion["advance"]) <= TIGHT * motion["advance"]
+        assert abs(reaction - 2e4) <= TIGHT * 2e4 and abs(motion["reaction"] - 2e4) <= TIGHT * 2e4
+        assert float(distributed[key + "_residual"]) < 1e-10
 
 
 @needs_mpi
-def test_a_load_path_of_a_moved_indenter_on_two_ranks_agrees_with_the_serial_path(tmp_path):
-    """The circle pressed 0.02 in 3 steps: each step's advance is the factor times 0.02 (the
-    shifted supports scale with the other prescribed values), and 2 ranks reproduce every
-    serial step (active set, displacement moved back, multiplier) to 1e-10."""
+@pytest.mark.parametrize("name", ["circle_pressed", "pushed"])
+def test_a_load_path_of_an_indenter_on_two_ranks_agrees_with_the_serial_path(tmp_path, name):
+    """The circle pressed 0.02, or pushed by 2e4, in 3 steps: a prescribed advance is the
+    factor times 0.02 (the shifted supports scale with the other prescribed values), a
+    pushed one balances the factor times the force. 2 ranks reproduce every serial step
+    (active set, displacement moved back by the advance, multiplier) to 1e-10."""
     import yaml
 
     from contactfem.solve import solve_load_path
 
-    case_file = tmp_path / "indenter_path.yaml"
-    case_file.write_text(yaml.safe_dump({**INDENTERS["circle_pressed"], "load_path": {"steps": 3}}, sort_keys=False),
-                         encoding="utf-8")
+    data = PUSHED if name == "pushed" else INDENTERS[name]
+    case_file = tmp_path / f"{name}_path.yaml"
+    case_file.write_text(yaml.safe_dump({**data, "load_path": {"steps": 3}}, sort_keys=False), encoding="utf-8")
     script = tmp_path / "path.py"
     script.write_text(PATH_SCRIPT)
     out = tmp_path / "path.npz"
@@ -452,7 +481,11 @@ def test_a_load_path_of_a_moved_indenter_on_two_ranks_agrees_with_the_serial_pat
                          capture_output=True, text=True, timeout=300, env=_mpi_environment())
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
     serial = solve_load_path(load_case(case_file)).steps
-    assert [step.problem.drive.advance for step in serial] == pytest.approx([0.02 / 3, 0.04 / 3, 0.02], rel=1e-15)
+    advances = [step.problem.drive.advance for step in serial]
+    if name == "pushed":  # contact stiffens as the zone grows: less advance per step
+        assert 0 < advances[2] - advances[1] < advances[1] - advances[0] < advances[0]
+    else:
+        assert advances == pytest.approx([0.02 / 3, 0.04 / 3, 0.02], rel=1e-15)
     with np.load(out) as distributed:
         assert len(distributed["u"]) == len(serial) == 3
         assert serial[0].solution.contact.active.sum() < serial[-1].solution.contact.active.sum()
