@@ -28,9 +28,10 @@ starting where the last settled, keeps its factorisation). The first active set 
 across the ranks too, when that pays), the active-set updates, tolerance bands, cycling
 safeguards and certificate are the serial kernel's.
 
-Platens are assembled into the rotated unknowns as the serial
-:class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
-:mod:`contactfem.distributed_assembly`); a body held only by contact gives the kernel its
+Platens, and a pushed obstacle's advance, are assembled into the rotated unknowns as the
+serial :class:`contactfem.discretize.ReducedSystem` does (the advance one more unknown, see
+:mod:`contactfem.distributed_assembly`); curved obstacles give each contact node its own
+frame, a moved one shifts the supports; a body held only by contact gives the kernel its
 free rigid motions at the contact normals (every active set must hold them, as serially);
 load paths run in :mod:`contactfem.distributed_path`, one distributed solver (its MUMPS
 analysis, or GAMG's coarse spaces) carried across the steps.
@@ -93,16 +94,6 @@ PROBE_RTOL = 1e-6
 
 _INSTALL_HINT = ("the petsc backend needs petsc4py and mpi4py: pip install mpi4py, then "
                  "PETSC_DIR=<PETSc directory> pip install --no-build-isolation petsc4py (see README)")
-
-
-def refuse_indenter(case: Case) -> None:
-    """Refuse what the distributed solve does not pose: a curved obstacle (its per-node
-    normals are not passed to the ranks' frames) or a moving one."""
-    obstacle = case.obstacle
-    if not obstacle.flat or obstacle.motion is not None:
-        what = f"a {obstacle.shape} obstacle" if not obstacle.flat else "a moving obstacle (obstacle.motion)"
-        raise CaseError(f"{case.source.name}: solver.backend = petsc: {what} is solved serially only; expected a "
-                        "flat obstacle that stays where it is, or another backend (auto, cholmod, pardiso, superlu)")
 
 
 def petsc_available() -> bool:
@@ -290,9 +281,14 @@ def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_Distributed
     slots, internal = gathered
     layout = system.layout
     kernel.displacement = layout.to_mesh(slots)
+    pushed = getattr(system, "pushed", None)
+    if pushed is not None:  # the pushed obstacle at the advance found
+        problem = problem.advanced(pushed.advance(kernel.displacement, problem.dirichlet_values))
     displacement = system.mesh_vector(kernel.displacement)
     force = system.mesh_force(layout.to_mesh(internal))
-    problem = _with_stiffness(problem, SolutionProduct(displacement, force))
+    # A moving obstacle's field is moved back by its advance (a rigid translation: K u stays).
+    moved = displacement if problem.drive is None else problem.drive.moved(displacement.reshape(-1, 2)).ravel()
+    problem = _with_stiffness(problem, SolutionProduct(moved, force))
     return problem, _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
 
 

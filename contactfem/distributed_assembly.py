@@ -13,6 +13,7 @@ from contactfem.mesh.core import coordinate_span
 
 if TYPE_CHECKING:
     from contactfem.discretize import DiscreteProblem
+    from contactfem.discretize.motion import PushedAdvance
 
 #: Triangles per block of the element loop: bounds the temporaries of assembly.
 ELEMENT_CHUNK = 65536
@@ -115,18 +116,21 @@ class _DistributedSystem:
     #: The force that strains the body by its whole size (largest diagonal entry of K times
     #: the body's size), as :class:`contactfem.kernel.ActiveSetSolver` measures it.
     force_unit: float
+    #: A pushed obstacle's advance among the unknowns (None: no obstacle is pushed).
+    pushed: PushedAdvance | None = None
 
     @classmethod
     def assemble(cls, PETSc, comm, problem: DiscreteProblem, method, layout: _Layout) -> "_DistributedSystem":
-        from contactfem.discretize.frames import _frames, _reduce
+        from contactfem.discretize.frames import _frames, _pushed, _reduce
 
         mesh = problem.mesh
         n_dof = 2 * mesh.n_points
         supported = np.zeros(n_dof, dtype=bool)
         supported[problem.dirichlet_dofs] = True
         frames = _frames(problem, supported)
+        pushed = _pushed(problem, frames.nodes)
         blocks = np.stack([frames.a, frames.b], axis=2)  # (k, 2, 2), columns a and b
-        stiffness, owned = _assemble_stiffness(PETSc, comm, problem, layout, frames, blocks)
+        stiffness, owned = _assemble_stiffness(PETSc, comm, problem, layout, frames, blocks, pushed)
         absolute, longest_row, largest_diagonal = matrix_scales(PETSc, comm, stiffness, layout.last - layout.first,
                                                                 n_dof)
 
@@ -139,16 +143,25 @@ class _DistributedSystem:
         np.add.at(load, 2 * frames.masters[slaves], load[2 * frames.nodes[slaves]])
         if len(frames.force_dofs):
             np.add.at(load, frames.force_dofs, frames.forces)
-        fixed_dofs = np.concatenate([problem.dirichlet_dofs, frames.fixed_dofs])
-        fixed_values = np.concatenate([problem.dirichlet_values, frames.fixed_values])
+        held_dofs, held_values = problem.dirichlet_dofs, problem.dirichlet_values
+        if pushed is not None:  # its held components follow the advance, as a platen's nodes do
+            load[pushed.slot] += pushed.ratios @ load[pushed.coupled] + pushed.load
+            held_dofs, held_values = pushed.fixed(held_values)
+        fixed_dofs = np.concatenate([held_dofs, frames.fixed_dofs])
+        fixed_values = np.concatenate([held_values, frames.fixed_values])
         supported_all = np.zeros(n_dof, dtype=bool)
         supported_all[fixed_dofs] = True
         values_all = np.zeros(n_dof)
         values_all[fixed_dofs] = fixed_values
         rigid = _reduce(_rigid_motions(mesh.points), frames.nodes, blocks, frames.masters)
         modes_normal = modes_load = None
-        if problem.free_modes is not None:
-            modes = _reduce(problem.free_modes, frames.nodes, blocks, frames.masters)
+        modes = problem.free_modes
+        if pushed is not None:
+            rigid = pushed.release(rigid)
+            modes = pushed.mode(problem.drive.direction, mesh.n_points)[:, None]
+        if modes is not None:
+            modes = _reduce(modes, frames.nodes, blocks, frames.masters)
+            modes = modes if pushed is None else pushed.release(modes)
             modes_normal, modes_load = modes[frames.normal_slot], load @ modes
         span = coordinate_span(mesh.points).max(initial=0.0)
         return cls(
@@ -161,7 +174,7 @@ class _DistributedSystem:
             layout=layout, frame_nodes=frames.nodes, frames=blocks, owned_triangles=int(len(owned)), n_dof=n_dof,
             rigid_motions_local=np.stack([layout.owned(r) for r in rigid.T]), masters=frames.masters,
             free_modes_normal=modes_normal, free_modes_load=modes_load,
-            force_unit=largest_diagonal * float(span) if span else 0.0,
+            force_unit=largest_diagonal * float(span) if span else 0.0, pushed=pushed,
         )
 
     def mesh_vector(self, slots: np.ndarray) -> np.ndarray:
@@ -172,13 +185,20 @@ class _DistributedSystem:
         slaves = (self.masters >= 0) & (self.frame_nodes != self.masters)
         advance = slots[2 * self.masters[slaves]]
         vector[self.frame_nodes[slaves]] += self.frames[slaves, :, 0] * advance[:, None]
-        return vector.ravel()
+        vector = vector.ravel()
+        pushed = getattr(self, "pushed", None)
+        if pushed is not None:  # a pushed obstacle's held components: u_q = s_q + r_q s_p
+            vector[pushed.coupled] += pushed.ratios * slots[pushed.slot]
+        return vector
 
     def mesh_force(self, rotated: np.ndarray) -> np.ndarray:
         """The mesh-frame force v (2n,) whose rotated form Qᵀ v is ``rotated`` (mesh
         numbering): K u from K' s. A platen's advance slot holds its nodes' a · v summed,
         each of which its node's x slot holds too."""
         w = rotated.copy()
+        pushed = getattr(self, "pushed", None)
+        if pushed is not None:  # the advance's slot holds v_p + Σ r_q v_q
+            w[pushed.slot] -= pushed.ratios @ w[pushed.coupled]
         slaves = (self.masters >= 0) & (self.frame_nodes != self.masters)
         np.subtract.at(w, 2 * self.masters[slaves], w[2 * self.frame_nodes[slaves]])
         vector = w.reshape(-1, 2)
@@ -213,12 +233,15 @@ def matrix_scales(PETSc, comm, stiffness, n_local: int, n_dof: int):
     return absolute, longest_row, largest_diagonal
 
 
-def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, frames, blocks: np.ndarray):
+def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, frames, blocks: np.ndarray,
+                        pushed: PushedAdvance | None = None):
     """K' = Qᵀ K Q as a PETSc MPIAIJ matrix, and the triangles this rank assembled.
 
     Q is block-diagonal (each framed node's [a b]) but for the platens: a platen node j
     but the first moves by a_j (δ + s_x) + b_j s_y, so the entries of its x slot are
-    added to the advance δ's row and column as well (the first node's x slot)."""
+    added to the advance δ's row and column as well (the first node's x slot). A pushed
+    obstacle's held components q follow its advance's slot p the same way, weighted:
+    u_q = s_q + r_q s_p adds r_q times the entries of q to p's row and column."""
     mesh = problem.mesh
     n_points, n_dof = mesh.n_points, 2 * mesh.n_points
     frame_of = np.full(n_points, -1, dtype=np.int64)
@@ -229,6 +252,12 @@ def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, 
     # Mesh unknown → PETSc index of the advance its entries also go to (−1: none; PETSc skips those).
     advance_of = np.full(n_dof, -1, dtype=np.int64)
     advance_of[2 * frames.nodes[slaves]] = layout.petsc(2 * frames.masters[slaves])
+    weight_of = np.ones(n_dof)  # what each unknown's entries are multiplied by there
+    if pushed is not None:
+        moving = pushed.coupled[pushed.ratios != 0.0]
+        advance_of[moving] = layout.petsc(np.full(len(moving), pushed.slot))
+        weight_of[moving] = pushed.ratios[pushed.ratios != 0.0]
+        master_of[moving // 2] = pushed.slot // 2
 
     first, last = layout.first, layout.last
     n_local = last - first
@@ -254,9 +283,12 @@ def _assemble_stiffness(PETSc, comm, problem: DiscreteProblem, layout: _Layout, 
         advances = advance_of[mesh_dofs]
         on_platen = np.flatnonzero((advances >= 0).any(axis=1))
         if len(on_platen):
-            extra, near, part = advances[on_platen].astype(index_type), dofs[on_platen], values[on_platen]
-            for rows, columns in ((extra, near), (near, extra), (extra, extra)):
-                stiffness.setValuesRCV(rows, columns, part, addv=add)
+            extra, near = advances[on_platen].astype(index_type), dofs[on_platen]
+            part, weight = ke[on_platen], weight_of[mesh_dofs[on_platen]]
+            rows_weighted = part * weight[:, :, None]
+            for rows, columns, block in ((extra, near, rows_weighted), (near, extra, part * weight[:, None, :]),
+                                         (extra, extra, rows_weighted * weight[:, None, :])):
+                stiffness.setValuesRCV(rows, columns, block.reshape(len(block), 36), addv=add)
     stiffness.assemblyBegin()
     stiffness.assemblyEnd()
     stiffness.setOption(PETSc.Mat.Option.SYMMETRIC, True)

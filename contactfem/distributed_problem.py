@@ -9,7 +9,7 @@ of another's piece. Its contact nodes, gaps, masses and frames are the serial on
 in the same order, the same coordinates), so every rank takes the kernel's decisions alike.
 
 The route is taken when the fine mesh comes from uniform refinement (``--refine R`` or
-``mesh.refine``, R ≥ 1) of a body held by its supports without platens; other cases keep the
+``mesh.refine``, R ≥ 1) of a body held by its supports without platens or a pushed obstacle; other cases keep the
 replicated mesh of :mod:`contactfem.distributed`. A coarser level of mesh sequencing made of
 fewer refinements of the same mesh is in pieces too; a rectangle's (fewer divisions) is meshed
 whole on every rank (a sixteenth of the unknowns). After the solve, rank 0 meshes the whole
@@ -29,6 +29,7 @@ from contactfem.discretize.contact import contact_boundary
 from contactfem.discretize.exact_checks import exact_fields
 from contactfem.discretize.loads import Loads, _body_force, _natural_boundary, compile_loads
 from contactfem.discretize.meshing import MeshRequest
+from contactfem.discretize.motion import obstacle_drive
 from contactfem.discretize.supports import supports
 from contactfem.distributed_assembly import (
     ELEMENT_CHUNK,
@@ -84,7 +85,7 @@ class PieceLayout:
 
 def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | None:
     """This rank's :class:`PieceProblem` of ``case``, or None when the case keeps the replicated
-    mesh (no refinement, platens, or a body only contact holds). Collective over ``mpi``."""
+    mesh (no refinement, platens, a pushed obstacle, or a body only contact holds). Collective over ``mpi``."""
     times = case.mesh.refine if refine is None else refine
     if not times:
         return None
@@ -92,7 +93,8 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     # The coarse problem runs every check of the case (held, loaded, contact facing) and tells
     # whether the fine one has platens or free rigid motions.
     checked = build_problem(case, coarse, assemble_stiffness=False)
-    if checked.platens or checked.free_modes is not None or coarse.n_triangles < mpi.Get_size():
+    pushed = checked.drive is not None and checked.drive.pushed
+    if checked.platens or checked.free_modes is not None or pushed or coarse.n_triangles < mpi.Get_size():
         return None
     _refuse_oversized(case, coarse.n_triangles * 4**times, times, mpi)
     piece = mesh_piece(coarse, times, mpi.Get_size(), mpi.Get_rank())
@@ -114,6 +116,8 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     loads = Loads(body_force=_body_force(case), natural=_natural_boundary(case, boundary))
     held = supports(case, boundary)
     contact = contact_boundary(case, boundary, held)
+    # A moving obstacle shifts the supports (the coarse problem ran its checks).
+    drive, held = obstacle_drive(case, held)
     body = None
     if loads.body_force is not None:
         piece_loads = compile_loads(case, piece.as_mesh())
@@ -126,7 +130,8 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
         dirichlet_dofs=held.dirichlet_dofs, dirichlet_values=held.dirichlet_values, contact=contact, loads=loads,
         exact=exact_fields(case), refinements=times, symmetry_nodes=held.symmetry_nodes,
         symmetry_normals=held.symmetry_normals, free_modes=None, platens=held.platens,
-        mesh_request=MeshRequest.of(case), holds=held.holds, piece=piece, numbers=numbers, node_range=(first, last),
+        mesh_request=MeshRequest.of(case), holds=held.holds, drive=drive, piece=piece, numbers=numbers,
+        node_range=(first, last),
         boundary_ids=ids, boundary_numbers=boundary_numbers, n_points_total=int(piece.global_counts[0]),
         body_load=body, preallocation=preallocation)
 

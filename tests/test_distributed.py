@@ -352,3 +352,145 @@ def test_a_mesh_too_large_for_the_ranks_is_refused_per_rank(tmp_path):
     errors = [line for line in run.stderr.splitlines() if line.startswith("error: ")]
     assert len(errors) == 1 and f"on each of {RANKS} ranks" in errors[0], run.stderr
     assert not out.exists()
+
+
+def _block(obstacle: dict, divisions: tuple[int, int], refine: int = 0) -> dict:
+    """A 2 x 0.5 block, bottom clamped, top the contact part, under a rigid indenter."""
+    mesh = {"divisions": list(divisions), **({"refine": refine} if refine else {})}
+    return {"title": "block under an indenter", "geometry": {"rectangle": {"lower": [-1, -0.5], "upper": [1, 0]}},
+            "mesh": mesh, "material": {"E": 1.0e6, "nu": 0.3},
+            "boundary": {"bottom": "clamped", "left": "free", "right": "free", "top": "contact"},
+            "obstacle": obstacle}
+
+
+#: Rigid indenters (2 210 unknowns each): a circle pressed 0.02 by its prescribed advance
+#: (every contact node its own normal in the ranks' frames, the supports shifted by the
+#: advance), on the replicated mesh and refined once in pieces; a wedge (a polyline with a
+#: corner at its tip) in place, and moved down 0.01 in pieces.
+_CIRCLE = {"circle": {"center": [0, 0.5], "radius": 0.5}, "motion": {"direction": [0, -1], "displacement": 0.02}}
+_WEDGE = [[0.6, 0.05], [0.013, -0.02], [-0.6, 0.05]]  # its tip between two nodes
+INDENTERS = {"circle_pressed": _block(_CIRCLE, (64, 16)),
+             "circle_pieces": _block(_CIRCLE, (32, 8), refine=1),
+             "wedge": _block({"polyline": _WEDGE}, (64, 16)),
+             "wedge_moved_pieces": _block({"polyline": [[x, y + 0.002] for x, y in _WEDGE],
+                                           "motion": {"direction": [0, -1], "displacement": 0.01}}, (32, 8),
+                                          refine=1)}
+
+
+#: The circle pushed by a force instead, and what rank 0 adds to the fields: its advance and reaction.
+PUSHED = dict(INDENTERS["circle_pressed"], obstacle={**_CIRCLE, "motion": {"direction": [0, -1], "force": 2.0e4}})
+_REPORT_LINE = """
+if fields:
+    motion = report["obstacle"]["motion"]
+    fields[key + "_motion"] = np.array([motion["advance"], motion["reaction"]])
+    np.savez(out, **fields)
+"""
+
+
+@needs_mpi
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_two_ranks_agree_with_the_serial_solve_under_an_indenter(tmp_path, method):
+    """Curved and cornered obstacles, still or moved by a prescribed advance, on the replicated
+    mesh and in pieces: 2 ranks reproduce the serial solve (the same frames, gaps, shifted
+    supports and moved-back field) to 1e-10, and the obstacle's reaction with it."""
+    import yaml
+
+    files = {}
+    for name, data in INDENTERS.items():
+        files[name] = tmp_path / f"{name}.yaml"
+        files[name].write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    script = tmp_path / "solve.py"
+    script.write_text(SCRIPT)
+    out = tmp_path / "fields.npz"
+    command = [_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out),
+               *(f"{name}:{path}:{method}" for name, path in files.items())]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    with np.load(out) as distributed:
+        for name, path in files.items():
+            solved = solve_case(load_case(path), method=method)
+            serial, key = solved.solution, f"{name}_{method}"
+            assert not solved.problem.contact.flat
+            assert (solved.problem.drive is not None) == ("motion" in INDENTERS[name]["obstacle"])
+            assert str(distributed[key + "_mesh"]) == ("pieces" if name.endswith("_pieces") else "replicated")
+            assert str(distributed[key + "_status"]) == "converged"
+            assert serial.contact.active.sum() >= 5
+            np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
+            u = distributed[key + "_u"]
+            assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
+            for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
+                assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
+            assert float(distributed[key + "_residual"]) < 1e-10
+
+
+@needs_mpi
+@pytest.mark.parametrize("method", ["positive", "standard"])
+def test_two_ranks_agree_with_the_serial_solve_under_a_pushed_indenter(tmp_path, method):
+    """The circle pushed by a force of 2e4 along −y: its advance is one more unknown, coupled
+    to the held components as a platen's nodes are to its advance. 2 ranks reproduce the
+    serial solve (field, multiplier, active set) and its advance to 1e-10; the contact
+    force holding the obstacle is the force given, to 1e-10."""
+    import yaml
+
+    from contactfem.report import build_report
+
+    path = tmp_path / "pushed.yaml"
+    path.write_text(yaml.safe_dump(PUSHED, sort_keys=False), encoding="utf-8")
+    script = tmp_path / "solve.py"
+    script.write_text(SCRIPT + _REPORT_LINE)
+    out = tmp_path / "fields.npz"
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), f"pushed:{path}:{method}"],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    case = load_case(path)
+    solved = solve_case(case, method=method)
+    serial, key = solved.solution, f"pushed_{method}"
+    motion = build_report(case, solved)["obstacle"]["motion"]
+    with np.load(out) as distributed:
+        assert str(distributed[key + "_mesh"]) == "replicated" and str(distributed[key + "_status"]) == "converged"
+        assert serial.contact.active.sum() >= 5
+        np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
+        u = distributed[key + "_u"]
+        assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
+        for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
+            assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
+        advance, reaction = distributed[key + "_motion"]
+        assert abs(advance - motion["advance"]) <= TIGHT * motion["advance"]
+        assert abs(reaction - 2e4) <= TIGHT * 2e4 and abs(motion["reaction"] - 2e4) <= TIGHT * 2e4
+        assert float(distributed[key + "_residual"]) < 1e-10
+
+
+@needs_mpi
+@pytest.mark.parametrize("name", ["circle_pressed", "pushed"])
+def test_a_load_path_of_an_indenter_on_two_ranks_agrees_with_the_serial_path(tmp_path, name):
+    """The circle pressed 0.02, or pushed by 2e4, in 3 steps: a prescribed advance is the
+    factor times 0.02 (the shifted supports scale with the other prescribed values), a
+    pushed one balances the factor times the force. 2 ranks reproduce every serial step
+    (active set, displacement moved back by the advance, multiplier) to 1e-10."""
+    import yaml
+
+    from contactfem.solve import solve_load_path
+
+    data = PUSHED if name == "pushed" else INDENTERS[name]
+    case_file = tmp_path / f"{name}_path.yaml"
+    case_file.write_text(yaml.safe_dump({**data, "load_path": {"steps": 3}}, sort_keys=False), encoding="utf-8")
+    script = tmp_path / "path.py"
+    script.write_text(PATH_SCRIPT)
+    out = tmp_path / "path.npz"
+    run = subprocess.run([_mpiexec, "-n", str(RANKS), sys.executable, str(script), str(out), str(case_file), "mumps"],
+                         capture_output=True, text=True, timeout=300, env=_mpi_environment())
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-4000:]
+    serial = solve_load_path(load_case(case_file)).steps
+    advances = [step.problem.drive.advance for step in serial]
+    if name == "pushed":  # contact stiffens as the zone grows: less advance per step
+        assert 0 < advances[2] - advances[1] < advances[1] - advances[0] < advances[0]
+    else:
+        assert advances == pytest.approx([0.02 / 3, 0.04 / 3, 0.02], rel=1e-15)
+    with np.load(out) as distributed:
+        assert len(distributed["u"]) == len(serial) == 3
+        assert serial[0].solution.contact.active.sum() < serial[-1].solution.contact.active.sum()
+        for index, step in enumerate(serial):
+            np.testing.assert_array_equal(distributed["active"][index], step.solution.contact.active)
+            u, mu = step.solution.displacement, step.solution.contact.multiplier
+            assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
+            assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()

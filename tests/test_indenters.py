@@ -274,19 +274,6 @@ def test_what_a_pushed_obstacle_does_not_pose_is_refused(tmp_path, boundary, fra
     assert not (tmp_path / "out").exists()
 
 
-def test_the_distributed_solve_refuses_a_curved_or_moving_obstacle():
-    """Checked before PETSc is asked for: the ranks' frames take one normal."""
-    from contactfem.distributed import refuse_indenter
-    from contactfem.errors import CaseError
-
-    with pytest.raises(CaseError, match=r"test.yaml: solver.backend = petsc: a circle obstacle is solved serially"):
-        refuse_indenter(case_from(circle_case({"direction": [0, -1], "displacement": 0.001})))
-    with pytest.raises(CaseError, match=r"a moving obstacle \(obstacle.motion\)"):
-        refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]],
-                                         "motion": {"direction": [0, -1], "displacement": 0.003}})))
-    refuse_indenter(case_from(block({"points": [[1, 0.001], [-1, 0.001]]})))
-
-
 def test_the_archive_reader_checks_a_curved_obstacles_normals(tmp_path):
     """solution.h5 is untrusted input: non-unit normals, or normals without their closest
     points, are refused naming the dataset."""

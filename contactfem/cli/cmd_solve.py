@@ -89,9 +89,6 @@ def solve(case_file: Path, method: str | None, out_dir: Path | None, refine: int
             raise CaseError(f"{case_file.name}: output.files: --plot reads solution.h5; keep h5 in output.files")
         directory = out_dir if out_dir is not None else case.output.directory
         if case.solver.backend in DISTRIBUTED_BACKENDS:
-            from contactfem.distributed import refuse_indenter
-
-            refuse_indenter(case)
             _solve_distributed(case, method, refine, petsc_solver, directory, quiet, as_json, overwrite, make_plot,
                                progress)
             return
