@@ -41,6 +41,7 @@ sys.path.insert(0, sys.argv[1])
 from click.testing import CliRunner
 from conftest import case_from, square_case_dict
 
+import contactfem.progress
 import contactfem.studies as studies
 from contactfem.cli import main
 from contactfem.engines import SerialEngine, open_engine
@@ -70,6 +71,9 @@ def run(manufactured, failing, work):
         out["count_there"], out["solutions"] = count["n"], solutions
         address = engine.client.scheduler.address
         runner = CliRunner()
+        # Progress lines are held for HOLD_SECONDS and dropped by a command done sooner: write
+        # them at once, so that the line naming the cluster is there however fast the study.
+        contactfem.progress.HOLD_SECONDS = 0.0
         done = runner.invoke(main, ["converge", manufactured, "--levels", "2", "--method", "positive",
                                     "--out", work + "/there", "--scheduler", address])
         out["cli"] = [done.exit_code, done.stderr]
