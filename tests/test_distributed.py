@@ -415,11 +415,7 @@ def test_two_ranks_agree_with_the_serial_solve_under_an_indenter(tmp_path, metho
             assert str(distributed[key + "_mesh"]) == ("pieces" if name.endswith("_pieces") else "replicated")
             assert str(distributed[key + "_status"]) == "converged"
             assert serial.contact.active.sum() >= 5
-            np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
-            u = distributed[key + "_u"]
-            assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
-            for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
-                assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
+            _assert_same_solution(distributed, key, serial)
             assert float(distributed[key + "_residual"]) < 1e-10
 
 
@@ -449,11 +445,7 @@ def test_two_ranks_agree_with_the_serial_solve_under_a_pushed_indenter(tmp_path,
     with np.load(out) as distributed:
         assert str(distributed[key + "_mesh"]) == "replicated" and str(distributed[key + "_status"]) == "converged"
         assert serial.contact.active.sum() >= 5
-        np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
-        u = distributed[key + "_u"]
-        assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
-        for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
-            assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
+        _assert_same_solution(distributed, key, serial)
         advance, reaction = distributed[key + "_motion"]
         assert abs(advance - motion["advance"]) <= TIGHT * motion["advance"]
         assert abs(reaction - 2e4) <= TIGHT * 2e4 and abs(motion["reaction"] - 2e4) <= TIGHT * 2e4
@@ -494,3 +486,13 @@ def test_a_load_path_of_an_indenter_on_two_ranks_agrees_with_the_serial_path(tmp
             u, mu = step.solution.displacement, step.solution.contact.multiplier
             assert np.abs(distributed["u"][index] - u).max() <= TIGHT * np.abs(u).max()
             assert np.abs(distributed["mu"][index] - mu).max() <= TIGHT * np.abs(mu).max()
+
+
+def _assert_same_solution(distributed, key: str, serial) -> None:
+    """The ranks' active set equals the serial one, and their displacement, multiplier and
+    nodal contact force agree with it to TIGHT relative to each field's largest entry."""
+    np.testing.assert_array_equal(distributed[key + "_active"], serial.contact.active)
+    u = distributed[key + "_u"]
+    assert np.abs(u - serial.displacement).max() <= TIGHT * np.abs(serial.displacement).max()
+    for field, reference in (("_mu", serial.contact.multiplier), ("_force", serial.contact.nodal_force)):
+        assert np.abs(distributed[key + field] - reference).max() <= TIGHT * np.abs(reference).max()
