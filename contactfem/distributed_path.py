@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
@@ -41,6 +40,7 @@ from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import Iteration, PathSolver, Status
 from contactfem.methods import get_method
 from contactfem.sequencing import PredictedStarts, predict_active_set
+from contactfem.timings import clock
 
 if TYPE_CHECKING:
     from contactfem.solve import PathResult, SolveResult
@@ -90,17 +90,17 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
     factors = case.load_path.factors
     timings: dict[str, float] = {}
 
-    clock = time.perf_counter()
+    since = clock()
     say(f"meshing (each of {mpi.Get_size()} ranks)")
     mesh = build_mesh(case, refine=refine)
-    timings["mesh"] = time.perf_counter() - clock
-    clock = time.perf_counter()
+    timings["mesh"] = clock() - since
+    since = clock()
     problem = _problem_without_stiffness(case, mesh, case.mesh.refine if refine is None else refine)
     if keep_steps:
         _refuse_oversized_path(mpi, case, problem)
     linear, c = _assembled(PETSc, MPI, comm, case, problem, method_name, solver)
     system = linear.system
-    timings["assemble"] = time.perf_counter() - clock
+    timings["assemble"] = clock() - since
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes ({timings['assemble']:.2f} s)")
     numbers = itertools.count(1)
 
@@ -123,11 +123,11 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
     factorizations = 0
     postprocess = handed_over = 0.0
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
-    clock = started = time.perf_counter()
+    since = started = clock()
     try:
         for index, factor in enumerate(factors):
             kernel = path.step(factor)
-            seconds = time.perf_counter() - started
+            seconds = clock() - started
             factorizations += kernel.factorizations
             say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
                 f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
@@ -139,25 +139,25 @@ def solve_distributed_path(case: Case, method: str | None = None, refine: int | 
             gathered = gather_iterate(linear)
             failure = None
             if rank == 0:
-                post = time.perf_counter()
+                post = clock()
                 scaled, solution = step_solution(gathered, system, problem.scaled(factor), method_name, kernel)
                 step = SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel,
                                    backend=f"petsc-{solver}",
-                                   timings={"solve": seconds, "postprocess": time.perf_counter() - post})
+                                   timings={"solve": seconds, "postprocess": clock() - post})
                 postprocess += step.timings["postprocess"]
-                handed = time.perf_counter()
+                handed = clock()
                 try:
                     if on_step is not None:
                         on_step(index, factor, step)
                 except Exception as error:  # (writing a step) shared below, so that no rank waits for the next
                     failure = error
-                handed_over += time.perf_counter() - handed
+                handed_over += clock() - handed
                 steps = [*steps, step] if keep_steps else [step]
             failure = mpi.bcast(failure, root=0)
             if failure is not None:
                 raise failure
-            started = time.perf_counter()
-        seconds = time.perf_counter() - clock - handed_over
+            started = clock()
+        seconds = clock() - since - handed_over
         timings.update({"solve": seconds - postprocess, "postprocess": postprocess,
                         **({"write_steps": handed_over} if on_step is not None else {})})
         parallel = parallel_figures(linear, solver, timings, factorizations)
@@ -216,7 +216,7 @@ class _CoarsePath:
 
         if self.failed:
             return None
-        started = time.perf_counter()
+        started = clock()
         try:
             kernel = self.path.step(factor)
         except SolverError:
@@ -235,7 +235,7 @@ class _CoarsePath:
                 obstacle_point=contact.obstacle.point, obstacle_normal=contact.obstacle.normal,
                 obstacle_ends=contact.obstacle.ends)
             active = predict_active_set(self.fine.contact, fields, self.c, self.fine.law)
-        self.seconds += time.perf_counter() - started
+        self.seconds += clock() - started
         return active
 
     def record(self) -> dict:
@@ -257,7 +257,7 @@ def _coarse_path(PETSc, MPI, comm, case: Case, problem, c: float, solver: str, a
     from contactfem.coarse_levels import coarser_level
     from contactfem.solve import SEQUENCING_METHOD
 
-    started = time.perf_counter()
+    started = clock()
     coarse_problem = coarser_level(problem, lambda request, refine: _problem_without_stiffness(
         case, build_mesh(case, refine=refine, request=request), refine, request))
     if coarse_problem is None:
@@ -267,4 +267,4 @@ def _coarse_path(PETSc, MPI, comm, case: Case, problem, c: float, solver: str, a
     path = PathSolver(kernel_system(linear), linear=linear, c=coarse_c, tolerance=case.solver.tolerance,
                       max_iterations=case.solver.max_iterations, accelerators=accelerators,
                       starts=None if below is None else PredictedStarts(below.predict))
-    return _CoarsePath(problem, coarse_problem, linear, path, c, below, time.perf_counter() - started)
+    return _CoarsePath(problem, coarse_problem, linear, path, c, below, clock() - started)

@@ -5,7 +5,6 @@ Nothing here prints or writes; the command line renders the returned dictionarie
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from contactfem.norms import (
 from contactfem.report import case_record, contact_zone, sign_conditions
 from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, prepare, solve_case
+from contactfem.timings import clock
 
 #: Version of compare.json's layout (contactfem/schemas/compare.schema.json).
 COMPARE_SCHEMA_VERSION = 1
@@ -162,10 +162,10 @@ def study_level(task: dict, reference: Reference | None, progress: Progress | No
             files = ", ".join(path.name for path in case.data_files)
             raise CaseError(f"{Path(task['source']).name}: a data file it reads ({files}) changed during the study")
         timings: dict[str, float] = {}
-        started = time.perf_counter()
+        started = clock()
         with worker_budget():
             problem = prepare(case, refine=task["refine"], timings=timings, progress=detail)
-            setup = time.perf_counter() - started
+            setup = clock() - started
             rows, energy, contact, solutions = [], {}, {}, {}
             for name in task["methods"]:
                 outcome = solve_case(case, method=name, problem=problem, progress=detail)
