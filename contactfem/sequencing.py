@@ -29,15 +29,13 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
+from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from contactfem.assembly import Elasticity
 from contactfem.case import MeshFileGeometry, PolygonGeometry, RectangleGeometry
 from contactfem.discretize import ContactBoundary
 from contactfem.discretize.meshing import MeshRequest, estimate_triangles
-from contactfem.errors import SolverError
 from contactfem.kernel import PathStarts
-from contactfem.linalg import factorize
 from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
@@ -105,8 +103,6 @@ COLUMNS_PER_FACTORIZATION = 20
 #: Steps of the half-plane correction of a prediction (:func:`correct_at_asperities`): it
 #: settled in 3-4 on the rough profiles and the Hertz disk.
 ASPERITY_ITERATIONS = 8
-#: Unknowns of the half-plane correction up to which its blocks are factorised dense.
-ASPERITY_DENSE_UP_TO = 300
 #: Fine contact nodes on either side within the half-plane correction's reach at most (the
 #: coarse level's spacing, four fine ones on the rough profiles): its compliance matrix
 #: has at most 2 x this + 1 entries a row.
@@ -441,18 +437,14 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     held[band] = 0.0
     slack = normal[band] - fine.gap[band] + compliance @ (force - held)  # u_n − g with the band's Λ = 0
     local = compliance[:, band]
-    dense = local.toarray() if len(band) <= ASPERITY_DENSE_UP_TO else None
     settled = active[band]
     for _ in range(ASPERITY_ITERATIONS):
         on = np.flatnonzero(settled)
         forces = np.zeros(len(band))
         try:
-            if dense is not None and len(on):
-                forces[on] = cho_solve(cho_factor(dense[np.ix_(on, on)]), slack[on])
-            elif len(on):
-                block = local[on][:, on]
-                forces[on] = factorize(block, check=False, name="the half-plane compliance").solve(slack[on])
-        except (SolverError, MemoryError, LinAlgError):
+            if len(on):
+                forces[on] = _banded_solve(local[on][:, on], slack[on])
+        except (MemoryError, LinAlgError):
             return active
         updated = np.where(settled, forces > 0, slack - local @ forces > 0)
         if np.array_equal(updated, settled):
@@ -461,6 +453,18 @@ def correct_at_asperities(fine: ContactBoundary, normal: np.ndarray, force: np.n
     corrected = active.copy()
     corrected[band] = settled
     return corrected
+
+
+def _banded_solve(block: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+    """``block``⁻¹ ``rhs`` for a symmetric positive definite ``block`` whose entries lie near
+    its diagonal: the compliance of nodes sorted along ΓC couples each node with those within
+    reach only, so its band holds about 2 :data:`ASPERITY_NEIGHBOURS` + 1 diagonals and the
+    banded Cholesky costs O(n · band²), whatever n."""
+    upper = sp.triu(block, format="coo")
+    width = int((upper.col - upper.row).max(initial=0))
+    bands = np.zeros((width + 1, block.shape[0]))
+    bands[width + upper.row - upper.col, upper.col] = upper.data
+    return cho_solve_banded((cholesky_banded(bands), False), rhs)
 
 
 def plane_strain_modulus(law: Elasticity) -> float:

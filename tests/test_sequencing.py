@@ -776,25 +776,38 @@ def test_the_half_plane_correction_predicts_the_fine_zone_better(name, refine):
 
 
 def test_a_half_plane_block_that_cannot_be_factorised_keeps_the_prediction(monkeypatch):
-    """The correction is only a start: a compliance block the factorisation refuses (dense
-    or sparse) leaves the interpolated prediction as it was."""
+    """The correction is only a start: a compliance block the factorisation refuses leaves
+    the interpolated prediction as it was."""
     from scipy.linalg import LinAlgError
 
     import contactfem.sequencing as sequencing
-    from contactfem.errors import SolverError
 
     problem, _reduced, c, coarse = _predictions(rough_polygon_case(2000))
     plain = sequencing.predict_active_set(problem.contact, coarse, c)
 
     def refuse(*args, **kwargs):
-        raise SolverError("not positive definite")
-
-    def refuse_dense(*args, **kwargs):
         raise LinAlgError("not positive definite")
 
-    monkeypatch.setattr(sequencing, "factorize", refuse)
-    monkeypatch.setattr(sequencing, "cho_factor", refuse_dense)
+    monkeypatch.setattr(sequencing, "cholesky_banded", refuse)
     assert np.array_equal(sequencing.predict_active_set(problem.contact, coarse, c, problem.law), plain)
+
+
+def test_the_banded_compliance_solve_is_the_dense_one():
+    """The half-plane compliance of nodes sorted along ΓC, restricted to any subset of them,
+    is solved in its band: the same solution as a dense Cholesky solve, to round-off."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    from contactfem.sequencing import _banded_solve, half_plane_compliance
+
+    rng = np.random.default_rng(7)
+    abscissa = np.linspace(0.0, 1.0, 400) + rng.uniform(-0.2, 0.2, 400) / 399  # a profile's nodes
+    share = np.gradient(abscissa)
+    compliance = half_plane_compliance(abscissa, share, 16 / 399, 1.0)
+    subset = np.sort(rng.choice(400, 150, replace=False))
+    block = compliance[subset][:, subset]
+    rhs = rng.standard_normal(150)
+    dense = cho_solve(cho_factor(block.toarray()), rhs)
+    assert np.allclose(_banded_solve(block.tocsr(), rhs), dense, rtol=1e-10, atol=1e-10 * np.abs(dense).max())
 
 
 def test_the_half_plane_correction_moves_only_nodes_near_a_predicted_patch_end():
