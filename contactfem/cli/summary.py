@@ -7,6 +7,10 @@ from pathlib import Path
 from contactfem.cli.exits import _printable, _shown
 
 
+def _steps(count: int) -> str:
+    return f"{count} step" if count == 1 else f"{count} steps"
+
+
 def _summary(report: dict, written: list[Path]) -> str:
     from contactfem.plots import zone_text
 
@@ -18,7 +22,7 @@ def _summary(report: dict, written: list[Path]) -> str:
         f"{report['case']['title']} — method {report['method']['equation']} {report['method']['name']}",
         f"  mesh         {report['mesh']['nodes']} nodes, {report['mesh']['triangles']} triangles, "
         f"{report['unknowns']['displacement']} unknowns",
-        f"  Newton       {report['solver']['iterations']} iterations ({report['solver']['backend']})",
+        f"  Newton       {_steps(report['solver']['iterations'])} ({report['solver']['backend']})",
         f"  contact      {zone['active_nodes']} of {zone['contact_nodes']} nodes active; zone along ΓC: {intervals}",
         f"  force        {report['contact_force']['normal']:.6g} (normal, total)",
         f"  signs        min multiplier {signs['min_multiplier']:.3g}, "
