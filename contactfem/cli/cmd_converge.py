@@ -107,7 +107,7 @@ def converge(case_file: Path, levels: int, extra: int, methods: tuple[str, ...],
             rate = "" if index < 0 else ("(n/a)" if value is None else f"({value:.2f})")
             cells.append(f"{row[norm]:.3e} {rate:>6}")
         click.echo(f"  {row['method']:<9}{row['h']:>9.4f}{row['unknowns']:>10}{row['iterations']:>7}"
-                   f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells))
+                   f"{row['total_seconds']:>9.2f}" + "".join(f"{c:>21}" for c in cells).rstrip())
     click.echo("  (observed rates between consecutive levels in parentheses; the paper predicts "
                "h^(1/2+ν), ν ≤ 1/2, for the H1 and H-1/2 errors)")
     click.echo(f"  wrote {_shown(directory)}/{CONVERGENCE_JSON}, {CONVERGENCE_CSV}, {', '.join(CONVERGENCE_PNGS)}, "
