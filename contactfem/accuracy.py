@@ -5,9 +5,9 @@ Two kinds of figure, neither a guaranteed bound:
 - **Energy norm.** η = (Σ_T η_T²)^{1/2} of the residual estimator of
   :mod:`contactfem.estimator` (Hild & Nicaise), one vectorised pass over the mesh. It is
   reliable only up to a constant that the theory does not give (‖u − u_h‖_a ≤ C η + h.o.t.),
-  so it is an estimate, not a bound: on cases/manufactured.yaml η is 7.2 times the true
-  energy error on every mesh from 1 056 to 65 792 unknowns (the ratio does not drift, so η
-  falls at the rate of the error). It is defined for method (4) only: with method (5) the
+  so it is an estimate, not a bound. Its ratio to the true error (the effectivity index)
+  stays put under refinement, so η falls at the rate of the error; the ratio measured on
+  cases/manufactured.yaml is in docs/performance.md#accuracy-studies. It is defined for method (4) only: with method (5) the
   multiplier θ_h may be negative and the estimator's complementarity term loses its sign.
 - **The quantities users read** — total contact force, contact width (the length of ΓC in
   contact, as ``contact_zone`` measures it: from the first to the last active node of each

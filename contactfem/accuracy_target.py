@@ -6,8 +6,9 @@ newest-vertex bisection, method (4)); what this module adds is the stopping rule
 estimate it reads after each solve:
 
 - ``energy``: η / ‖u_h‖_a, η the residual estimator's (:mod:`contactfem.estimator`), reliable
-  up to an unknown constant (on cases/manufactured.yaml η is about 7 times the true error,
-  so the true relative error is then well below the target).
+  up to an unknown constant, larger than one on the cases measured (see
+  docs/performance.md#accuracy-studies), so the true relative error is then well below
+  the target).
 - ``contact_width``, ``peak_pressure``, ``contact_force``: a Richardson estimate from the
   run's own earlier meshes (:func:`contactfem.accuracy.richardson`), their mesh size relative
   to the current one taken as r = (N / N_j)^{1/2}, N the unknowns (the ratio of h for uniform
@@ -35,8 +36,8 @@ if TYPE_CHECKING:
     from contactfem.solve import Progress, SolveResult
 
 #: Dörfler's bulk parameter for a run towards a target: the marked triangles carry this share
-#: of η². Larger than ``adapt``'s 0.5 so that the unknowns grow about 1.6-2.2 times per step
-#: and successive meshes differ enough for their differences to say something.
+#: of η². Larger than ``adapt``'s 0.5 so that the unknowns about double per step and
+#: successive meshes differ enough for their differences to say something.
 THETA = 0.7
 #: Dörfler's parameter when the quantity is a contact one: its own triangles are marked
 #: besides (:func:`quantity_marks`), and the estimator's share only keeps the rest of the

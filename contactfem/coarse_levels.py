@@ -76,8 +76,7 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     # The layer's share from an even sample of the nodes first: on a mesh graded onto ΓC
     # it is most of the mesh, and finding every node of it would be wasted. Near an even
     # sample of the contact nodes is within the layer too: that lower bound refuses such a
-    # mesh without a search among all of them (11-22 ms from 52 000 to 209 000 unknowns
-    # on a rough profile's graded mesh, 95% of whose nodes are in the layer).
+    # mesh without a search among all of them.
     sample = points[::max(1, len(points) // LAYER_SAMPLES)]
     few = boundary[::max(1, len(boundary) // LAYER_SAMPLES)]
     for nearby in (few, boundary) if len(few) < len(boundary) else (boundary,):
@@ -131,7 +130,7 @@ def coarser_level(problem: DiscreteProblem, prepare_coarse: Callable[[MeshReques
         return None
     request, coarse_refine = coarse
     if not forced and not meshing_pays(problem, request, coarse_refine):
-        return None  # not worth meshing: a tread's teeth keep 38% of the unknowns at every level
+        return None  # not worth meshing: a boundary that cannot be decimated (a tread's teeth)
     try:
         coarse_problem = prepare_coarse(request, coarse_refine)
     except ContactFemError:
@@ -186,8 +185,8 @@ def predict_from_coarser(problem: DiscreteProblem, c: Callable[[], float], say: 
     settled = coarse_kernel.status is Status.CONVERGED
     # A coarse level that stopped unsettled (its own cap, a cycle) still predicts, if its last
     # iterate is finite: a prediction is only a start, which the fine level corrects and
-    # certifies. A strip 1 x 0.001 peeling off, 800 x 2 cells, whose 400 x 1 level creeps
-    # past its own cap, went on cold without one and did not settle in 800 steps.
+    # certifies. A thin strip peeling off, whose one-cell-across level creeps past its own
+    # cap, would otherwise go on cold, where its creeping zone takes a step per node.
     if not settled and not (forced and np.isfinite(coarse_kernel.displacement).all()
                             and np.isfinite(coarse_kernel.multiplier).all()):
         return None, {}

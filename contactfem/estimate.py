@@ -1,13 +1,13 @@
-"""What a solve will cost, estimated before it runs from figures measured on a 2-core machine.
+"""What a solve will cost, estimated before it runs, from rates measured once per backend.
 
-Measured on the square case at 2.1M unknowns (benchmarks/results/square_sweep.json and
-FINDINGS): CHOLMOD (AMD, OpenBLAS) factorises in about 14 s, Pardiso in 11 s, SuperLU
-(MMD_AT_PLUS_A) in about 50 s; a whole solve peaks near 5 GB with CHOLMOD, through
-scikit-sparse or in cvxopt's wheel (the default install: 4.8 GB for the positive method,
-5.0 GB for the standard one, benchmarks/square_sweep.py 1024). Sparse
-factorisation of 2D meshes grows slightly faster than linearly (exponent ≈ 1.1 over
-130k–2.1M unknowns). With mesh sequencing a contact solve costs about 1.3 factorisations;
-assembly and writing add about 25%. Expect ±50% on other machines.
+Each backend has one reference point, the square case at :data:`REFERENCE_UNKNOWNS`: the
+seconds of one factorisation and the peak bytes of a whole solve. A solve of another size
+scales the time by the factorisation's growth on 2D meshes (slightly faster than linear,
+:data:`GROWTH`) and the memory linearly, counts a contact solve as a little more than one
+factorisation (mesh sequencing) and adds assembly and writing. The estimate orders
+backends and guards memory; it is not a promise of seconds on another machine. The
+reference figures come from ``benchmarks/square_sweep.py``, ``benchmarks/petsc_scaling.py``
+and ``benchmarks/amg.py`` (see docs/performance.md#measured-design-choices).
 """
 
 from __future__ import annotations
@@ -20,26 +20,26 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+#: The size, in displacement unknowns, at which :data:`FACTOR_SECONDS` and :data:`PEAK_BYTES` hold.
 REFERENCE_UNKNOWNS = 2.1e6
-# petsc: MUMPS on one rank (benchmarks/results/petsc_scaling.json: 26.6 s, 4.35 GB at 2.1M).
-# On P ranks each needs (1 + RANK_OVERHEAD (P − 1)) / P of it (see :func:`estimate_cost`).
-# amg: CG with smoothed aggregation, every Newton step an iterative solve (benchmarks/amg.py,
-# benchmarks/results/amg.json: 2.95 GB peak at 2.1M unknowns); its "factorisation" is one
-# step's set-up and CG.
+# Seconds of one factorisation and bytes of a whole solve's peak, per backend, at
+# REFERENCE_UNKNOWNS (benchmarks/results/square_sweep.json, petsc_scaling.json, amg.json).
+# petsc: MUMPS on one rank; on P ranks each needs (1 + RANK_OVERHEAD (P − 1)) / P of it
+# (see :func:`estimate_cost`). amg: CG with smoothed aggregation, every Newton step an
+# iterative solve; its "factorisation" is one step's set-up and CG.
 FACTOR_SECONDS = {"cholmod": 14.0, "pardiso": 11.0, "superlu": 50.0, "petsc": 26.6, "amg": 60.0}
 PEAK_BYTES = {"cholmod": 5.0e9, "pardiso": 6.0e9, "superlu": 8.0e9, "petsc": 4.4e9, "amg": 3.2e9}
 GROWTH = 1.1
 #: What each further rank adds to a distributed solve's memory, as a share of the one-rank
 #: peak: the interfaces' rows and MUMPS's separators held twice, the libraries per process.
-#: benchmarks/results/petsc_scaling.json, square at 2.1M unknowns, MUMPS: the largest rank
-#: needs 0.59–0.60 of the one-rank peak on two ranks (0.18) and 0.35–0.36 on four (0.14):
-#: the larger share keeps the guard on the safe side.
+#: Fitted to the largest rank's peak on two and four ranks (benchmarks/petsc_scaling.py),
+#: taking the larger of the two fits so that the guard errs on the safe side.
 RANK_OVERHEAD = 0.18
 #: ``auto`` keeps the fastest direct backend while its estimated peak is at most this share
 #: of the memory the process may use; beyond, it solves iteratively (see :func:`choose_backend`).
-#: The quarter left is the model's margin (±25% between meshes of one kind: 18.25 GB
-#: measured for CHOLMOD on the square at 8.4M unknowns against 18.7 GiB modelled) and room
-#: for whatever else the machine runs.
+#: The rest is the model's margin (its error between meshes of one kind, checked against
+#: the square's measured peaks in benchmarks/amg.py) and room for whatever else the machine
+#: runs. A larger share keeps factorising closer to the limit, at more risk of running out.
 DIRECT_MEMORY_SHARE = 0.75
 
 
@@ -96,8 +96,8 @@ def choose_backend(unknowns: int, requested: str, limit: "MemoryLimit", iterativ
 
 
 #: The fewest stiffness nonzeros per displacement unknown of a P1 mesh: two unknowns per node,
-#: each coupled to its node and at least four others (a strip one triangle across); 14 on
-#: most meshes (13.9 on a holed strip at 1.3 million unknowns).
+#: each coupled to its node and at least four others (a strip one triangle across); most
+#: meshes have about 14, so the bound refuses only what no mesh could factorise.
 MIN_NONZEROS_PER_UNKNOWN = 10
 
 
@@ -125,7 +125,7 @@ def unknowns_of_triangles(triangles: int) -> int:
 
 
 def machine_memory() -> int:
-    """This machine's physical memory in bytes (16 GiB when the system does not say)."""
+    """This machine's physical memory in bytes (a default of 16 GiB when the system does not say)."""
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
@@ -133,13 +133,12 @@ def machine_memory() -> int:
 
 
 #: Address space a solve maps beyond its resident peak: the shared libraries (VTK, CHOLMOD,
-#: two OpenBLAS copies), thread stacks, and a buffer per BLAS thread. Measured as VmPeak −
-#: VmHWM of `contactfem solve` on the square at 5 000 to 1.3 million unknowns on a 2-core
-#: machine: 0.57–0.59 GB whatever the size; 0.50 GB with one BLAS thread, 0.58 with two.
-#: Under an address-space limit (``ulimit -v``; Grid Engine's h_vmem) a solve needs its
-#: estimated peak plus this; short of it a library's allocation fails where it cannot say
-#: so (OpenBLAS or CHOLMOD crashed the process at 0.6 GiB for a 0.85 GiB solve, VTK failed
-#: to load at 1.2 GiB).
+#: two OpenBLAS copies), thread stacks, and a buffer per BLAS thread: independent of the
+#: mesh size, measured as VmPeak − VmHWM of `contactfem solve` (see
+#: docs/performance.md#measured-design-choices). Under an address-space limit (``ulimit
+#: -v``; Grid Engine's h_vmem) a solve needs its estimated peak plus this; short of it a
+#: library's allocation fails where it cannot say so (OpenBLAS or CHOLMOD crash the
+#: process, VTK fails to load), so the guard refuses first.
 ADDRESS_SPACE_BASE = 0.50e9
 ADDRESS_SPACE_PER_BLAS_THREAD = 0.08e9
 #: A cgroup limit at or above this is no limit (cgroup v1 writes 2^63 rounded to a page).
@@ -149,7 +148,7 @@ _UNLIMITED = 2**60
 @dataclass(frozen=True)
 class MemoryLimit:
     """The memory a solve in this process may use, in bytes, and what sets it (``source``,
-    for messages: "this machine's 23.5 GiB", "this process's cgroup limit of 8 GiB", ...)."""
+    for messages: "this machine's … GiB", "this process's cgroup limit of … GiB", ...)."""
 
     bytes: int
     source: str

@@ -1,19 +1,14 @@
 """The process's C heap, kept for reuse: how the command line runs a solve.
 
-glibc serves each allocation above a threshold (128 kB at first, rising with what is freed
-to at most 32 MB) with a mapping of its own and unmaps it when it is freed, and gives back
-what stays free at the top of its heap. numpy asks for huge pages for its large arrays, but
-a C library's blocks are faulted in page by page: CHOLMOD's factor and workspace (about 200
-MB at 650 000 unknowns) are mapped anew at every factorisation of every level and faulted
-in again, 52 000 faults for one factorisation and solve there. On the 100 000-point rough
-profile (650 000 unknowns, five levels) a process took 600 000-670 000 page faults and
-11-17 s of system time, its contact solves 4.2-4.5 s at best and 7.0-7.1 by the median;
-with the heap kept, 160 000-200 000 faults, 3-6 s, 3.4-3.7 s and 3.6-3.9 s, and a lower
-peak (1.01-1.04 GB above the interpreter against 1.13-1.14: one heap for every thread).
-At 32 000 points (209 000 unknowns, fresh processes taking turns) the first solve of a
-process took 1.6-2.1 s against 1.9-2.4 and the later ones 0.95-1.2 against 1.0-1.9; from
-1 000 to 16 000 points and at 64 000 the same either way within this machine's noise
-(``benchmarks/rough.py --plain-heap``).
+glibc serves each allocation above a threshold (rising with what is freed, up to a
+ceiling) with a mapping of its own and unmaps it when it is freed, and gives back what
+stays free at the top of its heap. numpy asks for huge pages for its large arrays, but a C
+library's blocks are faulted in page by page: CHOLMOD's factor and workspace are mapped
+anew at every factorisation of every level and faulted in again. Keeping freed memory in
+the heap turns those page faults and their system time into reuse, which shortens the
+solves of a mesh-sequenced problem and lowers its peak (one heap for every thread);
+below some hundred thousand unknowns it makes no measurable difference. Measured by
+``benchmarks/rough.py --plain-heap``; see docs/performance.md#process-settings.
 
 The policy belongs to the application, not the library: :func:`keep_freed_memory` is called
 by the ``contactfem`` command before it does any work (and by ``benchmarks/rough.py``,

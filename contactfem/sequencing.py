@@ -40,56 +40,56 @@ from contactfem.mesh import Mesh
 from contactfem.mesh.polygon import Loop
 from contactfem.result import ContactFields
 
-# Below this many unknowns a cold start is cheaper than solving a coarser case first.
+#: Below this many unknowns a cold start is cheaper than solving a coarser case first: the
+#: fixed cost of meshing and solving a level outweighs the factorisations a prediction saves.
 SEQUENCING_THRESHOLD = 5_000
-# Each coarser level has h four times larger: it costs about 1/16 of the finer solve,
-# against 1/4 for halving, and mispredicts only nodes next to the ends of the zone, which
-# the kernel's cached Schur columns absorb (measured on the square: 1024 from 256).
+#: Each coarser level has h this many times larger. Four leaves about a sixteenth of the
+#: unknowns (halving would leave a quarter), and the prediction it gives misses only nodes
+#: next to the ends of the zone, which the kernel's cached Schur columns absorb; a larger
+#: factor saves more on the coarse level and mispredicts more on the fine one.
 COARSENING = 4
 #: The share of the fine level's estimated triangles a polygon's coarser level keeps at
 #: most: about the sixteenth that h four times larger leaves of a uniform mesh. A mesh
 #: graded onto its boundary (a long profile, a contact size) keeps a quarter at four times
-#: h, its triangles following the boundary's edges, and its coarse level then cost more
+#: h, its triangles following the boundary's edges, and its coarse level then costs more
 #: than the fine level's system and analysis beside it: its boundary and sizes are
 #: coarsened by 8, then 16 (COARSENING squared), until the estimate is within this share.
-#: Rough profile of 4 000 points (26 700 unknowns): 62-67 ms against 69-75 with a quarter
-#: kept; of 8 000, 104-123 against 135-167; the Hertz platen (16 000 unknowns): 36 against
-#: 52 ms; each with as many fine Newton steps and one fine factorisation.
+#: A smaller share makes the coarse level cheaper at no cost in fine Newton steps on the
+#: rough profiles and the Hertz platen (benchmarks/rough.py; see
+#: docs/performance.md#measured-design-choices).
 COARSE_SHARE = 1 / 12
 #: Each further doubling must leave at most this share of the last level's estimated
-#: triangles (a half where the boundary sets them): the teeth of a tread, whose tips
-#: cannot be decimated, left 0.66 and 0.75 of the estimate, and 0.91 and 0.93 of the
-#: unknowns once meshed.
+#: triangles (a half where the boundary sets them): a boundary that cannot be decimated
+#: (the teeth of a tread, whose tips stay) shrinks too little for the doubling to pay.
 FURTHER_COARSENING_SHARE = 0.6
 #: What a coarse level's contact solve costs, in linear solves of its own size, once
-#: predicted from the level below: 1.3–3 measured on the square and the rough profiles.
+#: predicted from the level below (fitted on the square and the rough profiles,
+#: benchmarks/fragmented.py and rough.py). A larger value refuses more coarse levels.
 COARSE_LEVEL_SOLVES = 3.0
-#: What meshing and assembling a coarse level costs, in linear solves of its own size:
-#: 1.8–3.2 on the shipped polygons' coarse levels and 2.2–4.0 on the rough profiles' (the
-#: Hertz disk's graded mesh of 7 000 unknowns 2.8; its 3 500 of the platen 5.2; the teeth
-#: of a tread, graded onto their tips, 4.6–8.0).
+#: What meshing and assembling a coarse level costs, in linear solves of its own size
+#: (fitted on the shipped polygons' and the rough profiles' coarse levels; graded meshes
+#: cost more). A larger value refuses more coarse levels.
 MESHING_SOLVES = 3.0
-#: What a prediction saves on the fine level, in its linear solves: a cold start took 3–8
-#: factorisations (square, punch, rough profiles), a predicted one 1–2.
+#: What a prediction saves on the fine level, in its linear solves: the difference between
+#: a cold start's factorisations and a predicted start's (benchmarks/fragmented.py).
 EXPECTED_SAVING_SOLVES = 2.0
 #: Sparse factorisation time grows like unknowns ** GROWTH on these 2D meshes.
 GROWTH = 1.1
 #: Cells a coarser level keeps across each side of a rectangle (all the fine mesh has, if
 #: fewer): P1 triangles resist bending by their cells across a thin body, so a strip
 #: coarsened to one cell across is far stiffer than its fine mesh and misplaces the edges of
-#: a zone that peels off. Strips 1 x 0.01 of 4 cells across, clamped at one end: coarsened
-#: to 1 cell across, 9 and 18 fine steps (0.24 and 2.5-3.3 s at 64 000 and 256 000
-#: unknowns); to 2, 7 and 9 (0.18 and 0.99 s); kept at 4 (a quarter of the unknowns
-#: instead of a sixteenth), 3 and 3 (0.15-0.16 and 0.44-0.51 s). The wavy strips' patches,
-#: a period each, were predicted as well either way (0-20% slower with 4 kept).
+#: a zone that peels off, and the fine level then takes many steps. Keeping four costs a
+#: quarter of the unknowns instead of a sixteenth on a thin strip, and returns the fine
+#: level to a few steps (benchmarks/fragmented.py; see
+#: docs/performance.md#measured-design-choices).
 MIN_CELLS_ACROSS = 4
 #: Candidate edge pairs the simplicity check of a decimated polygon may test; beyond it the
 #: polygon is kept as it is (an outline with many long, overlapping edges).
 MAX_EDGE_PAIRS = 5_000_000
 #: Depth of the layer along ΓC in which a fragmented prediction is corrected on the fine
-#: mesh, in median fine triangle diameters (four coarse ones). Rough base of 16 000
-#: segments: the coarse prediction missed 776 of 16 001 nodes; corrected in a layer 4, 8
-#: and 16 diameters deep, 39, 25 and 14.
+#: mesh, in median fine triangle diameters (four coarse ones). A deeper layer corrects more
+#: of the mispredicted nodes and costs more to solve (benchmarks/rough.py; see
+#: docs/performance.md#measured-design-choices).
 LAYER_DEPTH = 16
 #: The largest share of the fine unknowns the layer may hold (a mesh graded onto ΓC puts
 #: most of its nodes near it, and the layer then costs as much as the fine solve).
@@ -100,8 +100,9 @@ LAYER_SAMPLES = 4_000
 LAYER_THRESHOLD = 50_000
 #: Schur columns costing about one refactorisation (CHOLMOD; see :mod:`contactfem.kernel`).
 COLUMNS_PER_FACTORIZATION = 20
-#: Steps of the half-plane correction of a prediction (:func:`correct_at_asperities`): it
-#: settled in 3-4 on the rough profiles and the Hertz disk.
+#: Steps of the half-plane correction of a prediction (:func:`correct_at_asperities`): a
+#: bound with room to spare, since the correction settles in a few steps on the rough
+#: profiles and the Hertz disk.
 ASPERITY_ITERATIONS = 8
 #: Fine contact nodes on either side within the half-plane correction's reach at most (the
 #: coarse level's spacing, four fine ones on the rough profiles): its compliance matrix
@@ -128,8 +129,8 @@ def coarse_level_pays(fine_unknowns: int, coarse_unknowns: int, meshed: bool = T
 
     A square coarsened by four in h (a sixteenth of the unknowns), h twice as large (a
     quarter) or a decimated rough base (a fifth) pays; a polygon whose boundary cannot be
-    coarsened (the teeth of a tread keep 38% of the unknowns, and a coarse level made their
-    solve twice as slow as a cold start) does not.
+    coarsened (the teeth of a tread, whose coarse level keeps over a third of the unknowns)
+    does not: solving it first is slower than a cold start.
     """
     if coarse_unknowns <= 0 or coarse_unknowns >= fine_unknowns:
         return False

@@ -40,9 +40,9 @@ from contactfem.errors import CaseError
 #: The most points a sweep may have (the product of a grid's list lengths).
 MAX_SWEEP_POINTS = 10_000
 #: The most bytes of case text a sweep's points may make together: each point's text is built,
-#: validated and held before the first solve, and travels to its worker. Validating takes
-#: about 1.2 s per MB of inline numbers (0.83 MB of 85 000 heights: 1.0 s a point), so
-#: planning stays under about a minute and a half; 10 000 points of a 6 kB case fit.
+#: validated and held before the first solve, and travels to its worker. Validation time
+#: grows with the inline numbers, so the bound keeps planning to about a minute and a half
+#: (see docs/performance.md#measured-design-choices); 10 000 points of a 6 kB case fit.
 MAX_SWEEP_PLAN_BYTES = 64 << 20
 #: A plan larger than this is announced (``progress``) before it is built: it takes seconds.
 PLAN_NOTE_BYTES = 4 << 20

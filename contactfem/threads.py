@@ -2,15 +2,12 @@
 
 numpy and SciPy each load an OpenBLAS of their own, and each starts a pool of as many
 threads as there are cores; CHOLMOD's (inside the cvxopt wheel) is built single-threaded.
-A solve's dense work is small (the half-plane model's blocks of a few hundred nodes, the
-kernel's Schur columns, the coarse level's corrections) and runs beside the fine level's
-symbolic analysis in a worker thread: on 2 cores two idle pools' busy-waiting threads took
-the cores from both. On the rough block (fresh processes taking turns, fastest of 7), the
-contact solve took 19.5-21.3 ms against 20.5-30.9 at 1 000 segments, 37-39 against 40-58
-at 2 000, 64-69 against 81-108 at 4 000 and 242-257 against 295-342 at 16 000, its linear
-solve the same (CHOLMOD's BLAS is single-threaded either way). Limiting the pools after
-they had started (threadpoolctl's limits) did not do it: 82-85 ms at 4 000, 294-321 at
-16 000. So the variable has to be set before numpy loads.
+A solve's dense work is small (the kernel's Schur columns, the coarse level's
+corrections) and runs beside the fine level's symbolic analysis in a worker thread, so
+idle pools' busy-waiting threads only take cores from that work: one thread per library
+is faster, and the linear solves lose nothing. Limiting the pools once they have started
+(threadpoolctl's limits) does not recover it, so the variable has to be set before numpy
+loads. Measured by ``benchmarks/rough.py``; see docs/performance.md#process-settings.
 
 The policy belongs to the application: :func:`one_blas_thread` is called by the
 ``contactfem`` command before it imports anything numerical (:mod:`contactfem.__main__`),

@@ -8,7 +8,10 @@ Read from the source (every import, module level or inside a function, except un
 from __future__ import annotations
 
 import ast
+import io
+import re
 import sys
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -254,3 +257,88 @@ def test_the_discretisation_asks_the_obstacle_through_its_protocol():
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("HalfPlane", "Segment"):
                 concrete.append(f"{path.name}:{node.lineno}")
     assert concrete == []
+
+
+#: Modules whose comments and docstrings state the design and leave measurements to
+#: benchmarks/results and docs/performance.md ("Measured design choices"): the top-level
+#: modules and those of these subpackages, except the ones listed as not yet cleaned.
+MEASUREMENT_FREE_PACKAGES = ("", "case", "cli", "discretize", "mesh", "kernel")
+NOT_YET_CLEANED = ("solve.py", "kernel/paths.py", "kernel/schur.py", "kernel/columns.py")
+
+
+def measurement_free_modules(package: Path = PACKAGE) -> list[str]:
+    """Paths, relative to the package, of the modules the measurement rule covers."""
+    names = [str(path.relative_to(package)) for sub in MEASUREMENT_FREE_PACKAGES
+             for path in sorted((package / sub).glob("*.py"))]
+    return [name for name in names if name not in NOT_YET_CLEANED and not name.startswith("distributed")]
+
+
+_FIGURE = r"\d[\d.,]*\s?(?:ms|µs|s|GB|GiB|MB|kB|%)"
+#: What a measured figure looks like in prose: a duration in (micro)seconds, a range of times,
+#: sizes or shares, one figure taken against another, a run that "took" some amount, a count of
+#: page faults, or a measured peak of memory. A size stated as a default or a bound ("16 GiB
+#: when the system does not say") is design; units in a message ("… GiB" in an f-string) are
+#: string literals, not prose; a bare number (an equation, a theorem, a constant) has no unit.
+MEASURED_FIGURE = re.compile("|".join([
+    r"\d\s?(?:ms|µs)(?!\w)",
+    rf"\d[\d.,]*\s?[–-]\s?{_FIGURE}(?!\w)",
+    rf"{_FIGURE}?\s+(?:against|instead of)\s+\d",
+    r"\btook\s+(?:about\s+)?\d",
+    r"\d\s?page faults",
+    r"\bpeak(?:s|ed)?\b[^.;:]{0,24}?\d[\d.]*\s?(?:GB|GiB|MB)(?!\w)",
+    r"\d[\d.]*\s?(?:GB|GiB|MB)\s+(?:peak|measured)\b",
+]))
+
+
+def prose_lines(source: str) -> list[tuple[int, str]]:
+    """(line, text) of every comment and docstring line of ``source``: module, class and
+    function docstrings, and the string that follows an assignment (an attribute's
+    docstring). Other string literals (messages, f-strings) are not prose."""
+    lines = [(token.start[0], token.string) for token in tokenize.generate_tokens(io.StringIO(source).readline)
+             if token.type == tokenize.COMMENT]
+    for node in ast.walk(ast.parse(source)):
+        body = getattr(node, "body", None)
+        if not isinstance(body, list):
+            continue
+        documented = isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+        docstrings = [body[0]] if documented else []
+        docstrings += [after for before, after in zip(body, body[1:])
+                       if isinstance(before, (ast.Assign, ast.AnnAssign))]
+        for statement in docstrings:
+            if (isinstance(statement, ast.Expr) and isinstance(statement.value, ast.Constant)
+                    and isinstance(statement.value.value, str)):
+                lines += [(statement.lineno + k, text) for k, text in enumerate(statement.value.value.splitlines())]
+    return sorted(lines)
+
+
+def measured_figures(source: str) -> list[tuple[int, str]]:
+    return [(line, text.strip()) for line, text in prose_lines(source) if MEASURED_FIGURE.search(text)]
+
+
+def test_comments_and_docstrings_state_the_design_not_measurements():
+    """Measurements go to benchmarks/results and the docs; the code says what and why."""
+    modules = measurement_free_modules()
+    assert "sequencing.py" in modules and "kernel/costs.py" in modules
+    found = [(name, *hit) for name in modules
+             for hit in measured_figures((PACKAGE / name).read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_the_measurement_rule_reads_prose_and_only_prose():
+    source = '''"""Module: contact solve 19.5-21.3 ms at 1 000 segments."""
+LIMIT = 8  #: a hint in GiB units, equation (4), Theorem 3.7, 2 x this + 1 entries
+# the queries took 0.13 s of 0.2 s
+message = f"needs about {LIMIT:.3g} GiB, more than 75% of 8 GiB"
+SHARE = 0.75
+"""18.25 GB measured; a whole solve peaks near 5 GB."""
+
+
+def f():
+    """Keeps 0.45 against 3.0 for both coordinates; a sixteenth of the unknowns."""
+    return "took 2 s"
+'''
+    assert [line for line, _ in measured_figures(source)] == [1, 3, 6, 10]
+    for clean in ("the order in h, 2.8 times per halving", "h four times larger (a sixteenth)",
+                  "see docs/performance.md#measured-design-choices", "(a default of 16 GiB when unknown)",
+                  "Numer. Math. 101 (2005) 523–549", "edge-midpoint rule, degree 5"):
+        assert not MEASURED_FIGURE.search(clean), clean

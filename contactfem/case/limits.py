@@ -31,9 +31,9 @@ MAX_YAML_VALUES = 100_000
 #: (geometry.polygon.holes[i].edges[j].arc.center[k]) is 10 levels down.
 MAX_YAML_DEPTH = 32
 #: The most vertices of a polygon geometry, its holes included, or of a profile's outline.
-#: The simplicity check is a sweep, O(k log k) in time and O(k) in memory (about 2 s and
-#: 0.5 GB at this bound); inline YAML lists stay far below it (MAX_YAML_VALUES), a profile
-#: or an outline read from a file may reach it.
+#: The simplicity check is a sweep, O(k log k) in time and O(k) in memory (seconds and a
+#: fraction of the memory of a solve at this bound); inline YAML lists stay far below it
+#: (MAX_YAML_VALUES), a profile or an outline read from a file may reach it.
 MAX_POLYGON_VERTICES = 1_000_000
 #: The most bytes of data files (a profile, an outline and its holes) a case may read, all
 #: of them together: room for MAX_POLYGON_VERTICES lines of two numbers written to full

@@ -33,10 +33,10 @@ Geometry = RectangleGeometry | PolygonGeometry | MeshFileGeometry
 
 
 #: The grading rule's constant G0: without a ``mesh.grading`` key the grading is
-#: G0 · sqrt(contact_size / size) (:func:`grading_of`). On the quarter Hertz disk
-#: (cases/hertz_quarter.yaml, no grading key) the half-width error against Hertz fell to
-#: 0.03% at contact_size 0.00025 with it, and stayed near 0.16% with G0 = 0.85 or 1
-#: (benchmarks/mesh_knob.py).
+#: G0 · sqrt(contact_size / size) (:func:`grading_of`). Chosen on the quarter Hertz disk
+#: (cases/hertz_quarter.yaml, no grading key), where a smaller G0 grades more gently and
+#: lets the half-width error keep falling as contact_size is halved, while a larger one
+#: leaves it stalled (benchmarks/mesh_knob.py; see docs/performance.md#measured-design-choices).
 GRADING_CONSTANT = 0.7
 #: The range the rule's grading is clipped to: at most the former fixed default (a
 #: contact mesh as coarse as the bulk grades no faster than before), at least a growth
@@ -48,9 +48,9 @@ def grading_of(contact_size: float, size: float) -> float:
     """The grading that follows the contact mesh: G0 · sqrt(contact_size / size), clipped to
     :data:`GRADING_RANGE`.
 
-    The error of the transition from contact_size to size behaves like grading² (the
-    quarter Hertz disk's half-width at contact_size 0.001: +0.4% at 0.25, -0.17% at
-    0.125), and the contact mesh's own like contact_size: with grading² ∝ contact_size
+    The error of the transition from contact_size to size behaves like grading² (as the
+    quarter Hertz disk's half-width error shows, benchmarks/mesh_knob.py), and the contact
+    mesh's own like contact_size: with grading² ∝ contact_size
     both fall together when contact_size is halved, and the graded band's triangles,
     ∝ 1 / (grading · contact_size), grow 2.8 times per halving instead of 2."""
     low, high = GRADING_RANGE

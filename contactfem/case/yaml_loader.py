@@ -16,7 +16,7 @@ from contactfem.case.messages import key_path, shortened
 from contactfem.errors import CaseError
 
 
-try:  # libyaml's parser: the events in C, about 20 times faster than PyYAML's own
+try:  # libyaml's parser: the events in C, an order of magnitude faster than PyYAML's own
     from yaml._yaml import CParser as _Events
 except ImportError:  # pragma: no cover - PyYAML built without libyaml
     from yaml.parser import Parser

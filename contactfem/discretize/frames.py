@@ -154,10 +154,10 @@ def _rotated_in_blocks(stiffness: sp.csr_matrix, nodes: np.ndarray, frames: np.n
     The assembled stiffness is (:func:`contactfem.assembly.stiffness_matrix`): every row
     stores its columns in pairs 2j, 2j+1, and dof rows 2i and 2i+1 the same ones. So KQ
     mixes each pair of a framed column node j by Q_j, and Qᵀ(KQ) the two rows of each
-    framed node i by Q_iᵀ, in place of a copy of K's values: no sparse product. On the
-    graded mesh under a rough profile (418 000 unknowns, a third of the nodes on ΓC) the
-    thin products and sums this replaces took 0.3 s, as long as a linear solve's
-    numeric factorisation.
+    framed node i by Q_iᵀ, in place of a copy of K's values: no sparse product. Where many
+    nodes are framed (a graded mesh under a rough profile frames a large share of its
+    nodes) the thin products and sums this replaces cost as much as a numeric
+    factorisation (benchmarks/rough.py; see docs/performance.md#measured-design-choices).
     """
     indptr, indices = stiffness.indptr, stiffness.indices
     n_dof = stiffness.shape[0]
@@ -304,7 +304,7 @@ def _frames(problem: DiscreteProblem, supported: np.ndarray) -> _Frames:
     b[platen_contact] = n_o[platen_contact]
     slot = np.where(platen_contact, 2 * c + 1, slot)
     # Symmetry nodes that are not contact nodes: a = n_s, b = t_s (or the platen's frame).
-    # (setdiff1d sorts its second argument even when the first is empty: 0.08 ms a call.)
+    # (setdiff1d sorts its second argument even when the first is empty: skip it then.)
     others = np.setdiff1d(problem.symmetry_nodes, c) if len(problem.symmetry_nodes) else c[:0]
     normals = problem.symmetry_normals[sym_index[others]]
     sym_a = normals.copy()

@@ -50,7 +50,7 @@ def build_mesh(case: Case, refine: int | None = None, request: MeshRequest | Non
     """Mesh the case's geometry (or a coarser level's ``request``), refine it ``refine``
     times (default: the request's), and check it. Messages name the case's file and keys."""
     shape = MeshRequest.of(case) if request is None else request
-    limit = memory_limit()  # read once: the cgroup files and rlimits behind it cost 0.2 ms
+    limit = memory_limit()  # read once: it reads cgroup files and rlimits
     _refuse_oversized(case, shape, refine, limit)
     try:
         mesh = _mesh_geometry(case, shape, limit)
@@ -96,13 +96,13 @@ def _capped_message(case: Case, shape: MeshRequest, limit: MemoryLimit, error: M
 
 
 #: Triangles Triangle makes per area of an equilateral triangle of side h under its size
-#: bound h (uniform bodies: 1.5-1.6, a plate with a hole, a 3 x 1 block; graded ones, whose
-#: triangles Triangle accepts up to 1.5 times the target area, alike: measured in
-#: tests/test_sizes.py and benchmarks/mesh_knob.py).
+#: bound h, uniform and graded bodies alike (Triangle accepts triangles up to 1.5 times the
+#: target area); a little above the observed counts so that the estimate errs high
+#: (tests/test_sizes.py and benchmarks/mesh_knob.py).
 TRIANGLES_PER_AREA = 1.7
 #: Triangles Triangle adds around an input vertex whose shorter edge is much shorter than
-#: the size there: it keeps every input edge and grades from its length to the size (measured
-#: 5.5-6 per edge of a rough profile, 1k-64k edges, size 10-800 times the edge).
+#: the size there: it keeps every input edge and grades from its length to the size, about
+#: the same count whatever the ratio of size to edge (rounded up from rough profiles').
 TRIANGLES_PER_SHORT_EDGE = 6.0
 #: Most cells of the background quadtree on which :func:`estimate_triangles` integrates a
 #: graded size field; past it (a band of more than some 10^8 triangles, which no machine
@@ -138,8 +138,8 @@ def estimate_triangles(shape: Case | MeshRequest, refine: int | None = None) -> 
         band, field = _graded_band(shape)
         count += TRIANGLES_PER_AREA * band
     # Input vertices with an edge shorter than h: Triangle keeps them, and grades away from
-    # them. The shorter edge counts: a tooth narrower than h is meshed at its width (a tread's
-    # level 8x coarser: 0.82 of the meshed count from the mean edge, 1.33 from the shorter).
+    # them. The shorter edge counts: a tooth narrower than h is meshed at its width (on a
+    # tread's coarse level the mean edge underestimates the count, the shorter one errs high).
     for loop in loops:
         v = loop.vertices
         edge = np.hypot(*(np.roll(v, -1, axis=0) - v).T)
@@ -219,7 +219,7 @@ def _contact_grading(shape: MeshRequest, spacing: float | None = None):
     settings = shape.mesh
     samples, ends = _contact_samples(shape, spacing)
     # Sliding-midpoint splits: the samples lie along curves, and the queries, most of them
-    # near ΓC on a graded mesh, ran 1.4x faster than in the default median-split tree.
+    # near ΓC on a graded mesh, descend a tree balanced for that faster than a median split.
     tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
     end_tree = cKDTree(ends) if len(ends) else None
     end_size = settings.contact_size / END_REFINEMENT
@@ -227,9 +227,9 @@ def _contact_grading(shape: MeshRequest, spacing: float | None = None):
     def reach(nearest: float) -> float:
         """The distance beyond which h is ``size`` whatever the distance: the nearest-point
         search stops there. Far from ΓC the nearest sample is otherwise sought among many
-        almost as near (the centre of a disk is as far from every point of its rim): the
-        queries took 65% of meshing the Hertz disk (0.13 s of 0.2 s at 32 000 unknowns;
-        0.065 s with the bound). ``mesh.grading`` is at least 0.01 (:mod:`contactfem.case`)."""
+        almost as near (the centre of a disk is as far from every point of its rim), which
+        made those queries most of the cost of meshing a disk. ``mesh.grading`` is at least
+        0.01 (:mod:`contactfem.case`)."""
         return max((settings.size - nearest) / settings.grading, 0.0)
 
     def size(points: np.ndarray) -> np.ndarray:

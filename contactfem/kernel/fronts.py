@@ -11,8 +11,8 @@ import numpy as np
 import scipy.sparse as sp
 
 #: Consecutive steps a zone edge must have moved the same way before its move is
-#: extrapolated (see :class:`ZoneFronts`): from the second step of a creep on (from the
-#: third, slender strips took half as many steps again).
+#: extrapolated (see :class:`ZoneFronts`): from the second step of a creep on. Each step
+#: waited is a step of creep left to Newton's update, which slender strips pay for most.
 CREEP_RUN = 2
 #: Overshoots (see :class:`ZoneFronts`) after which a solve goes on with Newton's update
 #: alone; each halves the extrapolations that overshot.

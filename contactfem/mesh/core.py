@@ -13,8 +13,8 @@ from contactfem.mesh.topology import Topology
 
 def coordinate_span(points: np.ndarray) -> np.ndarray:
     """Each coordinate's range (max − min) over ``points`` (n, d), zero for no points.
-    Column by column: NumPy 2's reduction along the first axis of an (n, 2) array costs
-    ten times as much (185 µs against 15 for 3 600 points), and a solve takes several."""
+    Column by column: NumPy 2's reduction along the first axis of an (n, 2) array is an
+    order of magnitude slower than two contiguous 1-D reductions, and a solve takes several."""
     points = np.asarray(points, dtype=float)
     if points.shape[0] == 0:
         return np.zeros(points.shape[1])

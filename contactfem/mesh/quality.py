@@ -69,8 +69,8 @@ def _check_arrays(mesh: Mesh) -> None:
 
 def _check_triangles(mesh: Mesh) -> None:
     """Orientation, size and use of every node."""
-    # Coordinate by coordinate over contiguous (n, 3) corner arrays: 13 ms instead of 70
-    # over (n, 3, 2) corners and einsum at 354 000 triangles.
+    # Coordinate by coordinate over contiguous (n, 3) corner arrays: plain elementwise
+    # arithmetic on them is several times faster than einsum over (n, 3, 2) corners.
     x, y = (np.ascontiguousarray(mesh.points[:, k])[mesh.triangles] for k in range(2))
     e1x, e1y = x[:, 1] - x[:, 0], y[:, 1] - y[:, 0]
     e2x, e2y = x[:, 2] - x[:, 0], y[:, 2] - y[:, 0]
@@ -282,8 +282,8 @@ def _nearly_coincident(points: np.ndarray, loops: list[np.ndarray]) -> tuple[int
     before = np.concatenate([np.roll(loop, 1) for loop in loops])
     after = np.concatenate([np.roll(loop, -1) for loop in loops])
     edge = np.minimum(np.hypot(*(points[nodes] - points[before]).T), np.hypot(*(points[nodes] - points[after]).T))
-    # Pairs within the bound for the longest edge, then each pair against its own edges (a
-    # k-nearest query of every node took 0.28 s for 200 000 nodes on a strip, this 0.11 s).
+    # Pairs within the bound for the longest edge, then each pair against its own edges:
+    # one pair query costs less than a k-nearest query of every node.
     pairs = cKDTree(points[nodes]).query_pairs(NEAR_NODES * float(edge.max()), output_type="ndarray")
     if not len(pairs):
         return None

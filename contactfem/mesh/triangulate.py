@@ -270,7 +270,7 @@ def _used_nodes(result: dict, n_segments: int) -> tuple[np.ndarray, np.ndarray, 
         If a boundary segment lies on no input segment.
     """
     # Keep only nodes that some triangle uses, renumbered in their original order (marked
-    # and counted: sorting the triangles' million entries took 76 ms at 354 000 triangles).
+    # and counted, O(n), rather than found by sorting the triangles' entries).
     tri = np.asarray(result["triangles"], dtype=np.int64)
     in_use = np.zeros(len(result["vertices"]), dtype=bool)
     in_use[tri] = True
