@@ -66,6 +66,10 @@ MAX_EXTRA_SHARE = 1 / 3
 #: The nearest level may keep at most this share of the solve's unknowns (estimated before
 #: it is meshed): a quarter, and the boundary's nodes.
 NEAREST_SHARE = 0.28
+#: The least mesh size ratio along ΓC between two levels a Richardson estimate compares: it
+#: divides their difference by r^p − 1, which magnifies a zone end's jump by an element as r
+#: nears 1, and a level coarsened only across ΓC (r = 1) says nothing of the error.
+MIN_RATIO = 1.4
 #: The coarsest level that serves as the nearest one (h times this), and as the furthest.
 NEAREST_RATIO = 4.0
 FURTHEST_RATIO = 8.0
@@ -185,11 +189,10 @@ def accuracy_figures(case: Case, result: "SolveResult", load_factor: float | Non
     elif levels == "none":
         found, reason = [], "the mesh was adapted: no coarser mesh of the same kind to compare with"
     elif levels == "reuse":
-        kept = _kept_level(result.coarse_levels, result.method, _contact_edge_size(result.problem), REUSED_RATIO)
+        base_size = _contact_edge_size(result.problem)
+        kept = _kept_level(result.coarse_levels, result.method, base_size, REUSED_RATIO)
         found = [] if kept is None or load_factor is not None else [kept]
-        reason = ("no coarser level was solved on the way (mesh sequencing runs from "
-                  f"{_sequencing_threshold():,} unknowns, with method positive); solver.accuracy.levels: solve "
-                  "(--accuracy-levels solve) solves some for the purpose")
+        reason = _reuse_reason(result.coarse_levels, base_size)
     else:
         try:
             found = coarser_levels(case, result, load_factor)
@@ -262,7 +265,7 @@ def coarser_levels(case: Case, result: "SolveResult", load_factor: float | None 
     if further is not None:
         budget = MAX_EXTRA_SHARE * problem.n_unknowns - spent
         level, _ = _solve_level(case, result, *further, base_size, load_factor, budget=budget)
-        if level is not None and levels[-1].ratio < level.ratio <= FURTHEST_RATIO:
+        if level is not None and MIN_RATIO * levels[-1].ratio <= level.ratio <= FURTHEST_RATIO:
             levels.append(level)
     return levels
 
@@ -281,6 +284,16 @@ def _nearest_request(problem: DiscreteProblem):
     return None
 
 
+def _reuse_reason(kept: dict, base_size: float) -> str:
+    """Why a plain solve's quantities have no estimate from the level sequencing solved."""
+    remedy = "solver.accuracy.levels: solve (--accuracy-levels solve) solves some for the purpose"
+    if "problem" in kept and "solve" in kept and _ratio(kept["problem"], base_size) < MIN_RATIO:
+        return (f"the coarser level sequencing solved has ΓC edges {_ratio(kept['problem'], base_size):.3g} times "
+                f"the solve's (a Richardson estimate needs {MIN_RATIO:g} or more); {remedy}")
+    return ("no coarser level was solved on the way (mesh sequencing runs from "
+            f"{_sequencing_threshold():,} unknowns, with method positive); {remedy}")
+
+
 def _kept_level(kept, method: str, base_size: float, largest: float) -> "Level | None":
     """The coarse level sequencing solved (``kept``: a solve's ``coarse_levels``) as a
     :class:`Level`, when it was solved with ``method`` on a mesh at most ``largest`` times
@@ -289,7 +302,7 @@ def _kept_level(kept, method: str, base_size: float, largest: float) -> "Level |
     if "solve" not in kept or "problem" not in kept or method != SEQUENCING_METHOD:
         return None
     ratio = _ratio(kept["problem"], base_size)
-    if ratio > largest:
+    if not MIN_RATIO <= ratio <= largest:
         return None
     return Level(ratio, kept["problem"].n_unknowns, "sequencing", quantities(kept["problem"], kept["solve"].contact))
 
@@ -308,8 +321,8 @@ def _solve_level(case: Case, result: "SolveResult", request, refine: int, base_s
         return None, None
     if budget is not None and coarse_problem.n_unknowns > budget:
         return None, None
-    if coarse_problem.n_unknowns >= result.problem.n_unknowns:
-        return None, None
+    if coarse_problem.n_unknowns >= result.problem.n_unknowns or _ratio(coarse_problem, base_size) < MIN_RATIO:
+        return None, None  # not coarser along ΓC, where the contact quantities see h
     if load_factor is not None:
         coarse_problem = coarse_problem.scaled(load_factor)
     kept: dict = {}

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from contactfem.accuracy import EXPECTED_ORDERS, Level, accuracy_figures, quantities, richardson
+from contactfem.accuracy import EXPECTED_ORDERS, MIN_RATIO, Level, accuracy_figures, quantities, richardson
 from contactfem.case import Case
 from contactfem.errors import CaseError
 
@@ -43,8 +43,6 @@ THETA = 0.7
 #: besides (:func:`quantity_marks`), and the estimator's share only keeps the rest of the
 #: mesh from falling behind.
 THETA_CONTACT = 0.3
-#: The least mesh size ratio between the levels a Richardson estimate compares.
-MIN_RATIO = 1.4
 #: Without a budget in unknowns, the run stops before a mesh whose solve the memory model
 #: says would not fit (:func:`contactfem.estimate.largest_mesh_points`).
 DEFAULT_STEPS = 30

@@ -142,6 +142,35 @@ def test_a_plain_solve_estimates_for_nothing():
                for entry in figures["quantities"].values())
 
 
+@pytest.mark.parametrize("levels", ["reuse", "solve"])
+def test_a_level_no_coarser_along_the_contact_gives_no_estimate(tmp_path, levels):
+    """A tall block whose contact side has an odd number of divisions: its coarser levels
+    halve the divisions across ΓC only, so their ΓC edges are the solve's (h ratio 1) and a
+    Richardson step would divide by 1^p − 1 = 0. The quantities then have no estimate and
+    say why; the solve and its report go through."""
+    path = tmp_path / "tall.yaml"
+    path.write_text("""
+title: a tall block on a tilted segment
+material: {E: 0.257, nu: 0.3, plane: stress}
+geometry: {rectangle: {lower: [0, 0], upper: [0.00606, 0.0441]}}
+mesh: {divisions: [33, 200]}
+boundary:
+  bottom: contact
+  top: {displacement: [2.05e-08, -1.04e-08]}
+obstacle: {segment: [[0.0025, -0.000222], [0.0085, -0.000755]]}
+""", encoding="utf-8")
+    case = load_case(path)
+    result = solve_case(case)
+    assert result.problem.n_unknowns > 5_000  # sequencing solved a coarser level
+    figures = accuracy_figures(case, result, levels=levels)
+    assert all(level["h_ratio"] >= 1.4 for level in figures["levels"])
+    for entry in figures["quantities"].values():
+        assert entry["estimate"] is None, entry
+        assert entry["reason"]
+    if levels == "reuse":
+        assert "ΓC edges 1 times" in figures["quantities"]["contact_force"]["reason"]
+
+
 # --------------------------------------------------------------------------- towards a target
 
 
