@@ -153,6 +153,23 @@ def test_a_curved_platen_is_refused():
         prepare(case_of(data))
 
 
+@pytest.mark.parametrize("kind", ["symmetry", {"platen": {"displacement": 0.0}}])
+@pytest.mark.parametrize("divisions", [[8, 8], [7, 12]])
+def test_two_opposite_sides_under_one_name_are_not_straight(kind, divisions):
+    """A block's left and right sides named alike: with as many edges on each, their outward
+    normals average to zero, which once made a NaN normal and a traceback; straight means
+    every edge on one line, whatever the edge counts."""
+    data = {"title": "sides named alike", "material": {"E": 1.0, "nu": 0.3},
+            "geometry": {"polygon": {"vertices": [[-1, -2], [1, -2], [1, 0], [-1, 0]],
+                                     "edges": ["base", "side", "top", "side"]}},
+            "mesh": {"size": 2 / divisions[0]} if divisions[0] == divisions[1] else {"size": 0.25, "contact_size": 0.1},
+            "boundary": {"base": "clamped", "side": kind, "top": "contact"},
+            "obstacle": {"point": [0, 0.001], "normal": [0, 1]}}
+    name = "symmetry" if kind == "symmetry" else "platen"
+    with pytest.raises(CaseError, match=f"boundary.side = {name}: the part is not straight"):
+        prepare(case_of(data))
+
+
 def test_two_platens_sharing_a_corner_are_refused():
     data = wedge({"left": "symmetry", "top": {"platen": {"force": FORCE}}})
     data["boundary"]["right"] = {"platen": {"displacement": 0.0}}

@@ -192,12 +192,15 @@ def _straight_normal(case: Case, mesh: Mesh, name: str, kind: PartKind) -> tuple
     if len(edges) == 0:
         raise CaseError(f"{case.source.name}: boundary.{name}: the mesh has no edge on this part")
     _, outward = edge_geometry(mesh.points, edges)
-    normal = outward.mean(axis=0)
-    normal /= np.linalg.norm(normal)
+    mean = outward.mean(axis=0)
+    # Edges facing opposite ways (two sides of a block under one name) may average to zero:
+    # such a part is not straight, and has no normal to test the others against.
+    length = float(np.linalg.norm(mean))
+    normal = mean / length if length > 0.5 else np.zeros(2)
     points = mesh.points[np.unique(edges)]
     offset = (points - points[0]) @ normal
     extent = coordinate_span(mesh.points).max()
-    if np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
+    if length <= 0.5 or np.abs(outward @ normal - 1.0).max() > 1e-9 or np.abs(offset).max() > 1e-9 * extent:
         raise CaseError(
             f"{case.source.name}: boundary.{name} = {kind}: the part is not straight; "
             f"a {kind} {'support' if kind is PartKind.SYMMETRY else 'part'} needs all its edges on one line"
