@@ -1,7 +1,7 @@
 """Scenes nobody chose: random bodies, obstacles and loads through ``contactfem solve``.
 
 Usage: python benchmarks/scenes.py [--count 200] [--seed 0] [--jobs 2] [--more] [--backend NAME]
-                                  [--mesh-files | --all-mesh-files] [--family mixed|rough] [--out FILE.json]
+                                  [--mesh-files | --all-mesh-files] [--family mixed|rough|indenter] [--out FILE.json]
 
 Each scene is drawn from its seed (the same seed, the same case):
 
@@ -25,6 +25,14 @@ are half-disks whose rim is a closed outline of 500 to 8 000 vertices in a file 
 part), roughened radially by 1e-4 to 1e-2 of the radius. The load presses the surface in
 by 5% to twice its relief; material, method, supports, loads, tables and load paths are
 drawn as above. It writes benchmarks/results/scenes_rough.json.
+
+``--family indenter`` presses rigid obstacles of other shapes into a block (width 1e-3 to
+1e3, aspect 0.2 to 5, clamped base, the top its contact part, meshed uniformly or graded
+onto it): a cylinder of radius 0.05 to 50 widths, a wedge of 0.3 to 30 degrees, a flat
+punch with chamfered corners, or a rigid wavy profile, off centre and tilted by up to 10
+degrees; moved by a prescribed advance, pushed by a force sized for a contact zone of 2%
+to 30% of the width, or placed overlapping the block; either method, 15% as load paths.
+It writes benchmarks/results/scenes_indenter.json.
 
 A scene's contact parts are the edges that face the obstacle (a star's base), as a user
 would mark them. Each solve runs in its own process (``python -m contactfem solve``) and
@@ -69,8 +77,8 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The scene generators: ``mixed`` bodies (the default) and ``rough`` surfaces.
-FAMILIES = ("mixed", "rough")
+#: The scene generators: ``mixed`` bodies (the default), ``rough`` surfaces, rigid ``indenter``s.
+FAMILIES = ("mixed", "rough", "indenter")
 MODES = ("push", "push", "pressure", "platen", "weight", "cantilever", "shear", "lift", "platen_displacement")
 
 
@@ -98,6 +106,8 @@ def scene(seed: int, family: str = "mixed") -> dict:
     :func:`run_scene` writes beside the case and leaves out of the record."""
     if family == "rough":
         return rough_scene(seed)
+    if family == "indenter":
+        return indenter_scene(seed)
     rng = random.Random(seed)
     young, strain, data = _material_and_method(rng, f"scene {seed}")
     size = _log_uniform(rng, 1e-3, 1e3)
@@ -168,6 +178,69 @@ def scene(seed: int, family: str = "mixed") -> dict:
         outline = list(zip(x.tolist(), heights.tolist()))
     _supports_loads_and_obstacle(rng, data, young * strain, strain, kind, base, top, side, width, height, outline,
                                  normal)
+    return data
+
+
+def indenter_scene(seed: int) -> dict:
+    """Scene ``seed`` of the indenter family: a rigid shape pressed into a clamped block (see
+    the module's docstring)."""
+    rng = random.Random(seed)
+    young, strain, data = _material_and_method(rng, f"indenter scene {seed}")
+    nu = data["material"]["nu"]
+    modulus = young / (1 - nu**2) if data["material"]["plane"] == "strain" else young
+    width = _log_uniform(rng, 1e-3, 1e3)
+    height = width * _log_uniform(rng, 0.2, 5)
+    half = width / 2
+    data["geometry"] = {"polygon": {"vertices": [[-half, -height], [half, -height], [half, 0], [-half, 0]],
+                                    "edges": ["base", "side", "surface", "side"]}}
+    contact = width / rng.choice([100, 400, 1600])
+    data["mesh"] = ({"size": contact} if rng.random() < 0.3 else
+                    {"size": min(width, height) / rng.choice([4, 8, 16]), "contact_size": contact})
+    data["boundary"] = {"base": "clamped", "side": rng.choice(["free", "free", "symmetry"]), "surface": "contact"}
+    zone = width * _log_uniform(rng, 0.02, 0.3)  # the contact half-width aimed at
+    centre = rng.uniform(-0.3, 0.3) * width
+    tilt = math.radians(rng.choice([0.0, 0.0, rng.uniform(-10, 10)]))
+    direction = [round(math.sin(tilt), 12), round(-math.cos(tilt), 12)]
+    shape = rng.choice(["circle", "circle", "wedge", "punch", "profile"])
+    if shape == "circle":
+        radius = width * _log_uniform(rng, 0.05, 50)
+        zone = min(zone, 0.5 * radius)
+        force, advance = math.pi * modulus * zone**2 / (4 * radius), zone**2 / radius
+        obstacle: dict = {"circle": {"center": [centre, radius], "radius": radius}}
+    elif shape == "wedge":
+        slope = math.tan(math.radians(_log_uniform(rng, 0.3, 30)))
+        force, advance = zone * modulus * slope, zone * slope
+        obstacle = {"polyline": [[centre + width, width * slope], [centre, 0.0], [centre - width, width * slope]]}
+    elif shape == "punch":
+        flat, chamfer = zone, zone * rng.uniform(0.05, 0.5)
+        force, advance = 2 * flat * modulus * strain, strain * height
+        obstacle = {"polyline": [[centre + flat + chamfer, chamfer], [centre + flat, 0.0],
+                                 [centre - flat, 0.0], [centre - flat - chamfer, chamfer]]}
+    else:
+        relief = zone * _log_uniform(rng, 1e-4, 1e-1)
+        terms = " + ".join(f"{relief / (j + 1):.6g}*sin({2 * math.pi * rng.randint(1, 12) / width:.6g}*x"
+                           f" + {rng.uniform(0, 6.28):.4g})" for j in range(rng.randint(1, 3)))
+        # Walked from right to left so that the obstacle, on the walk's right, lies above.
+        obstacle = {"profile": {"expression": f"{relief:.6g} - ({terms})", "x": [-width, width],
+                                "points": rng.choice([50, 500, 5000]), "origin": [centre, 0.0], "direction": [-1, 0]}}
+        force, advance = 2 * width * modulus * strain, 2 * relief + strain * height
+    mode = rng.choice(["advance", "advance", "force", "placed"])
+    if mode == "advance":
+        obstacle["motion"] = {"direction": direction, "displacement": advance}
+    elif mode == "force":
+        obstacle["motion"] = {"direction": direction, "force": force}
+    else:  # overlapping the block from the start: an imposed indentation, nothing moves
+        for key in ("circle", "polyline", "profile"):
+            if key == "circle" and key in obstacle:
+                obstacle[key]["center"][1] -= advance
+            elif key == "polyline" and key in obstacle:
+                obstacle[key] = [[x, y - advance] for x, y in obstacle[key]]
+            elif key == "profile" and key in obstacle:
+                obstacle[key]["origin"][1] -= advance
+    data["obstacle"] = obstacle
+    if rng.random() < 0.15:
+        data["load_path"] = {"steps": rng.randint(2, 6)}
+    data["output"] = {"files": ["json"]}
     return data
 
 
@@ -459,11 +532,12 @@ def main() -> None:
     parser.add_argument("--all-mesh-files", dest="mesh_files", action="store_const", const=1.0,
                         help="solve every certified straight-edged scene again from its mesh as a Gmsh file")
     parser.add_argument("--family", choices=FAMILIES, default="mixed",
-                        help="the mixed bodies (default) or rough surfaces read from files")
+                        help="the mixed bodies (default), rough surfaces read from files or rigid indenters")
     parser.add_argument("--out", type=Path, help="default: benchmarks/results/scenes.json, or scenes_rough.json")
     args = parser.parse_args()
     if args.out is None:
-        args.out = ROOT / "benchmarks" / "results" / ("scenes.json" if args.family == "mixed" else "scenes_rough.json")
+        args.out = ROOT / "benchmarks" / "results" / ("scenes.json" if args.family == "mixed" else
+                                                      f"scenes_{args.family}.json")
     results = run(args.count, args.seed, args.jobs, args.more, progress=lambda line: print(line, flush=True),
                   backend=args.backend, mesh_files=args.mesh_files, family=args.family)
     args.out.parent.mkdir(parents=True, exist_ok=True)
