@@ -174,6 +174,36 @@ class SchurColumns:
             ) from error
         return solution[:released], solution[released:]
 
+    def preview(self, active: np.ndarray, watched: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """What the set ``active`` would show Newton's update without its displacement:
+        (reaction, slack) (m,) each, NaN where not known. Its Schur system alone (no
+        backward solve, no product with K) gives the reactions of the nodes it adds to the
+        reference set (their multipliers μ) and the slack of the nodes it releases (u_r);
+        and the slack of ``watched`` nodes outside both sets, from their forward columns
+        W_j = L⁻¹ P e_j: u_j = base_j + W_jᵀ D⁻¹ W y, read from the stored Schur blocks.
+        A watched node's column is the one it needs once it joins. None where the update
+        would refactorise, or the columns are full ones (no blocks to read)."""
+        if self.factor is None or not self.forward or self._refactorize_first(active):
+            return None
+        m = len(self.normal_dofs)
+        released = np.flatnonzero(self.reference & ~active)
+        added = np.flatnonzero(~self.reference & active)
+        watched = np.unique(watched)
+        watched = watched[~self.reference[watched] & ~active[watched]]
+        changed = len(released) + len(added)
+        slots = self._slots(np.concatenate([released, added, watched]))
+        if not self.forward:  # the paths proved long: the columns went on as full ones
+            return None
+        reaction, slack = np.full(m, np.nan), np.full(m, np.nan)
+        seen = self.base[self.normal_dofs[watched]]
+        if changed:
+            u_r, mu, weights, _ = self._schur_forward(released, added, slots[:changed], self.base, self.load,
+                                                      self.values, self.gap[added])
+            reaction[added], slack[released] = mu, u_r - self.gap[released]
+            seen = seen + self.gram_store[np.ix_(slots[changed:], slots[:changed])] @ weights
+        slack[watched] = seen - self.gap[watched]
+        return reaction, slack
+
     def _solve_changed_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
                                load: np.ndarray, fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
         """:meth:`_solve_changed` from sparse forward columns: with C = [K0r, E_d] (the
@@ -183,6 +213,22 @@ class SchurColumns:
         solve instead of a product with full-length columns, or only its backward half where
         the backend solves with Lᵀ alone: K00⁻¹ C y = Pᵀ L⁻ᵀ (D⁻¹ W y), the forward half being
         the stored columns already."""
+        dofs_r = self.normal_dofs[released]
+        u_r, mu, weights, k_r0 = self._schur_forward(released, added, slots, base, load, fixed_values, added_values)
+        if self.backward:
+            u = base + self.factor.backward(self.scaled_store[:, slots] @ weights)
+        else:
+            combined = k_r0.T @ weights[:len(released)]
+            combined[self.normal_dofs[added]] -= mu
+            u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
+        u[dofs_r] = u_r
+        return u
+
+    def _schur_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
+                       load: np.ndarray, fixed_values: np.ndarray,
+                       added_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix]:
+        """The Schur system of :meth:`_solve_changed_forward` solved from the stored blocks:
+        u_r, μ, the weights y = [G_r − u_r; −μ] with u = base + K00⁻¹ C y, and K_r0."""
         r = len(released)
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
@@ -195,15 +241,7 @@ class SchurColumns:
         rhs = np.concatenate([b_r - (k_r0 @ base + gram[:r, :r] @ released_values),
                               added_values - (base[dofs_d] + gram[r:, :r] @ released_values)])
         u_r, mu = self._solve_schur(top, bottom, rhs, r, len(added))
-        if self.backward:
-            weights = np.concatenate([released_values - u_r, -mu])
-            u = base + self.factor.backward(self.scaled_store[:, slots] @ weights)
-        else:
-            combined = k_r0.T @ (released_values - u_r)
-            combined[dofs_d] -= mu
-            u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
-        u[dofs_r] = u_r
-        return u
+        return u_r, mu, np.concatenate([released_values - u_r, -mu]), k_r0
 
 
 def cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
