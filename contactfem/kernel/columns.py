@@ -191,6 +191,8 @@ class SchurColumns:
         watched = np.unique(watched)
         watched = watched[~self.reference[watched] & ~active[watched]]
         changed = len(released) + len(added)
+        if self._preview_seconds(watched, changed) > costs.START_CHECK_SHARE * self.combine_seconds:
+            return None
         slots = self._slots(np.concatenate([released, added, watched]))
         if not self.forward:  # the paths proved long: the columns went on as full ones
             return None
@@ -203,6 +205,20 @@ class SchurColumns:
             seen = seen + self.gram_store[np.ix_(slots[changed:], slots[:changed])] @ weights
         slack[watched] = seen - self.gap[watched]
         return reaction, slack
+
+    def _preview_seconds(self, nodes: np.ndarray, changed: int) -> float:
+        """Modelled seconds :meth:`preview` adds to a step watching ``nodes``, with
+        ``changed`` nodes in its Schur system: the watched nodes' missing forward columns,
+        their Schur blocks against the stored ones (each column its counted path) and the
+        dense solve (the changed nodes' columns the step needs anyway)."""
+        missing = int((self.slot_of[nodes] < 0).sum())
+        if not missing:
+            return costs.dense_seconds(changed)
+        columns = (self.factor.forward_seconds(missing) if callable(getattr(self.factor, "forward_seconds", None))
+                   else missing * (self.column_seconds or 0.0))
+        path = (self.forward_store.nnz / self.column_count if self.column_count
+                else costs.typical_path(self.stiffness.shape[0], self.path_share))
+        return columns + costs.cross_seconds(missing, self.column_count + missing, path) + costs.dense_seconds(changed)
 
     def _solve_changed_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
                                load: np.ndarray, fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
