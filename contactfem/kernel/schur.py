@@ -195,7 +195,9 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         with np.errstate(invalid="ignore", over="ignore"):
             absolute = self.absolute @ np.abs(u)
             target = self.gamma * (absolute + np.abs(self.load))[equations].max(initial=0.0)
-        residual = np.where(equations, self.load - internal, 0.0)
+        residual = self.load - internal
+        residual[~equations] = 0.0
+        refined = False
         # Iterative refinement down to the round-off bound of the equations, for solves that
         # are not backward stable (SuperLU without pivoting, long chains of Schur updates); it
         # corrects with the same factor and Schur structure while the residual improves (a
@@ -214,7 +216,7 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             if not np.abs(trial).max(initial=0.0) < size:
                 break
             u, residual, internal = u + correction, trial, internal + change
-            absolute = None
+            absolute, refined = None, True
         with np.errstate(invalid="ignore", over="ignore"):
             if absolute is None:
                 absolute = self.absolute @ np.abs(u)
@@ -222,7 +224,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             reaction = self.load[fixed] - internal[fixed]
             force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
                      + np.abs(reaction).max(initial=0.0))
-            size = np.abs(self.load - internal)[equations].max(initial=0.0)
+            # Unrefined, the residual is F − K u on the equations already (zero elsewhere).
+            size = (np.abs(self.load - internal)[equations] if refined else np.abs(residual)).max(initial=0.0)
             accurate = bool(size <= max(self.tolerance * force, target))
         return u, reaction, accurate
 
@@ -343,6 +346,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             self.forward_store = sp.csc_matrix((k.shape[0], 0))
             self.scaled_store = sp.csc_matrix((k.shape[0], 0))
             self.gram_store = np.empty((0, 0))
+            #: The stored scaled columns, dense over the rows they touch (see _cross_stored).
+            self.dense_rows, self.row_place, self.dense_row_count = np.zeros((0, 0)), None, 0
         elif getattr(self, "column_store", None) is None:
             self.column_store = np.empty((k.shape[0], 0), order="F")
 
