@@ -128,6 +128,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
         if self.reference is None or self._refactorize_first(active):
             self._factorize(active)
+        else:
+            self.dense_spent += costs.dense_seconds(int(np.count_nonzero(active != self.reference)))
         u, reaction, accurate = self._solve_refined(active)
         if not accurate and np.any(active != self.reference):
             # The Schur update carries the errors of the reference factorisation, amplified
@@ -150,6 +152,13 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         if held > costs.COLUMN_BYTES:
             return True
         k = len(changed)
+        if self.dense_spent + costs.dense_seconds(k) > self.refactorization_seconds:
+            # The dense Schur solves since the factorisation have cost (modelled) as much as
+            # another would: it makes every later one small again. Deciding step by step
+            # alone, a zone that keeps growing away from its reference (a rough profile's,
+            # to 1 900 changed nodes) kept paying ever larger dense solves once its new
+            # columns became cheap.
+            return True
         if self.forward and callable(getattr(self.factor, "forward_seconds", None)):
             # The backend models its own routes (a converted factor's pattern solve, a
             # blocked sparse solve).
@@ -276,6 +285,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         self.factor = None  # a CHOLMOD refactorisation overwrites the previous factor
         self.factor = self.factorizer.factorize(masked, check=False)
         self.factorizations += 1
+        #: Modelled seconds of the dense Schur solves taken with this factorisation (see _refactorize_first).
+        self.dense_spent = 0.0
         # The fixed unknowns' values reach the equations through their columns of K, that is
         # (K symmetric) their rows: a few thousand rows instead of a product with all of K.
         fixed_dofs = np.flatnonzero(fixed)
