@@ -27,7 +27,6 @@ import scipy.sparse as sp
 
 from contactfem.linalg.cholmod_ctypes import _c_array
 
-_SIZE_T = ctypes.sizeof(ctypes.c_size_t)
 #: Byte offsets in cholmod_factor (CHOLMOD 3-5, 64-bit): x (the values), nsuper, ssize,
 #: xsize, the pointers super, pi, px, s, and the ints is_ll, is_super, itype, xtype, dtype.
 _X, _NSUPER, _SSIZE, _XSIZE = 64, 104, 112, 120
