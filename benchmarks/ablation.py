@@ -7,8 +7,8 @@ Usage:
 
 Each scene is solved with every accelerator on, then with one switched off at a time
 (:class:`contactfem.kernel.Accelerators`: ``sequencing``, ``zone_fronts``,
-``schur_updates``), and with the two refinements of the coarse prediction switched off
-(the half-plane ``asperity`` correction and the fine ``layer`` correction, parts of
+``schur_updates``, and ``start_checks``, which only load paths use), and with the two
+refinements of the coarse prediction switched off (the half-plane ``asperity`` correction and the fine ``layer`` correction, parts of
 sequencing), the Schur solver's sparse ``forward columns`` (full columns instead) and the
 ``worker thread`` that builds a level's system beside its coarser levels. The contact solve's seconds (``timings["solve"]``: coarse levels and every
 Newton step; for a load path the whole path) are the fastest of ``--repeat`` runs, in
@@ -42,11 +42,11 @@ from contactfem.threads import one_blas_thread  # noqa: E402
 one_blas_thread()
 
 OUT = ROOT / "benchmarks" / "results" / "ablation.json"
-CONFIGURATIONS = ("all", "no sequencing", "no zone fronts", "no schur updates", "no asperity correction",
-                  "no layer correction", "no forward columns", "no worker thread")
+CONFIGURATIONS = ("all", "no sequencing", "no zone fronts", "no schur updates", "no start checks",
+                  "no asperity correction", "no layer correction", "no forward columns", "no worker thread")
 #: The configurations that only switch parts of sequencing off: nothing to switch in a cold scene.
 SEQUENCING_PARTS = ("no sequencing", "no asperity correction", "no layer correction", "no worker thread")
-SCENES = ("square", "rough", "hertz", "punch", "strip", "strip_cold", "rough_loading")
+SCENES = ("square", "rough", "hertz", "punch", "strip", "strip_cold", "rough_loading", "hertz_tenfold")
 #: Scenes solved without a coarser level in every configuration: a body whose mesh has no
 #: coarser level (a mesh file), where the zone fronts alone shorten a creeping zone's path.
 COLD = ("strip_cold",)
@@ -66,6 +66,10 @@ def scene_case(name: str, directory: Path):
         csv = directory / "profile.csv"
         write_surface(csv, 16_000)
         return parse_case(case_text(csv), source=directory / "rough.yaml"), 0
+    if name == "hertz_tenfold":
+        from load_path import scene  # the Hertz platen's zone growing ten-fold along 20 steps
+
+        return scene(name, 20, 2), 2
     refinements = {"hertz": 1, "punch": 3, "strip": 3, "strip_cold": 3, "rough_loading": 1}[name]
     return load_case(ROOT / "cases" / f"{name.removesuffix('_cold')}.yaml"), refinements
 
@@ -91,7 +95,8 @@ def switched(configuration: str, cold: bool = False):
     try:
         yield Accelerators(sequencing=configuration != "no sequencing" and not cold,
                            zone_fronts=configuration != "no zone fronts",
-                           schur_updates=configuration != "no schur updates")
+                           schur_updates=configuration != "no schur updates",
+                           start_checks=configuration != "no start checks")
     finally:
         (sequencing.correct_at_asperities, sequencing.layer_pays, costs.FORWARD_COLUMNS_FROM,
          costs.SIMPLICIAL_FORWARD_COLUMNS_FROM, solve_module.ThreadPoolExecutor) = saved

@@ -299,7 +299,7 @@ def case_accelerators(case: Case) -> Accelerators:
     """The kernel's accelerators as the case's ``solver.accelerators`` switches them."""
     switches = case.solver.accelerators
     return Accelerators(sequencing=switches.sequencing, zone_fronts=switches.zone_fronts,
-                        schur_updates=switches.schur_updates)
+                        schur_updates=switches.schur_updates, start_checks=switches.start_checks)
 
 
 def _worth_meshing(problem: DiscreteProblem, kept: dict) -> bool:

@@ -139,12 +139,19 @@ def test_library_sparse_solves_match_dense_ones(size, kind, monkeypatch):
     full = factor.solve_sparse(sp.csc_matrix(rhs))
     assert full.flags.f_contiguous and np.abs(full - dense).max() < 1e-13 * np.abs(dense).max()
     expected = rhs.T @ dense
-    # Both routes: CHOLMOD's blocked sparse solve, then its solve with each column's pattern
-    # (which converts a supernodal factor to a simplicial one), then whichever forward_sparse picks.
+    # Every route: the supernodal blocks (a supernodal factor), CHOLMOD's blocked sparse
+    # solve, then its solve with each column's pattern (which converts a supernodal factor
+    # to a simplicial one), then whichever forward_sparse picks.
     assert factor.analysis.simplicial is (kind == "simplicial")
+    # The supernodal blocks are read only from a supernodal factor (a simplicial one's fields
+    # do not read back as one).
+    assert (factor._supernodes() is None) is (kind == "simplicial")
     weights = rng.standard_normal(columns)
     combined = dense @ weights
-    for route in (factor._blocked_forward, factor._pattern_forward, factor.forward_sparse):
+    routes = [factor._blocked_forward, lambda b: factor._pattern_forward(factor._permuted(b)), factor.forward_sparse]
+    if kind == "supernodal":
+        routes.insert(0, lambda b: factor._supernodal_forward(factor._permuted(b)))
+    for route in routes:
         forward, scaled = route(sp.csc_matrix(rhs))
         schur = (forward.T @ scaled).toarray()
         assert np.abs(schur - expected).max() < 1e-12 * np.abs(expected).max()
@@ -227,14 +234,14 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
     rhs = sp.csc_matrix((np.ones(5), (np.arange(0, n, n // 5)[:5], np.arange(5))), shape=(n, 5))
     factorizer = linalg.Factorizer("cholmod")
     first = factorizer.factorize(matrix)
-    first._pattern_forward(rhs)
+    first._pattern_forward(first._permuted(rhs))
     assert first.analysis.simplicial and bool(first.analysis.solving.value) is (copy_bytes > 0)
     x = first.solve(np.ones(n))
     assert np.abs(matrix @ x - 1.0).max() < 1e-10 * np.abs(matrix).max() * np.abs(x).max()
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.5)))
     second = factorizer.factorize(changed)
     assert not second.analysis.simplicial and not second.analysis.solving.value
-    forward, scaled = second._pattern_forward(rhs)
+    forward, scaled = second._pattern_forward(second._permuted(rhs))
     expected = rhs.T @ second.solve(rhs.toarray())
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
     assert np.abs(expected - rhs.T @ spla.spsolve(sp.csc_matrix(changed), rhs.toarray())).max() \
@@ -245,12 +252,15 @@ def test_library_refactorises_after_sparse_solves_and_refuses_a_replaced_factor(
 
 @needs_library
 def test_library_picks_the_cheaper_forward_route_from_counts(monkeypatch):
-    """A few columns go through the blocked solve while converting the (supernodal) factor
-    is modelled to cost more than it saves; every forward call counts the factor entries
-    its columns' paths reach (Σ of L's column counts over each column's rows), and with
-    those counts (not a guess) the choice for many columns is the pattern solve, whose
-    conversion is then modelled in setup_seconds. The choice is the cheaper of the
-    modelled routes, from counts alone."""
+    """The route of a block of forward columns is the cheapest of the modelled ones, from
+    counts alone: with a supernodal factor, its blocks on the supernodes the block reaches
+    (counted exactly before solving: their stored entries and number), which convert
+    nothing; without them (a layout that does not read back), a few columns go through the
+    blocked solve while converting the factor is modelled to cost more than it saves; every
+    forward call counts the factor entries its columns' paths reach (Σ of L's column counts
+    over each column's rows), and with those counts (not a guess) the choice for many
+    columns is the pattern solve, whose conversion is then modelled in setup_seconds."""
+    from contactfem.linalg import supernodal
     from contactfem.linalg.costs import MODEL
 
     monkeypatch.setattr(cholmod_ctypes, "_FACTOR_SWITCH", 2)
@@ -258,17 +268,30 @@ def test_library_picks_the_cheaper_forward_route_from_counts(monkeypatch):
     n = matrix.shape[0]
     factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
     analysis = factor.analysis
-    assert factor.cost.kind == "cholmod-supernodal" and analysis.path_entries is None
     few = sp.csc_matrix((np.ones(2), ([3, n // 2], [0, 1])), shape=(n, 2))
-    blocked, pattern = factor._route_seconds(2)
-    assert blocked < pattern and pattern > MODEL.conversion_seconds(factor.cost) > 0
+    structure = factor._supernodes()
+    reach = structure.reach(factor._permuted(few).indices)
+    blocked, pattern, through_blocks = factor._route_seconds(2, reach)
+    assert through_blocks == MODEL.supernodal_forward_seconds(factor.cost, 2, structure.reach_entries(reach),
+                                                              len(reach)) < min(blocked, pattern)
+    forward, _ = factor.forward_sparse(few)
+    assert factor.route == "supernodal" and not analysis.simplicial and not analysis.solving.value
+    expected = few.T @ factor.solve(few.toarray())
+    assert np.abs((forward.T @ forward).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
+
+    monkeypatch.setattr(supernodal.SupernodalFactor, "read", classmethod(lambda cls, address, size: None))
+    factor = cholmod_direct.DirectCholmodFactor(matrix, "the test matrix")
+    analysis = factor.analysis
+    assert factor.cost.kind == "cholmod-supernodal" and analysis.path_entries is None
+    blocked, pattern, through_blocks = factor._route_seconds(2)
+    assert through_blocks == np.inf and blocked < pattern and pattern > MODEL.conversion_seconds(factor.cost) > 0
     forward, _ = factor.forward_sparse(few)
     assert factor.route == "blocked" and factor.setup_seconds == 0.0 and not analysis.simplicial
     reached = int(analysis.column_counts[forward.indices].sum())
     assert (analysis.path_columns, analysis.path_entries) == (2, reached / 2)
     k = 400
     many = sp.csc_matrix((np.ones(k), (np.arange(0, 8 * k, 8), np.arange(k))), shape=(n, k))
-    blocked, pattern = factor._route_seconds(k)
+    blocked, pattern, _ = factor._route_seconds(k)
     assert factor.forward_seconds(k) == min(blocked, pattern)
     assert pattern == MODEL.conversion_seconds(factor.cost) + MODEL.pattern_forward_seconds(
         factor.cost, k, reached / 2)
@@ -326,12 +349,12 @@ def test_cholmod_chooses_the_kind_of_factor_and_keeps_it_an_llt(monkeypatch):
     first = factorizer.factorize(matrix)
     assert first.analysis.analysed_simplicial
     rhs = sp.csc_matrix((np.ones(6), (np.arange(0, n, n // 6)[:6], np.arange(6))), shape=(n, 6))
-    first._pattern_forward(rhs)
+    first._pattern_forward(first._permuted(rhs))
     address = first.analysis.numeric.value
     changed = sp.csr_matrix(matrix + sp.diags(np.full(n, 0.25)))
     second = factorizer.factorize(changed)
     assert second.analysis.numeric.value == address and not second.analysis.converted
-    forward, scaled = second._pattern_forward(rhs)
+    forward, scaled = second._pattern_forward(second._permuted(rhs))
     expected = rhs.T @ spla.spsolve(sp.csc_matrix(changed), rhs.toarray())
     assert np.abs((forward.T @ scaled).toarray() - expected).max() < 1e-12 * np.abs(expected).max()
     bad = sp.csr_matrix(matrix - sp.diags(np.r_[np.zeros(n - 1), 10.0]))

@@ -214,7 +214,7 @@ def test_the_cycle_finder_finds_a_cycle_and_only_a_cycle(tmp_path, source, expec
 #: errors and the reporting clock.
 KERNEL_MAY_IMPORT = ("contactfem.kernel", "contactfem.linalg", "contactfem.errors", "contactfem.timings")
 #: The modules that may reach CHOLMOD's library through ctypes, with its hard-coded layout.
-CTYPES_ROUTE = ("contactfem.linalg.cholmod_direct", "contactfem.linalg.cholmod_ctypes")
+CTYPES_ROUTE = ("contactfem.linalg.cholmod_direct", "contactfem.linalg.cholmod_ctypes", "contactfem.linalg.supernodal")
 
 
 def test_the_kernel_imports_only_itself_the_solvers_errors_and_the_reporting_clock():

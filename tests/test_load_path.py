@@ -458,3 +458,51 @@ def test_a_path_that_unloads_and_loads_again_revisits_each_factor_in_one_newton_
         assert np.array_equal(step.solution.contact.active, earlier.solution.contact.active)
         force = abs(earlier.solution.contact.nodal_force.sum())
         assert abs(step.solution.contact.nodal_force.sum() - earlier.solution.contact.nodal_force.sum()) <= 1e-10 * force
+
+
+def test_a_start_corrected_from_its_schur_system_is_the_step_answer():
+    """The Schur system of a set gives, without the displacement, the same multipliers of
+    the nodes it adds and the same slack of the nodes beside it as the full solve of that
+    set (one linear system, two ways: identity to round-off, 1e-9 of the largest). A
+    Hertz platen step started with one node too many beyond the zone's edge and one too
+    few inside it is therefore corrected before Newton's first step: the step settles in
+    one Newton step on the answer of the step solved from scratch, where the start
+    uncorrected takes two."""
+    from contactfem.kernel import PathSolver, PathStarts, solve_path
+    from contactfem.methods import get_method
+
+    case = case_of(yaml.safe_load((CASES / "hertz_platen.yaml").read_text(encoding="utf-8")))
+    problem = prepare(case)
+    system = problem.contact_system(get_method("positive")).system
+    answer = list(solve_path(system, [0.36]))[-1].active
+
+    class Given(PathStarts):
+        def choose(self, factor, extrapolated):
+            return start if factor == 0.36 else None
+
+    path = PathSolver(system, starts=Given())
+    assert path.step(0.25).status is Status.CONVERGED and path.linear.forward
+    outside = path._beside(answer)[0]
+    inside = np.flatnonzero(answer)[np.argmin(np.abs(np.flatnonzero(answer) - outside))]
+    start = answer.copy()
+    start[[outside, inside]] = [True, False]
+    linear = path.linear
+    linear.set_load_factor(0.36)
+    reaction, slack = linear.preview(start, path._beside(start))
+    u, reactions = linear.solve(start)
+    full_reaction = np.zeros(len(start))
+    full_reaction[start] = reactions
+    full_slack = u[system.normal_dofs] - system.gap
+    assert not np.isnan(reaction[outside]) and not np.isnan(slack[inside])
+    for seen, full in ((reaction, full_reaction), (slack, full_slack)):
+        known = ~np.isnan(seen)
+        assert np.abs(seen[known] - full[known]).max() <= 1e-9 * np.abs(full).max()
+    assert reaction[outside] < 0 < slack[inside]
+    np.testing.assert_array_equal(path.checked_start(start), answer)
+    result = path.step(0.36)
+    assert result.status is Status.CONVERGED and result.iterations == 1
+    np.testing.assert_array_equal(result.active, answer)
+    unchecked = PathSolver(system, starts=Given())
+    unchecked.check_starts = False
+    unchecked.step(0.25)
+    assert unchecked.step(0.36).iterations == 2

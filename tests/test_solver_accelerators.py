@@ -12,7 +12,7 @@ from contactfem.case import ACCELERATORS, Accelerators
 from contactfem.cli import main
 from contactfem.errors import CaseError
 
-CHOICES = "sequencing, zone_fronts, schur_updates"
+CHOICES = "sequencing, zone_fronts, schur_updates, start_checks"
 
 
 def with_solver(solver) -> dict:
@@ -22,8 +22,8 @@ def with_solver(solver) -> dict:
 
 
 def test_the_switches_are_the_accelerators_fields():
-    assert ACCELERATORS == ("sequencing", "zone_fronts", "schur_updates")
-    assert Accelerators() == Accelerators(sequencing=True, zone_fronts=True, schur_updates=True)
+    assert ACCELERATORS == ("sequencing", "zone_fronts", "schur_updates", "start_checks")
+    assert Accelerators() == Accelerators(sequencing=True, zone_fronts=True, schur_updates=True, start_checks=True)
 
 
 @pytest.mark.parametrize("solver", [None, {}, {"method": "standard"}, {"accelerators": {}}, {"accelerators": None}],
@@ -33,7 +33,7 @@ def test_every_accelerator_is_on_by_default(solver):
     assert case_from(data).solver.accelerators == Accelerators()
 
 
-@pytest.mark.parametrize("values", list(itertools.product([True, False], repeat=3)))
+@pytest.mark.parametrize("values", list(itertools.product([True, False], repeat=4)))
 def test_the_switches_are_stored_as_given(values):
     given = dict(zip(ACCELERATORS, values))
     case = case_from(with_solver({"accelerators": given}))
@@ -43,7 +43,7 @@ def test_the_switches_are_stored_as_given(values):
 
 def test_a_switch_left_out_stays_on():
     accelerators = case_from(with_solver({"accelerators": {"schur_updates": False}})).solver.accelerators
-    assert accelerators == Accelerators(sequencing=True, zone_fronts=True, schur_updates=False)
+    assert accelerators == Accelerators(sequencing=True, zone_fronts=True, schur_updates=False, start_checks=True)
 
 
 @pytest.mark.parametrize("value, shown", [

@@ -272,12 +272,15 @@ class Accelerators:
     ``sequencing``: start the active set from the same case solved on coarser meshes;
     ``zone_fronts``: extrapolate a contact zone's creeping edges along ΓC
     (``contactfem.kernel.ZoneFronts``); ``schur_updates``: solve later Newton steps through
-    a Schur complement over the nodes whose state changed, rather than refactorising.
+    a Schur complement over the nodes whose state changed, rather than refactorising;
+    ``start_checks``: correct each load path step's starting set where its Schur system
+    alone (without the displacement) shows that Newton's first update would change it.
     """
 
     sequencing: bool = True
     zone_fronts: bool = True
     schur_updates: bool = True
+    start_checks: bool = True
 
 
 #: What ``solver.accuracy.quantity`` may name: the energy norm of the displacement error

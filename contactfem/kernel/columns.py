@@ -67,7 +67,7 @@ class SchurColumns:
                 # An LLᵀ factor has D = I: the scaled columns are the forward ones, kept once.
                 self.scaled_store = (self.forward_store if scaled is forward
                                      else sp.hstack([self.scaled_store, scaled], format="csc"))
-                self._extend_gram(forward, count)
+                self._extend_gram(forward, scaled, count)
             else:
                 solved = solve_sparse_columns(self.factor, rhs)
                 if count + len(missing) > self.column_store.shape[1]:
@@ -80,7 +80,7 @@ class SchurColumns:
             self.column_count = count + len(missing)
         return self.slot_of[nodes]
 
-    def _extend_gram(self, forward: sp.csc_matrix, count: int) -> None:
+    def _extend_gram(self, forward: sp.csc_matrix, scaled: sp.csc_matrix, count: int) -> None:
         """Add the new forward columns' rows and columns to the Schur blocks of every stored
         column, Wᵀ S (S = D⁻¹ W, W itself for an LLᵀ factor): a step then takes its blocks
         from the store instead of multiplying all its changed nodes' columns again (about
@@ -90,11 +90,45 @@ class SchurColumns:
             grown = np.empty((2 * total, 2 * total))
             grown[:count, :count] = self.gram_store[:count, :count]
             self.gram_store = grown
-        block = cross(forward, self.scaled_store)  # (new, all): rows count ... total - 1
+        block = self._cross_stored(forward, scaled, count)  # (new, all): rows count ... total - 1
         block[:, count:] = 0.5 * (block[:, count:] + block[:, count:].T)  # symmetric to round-off
         self.gram_store[count:total, :total] = block
         self.gram_store[:count, count:total] = block[:, :count].T
 
+    def _cross_stored(self, forward: sp.csc_matrix, scaled: sp.csc_matrix, count: int) -> np.ndarray:
+        """Wᵀ S of the new forward columns against every stored scaled one, new ones included
+        (:func:`cross`), from a dense copy of the stored columns over the rows any of them
+        touches (:attr:`dense_rows`, row-major): the new columns' rows are gathered from it
+        whole, instead of every stored entry being mapped onto them at every step (a Hertz
+        platen's 123 columns along its path: 420 000 entries, over 3 300 rows a block). The
+        copy goes while it would pass :data:`contactfem.kernel.costs.DENSE_ROWS_BYTES`."""
+        k, total = forward.shape[1], count + forward.shape[1]
+        if self.dense_rows is None:
+            return cross(forward, self.scaled_store)
+        if self.row_place is None:
+            self.row_place = np.full(self.stiffness.shape[0], -1, dtype=np.int64)
+        left_rows = np.unique(forward.indices)
+        touched = left_rows if scaled is forward else np.union1d(left_rows, scaled.indices)
+        fresh = touched[self.row_place[touched] < 0]
+        stored_rows = self.dense_row_count
+        rows, columns = stored_rows + len(fresh), total
+        if rows > self.dense_rows.shape[0] or columns > self.dense_rows.shape[1]:
+            shape = (max(rows, 2 * self.dense_rows.shape[0]) if rows > self.dense_rows.shape[0]
+                     else self.dense_rows.shape[0],
+                     max(columns, 2 * self.dense_rows.shape[1], 16) if columns > self.dense_rows.shape[1]
+                     else self.dense_rows.shape[1])
+            if 8 * shape[0] * shape[1] > costs.DENSE_ROWS_BYTES:
+                self.dense_rows = self.row_place = None
+                return cross(forward, self.scaled_store)
+            grown = np.zeros(shape)
+            grown[:self.dense_rows.shape[0], :self.dense_rows.shape[1]] = self.dense_rows
+            self.dense_rows = grown
+        self.row_place[fresh] = np.arange(stored_rows, rows)
+        self.dense_row_count = rows
+        self.dense_rows[self.row_place[scaled.indices], count + _entry_columns(scaled)] = scaled.data
+        dense_left = np.zeros((len(left_rows), k))
+        dense_left[np.searchsorted(left_rows, forward.indices), _entry_columns(forward)] = forward.data
+        return dense_left.T @ self.dense_rows[self.row_place[left_rows], :total]
 
     def _combine(self, slots: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Σ_k weights[k] · column(slots[k]) (n,), one matrix-vector product over the block."""
@@ -174,6 +208,52 @@ class SchurColumns:
             ) from error
         return solution[:released], solution[released:]
 
+    def preview(self, active: np.ndarray, watched: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """What the set ``active`` would show Newton's update without its displacement:
+        (reaction, slack) (m,) each, NaN where not known. Its Schur system alone (no
+        backward solve, no product with K) gives the reactions of the nodes it adds to the
+        reference set (their multipliers μ) and the slack of the nodes it releases (u_r);
+        and the slack of ``watched`` nodes outside both sets, from their forward columns
+        W_j = L⁻¹ P e_j: u_j = base_j + W_jᵀ D⁻¹ W y, read from the stored Schur blocks.
+        A watched node's column is the one it needs once it joins. None where the update
+        would refactorise, or the columns are full ones (no blocks to read)."""
+        if self.factor is None or not self.forward or self._refactorize_first(active):
+            return None
+        m = len(self.normal_dofs)
+        released = np.flatnonzero(self.reference & ~active)
+        added = np.flatnonzero(~self.reference & active)
+        watched = np.unique(watched)
+        watched = watched[~self.reference[watched] & ~active[watched]]
+        changed = len(released) + len(added)
+        if self._preview_seconds(watched, changed) > costs.START_CHECK_SHARE * self.combine_seconds:
+            return None
+        slots = self._slots(np.concatenate([released, added, watched]))
+        if not self.forward:  # the paths proved long: the columns went on as full ones
+            return None
+        reaction, slack = np.full(m, np.nan), np.full(m, np.nan)
+        seen = self.base[self.normal_dofs[watched]]
+        if changed:
+            u_r, mu, weights, _ = self._schur_forward(released, added, slots[:changed], self.base, self.load,
+                                                      self.values, self.gap[added])
+            reaction[added], slack[released] = mu, u_r - self.gap[released]
+            seen = seen + self.gram_store[np.ix_(slots[changed:], slots[:changed])] @ weights
+        slack[watched] = seen - self.gap[watched]
+        return reaction, slack
+
+    def _preview_seconds(self, nodes: np.ndarray, changed: int) -> float:
+        """Modelled seconds :meth:`preview` adds to a step watching ``nodes``, with
+        ``changed`` nodes in its Schur system: the watched nodes' missing forward columns,
+        their Schur blocks against the stored ones (each column its counted path) and the
+        dense solve (the changed nodes' columns the step needs anyway)."""
+        missing = int((self.slot_of[nodes] < 0).sum())
+        if not missing:
+            return costs.dense_seconds(changed)
+        columns = (self.factor.forward_seconds(missing) if callable(getattr(self.factor, "forward_seconds", None))
+                   else missing * (self.column_seconds or 0.0))
+        path = (self.forward_store.nnz / self.column_count if self.column_count
+                else costs.typical_path(self.stiffness.shape[0], self.path_share))
+        return columns + costs.cross_seconds(missing, self.column_count + missing, path) + costs.dense_seconds(changed)
+
     def _solve_changed_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
                                load: np.ndarray, fixed_values: np.ndarray, added_values: np.ndarray) -> np.ndarray:
         """:meth:`_solve_changed` from sparse forward columns: with C = [K0r, E_d] (the
@@ -183,6 +263,22 @@ class SchurColumns:
         solve instead of a product with full-length columns, or only its backward half where
         the backend solves with Lᵀ alone: K00⁻¹ C y = Pᵀ L⁻ᵀ (D⁻¹ W y), the forward half being
         the stored columns already."""
+        dofs_r = self.normal_dofs[released]
+        u_r, mu, weights, k_r0 = self._schur_forward(released, added, slots, base, load, fixed_values, added_values)
+        if self.backward:
+            u = base + self.factor.backward(self.scaled_store[:, slots] @ weights)
+        else:
+            combined = k_r0.T @ weights[:len(released)]
+            combined[self.normal_dofs[added]] -= mu
+            u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
+        u[dofs_r] = u_r
+        return u
+
+    def _schur_forward(self, released: np.ndarray, added: np.ndarray, slots: np.ndarray, base: np.ndarray,
+                       load: np.ndarray, fixed_values: np.ndarray,
+                       added_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix]:
+        """The Schur system of :meth:`_solve_changed_forward` solved from the stored blocks:
+        u_r, μ, the weights y = [G_r − u_r; −μ] with u = base + K00⁻¹ C y, and K_r0."""
         r = len(released)
         dofs_r = self.normal_dofs[released]
         dofs_d = self.normal_dofs[added]
@@ -195,15 +291,7 @@ class SchurColumns:
         rhs = np.concatenate([b_r - (k_r0 @ base + gram[:r, :r] @ released_values),
                               added_values - (base[dofs_d] + gram[r:, :r] @ released_values)])
         u_r, mu = self._solve_schur(top, bottom, rhs, r, len(added))
-        if self.backward:
-            weights = np.concatenate([released_values - u_r, -mu])
-            u = base + self.factor.backward(self.scaled_store[:, slots] @ weights)
-        else:
-            combined = k_r0.T @ (released_values - u_r)
-            combined[dofs_d] -= mu
-            u = base + np.asarray(self.factor.solve(combined), dtype=float).reshape(len(base))
-        u[dofs_r] = u_r
-        return u
+        return u_r, mu, np.concatenate([released_values - u_r, -mu]), k_r0
 
 
 def cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:

@@ -38,6 +38,17 @@ PATH_SAMPLES = 8
 #: What a factorisation step costs beyond the numeric factorisation, in full solves: the
 #: masking of the changed rows, the singularity probe and the first block of solves.
 FACTORIZATION_EXTRA_SOLVES = 3.0
+#: The most bytes the dense copy of the forward columns over the rows they touch may
+#: hold (:meth:`contactfem.kernel.schur.ActiveSetSolver._cross_stored`); beyond it the
+#: Schur blocks come from the sparse columns themselves.
+DENSE_ROWS_BYTES = 2**27
+#: The most a start check's round (:meth:`contactfem.kernel.schur.ActiveSetSolver.preview`)
+#: may cost, modelled, as a share of the backward solve a Newton step pays for its
+#: displacement: its new forward columns, their Schur blocks and its dense Schur solve.
+#: A Hertz platen's round (a handful of changed nodes, one or two new columns) costs a few
+#: percent of it; a rough profile's (hundreds changed, dozens of new columns beside many
+#: patches) several times it, and its starts are rarely settled in three rounds anyway.
+START_CHECK_SHARE = 0.25
 #: A forward column in full solves, for a backend that does not model its forward routes
 #: (CHOLMOD's blocked sparse solve through cvxopt's interface).
 FORWARD_COLUMN_SHARE = 0.25

@@ -11,10 +11,15 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from contactfem.errors import SolverError
 from contactfem.kernel.newton import KernelResult, Status, solve_contact
 from contactfem.kernel.proposers import Accelerators
 from contactfem.kernel.schur import ActiveSetSolver
 from contactfem.kernel.system import ContactSystem, default_c
+
+
+#: Rounds of corrections :meth:`PathSolver.checked_start` makes to a step's start.
+START_CHECKS = 3
 
 
 class PathStarts:
@@ -45,7 +50,10 @@ class PathSolver:
     steps before extrapolated in the factor (:func:`extrapolated_active`), or from the last
     step's set after one, or from ``initial_active`` (the kernel's cold start if None). A
     factor solved before (a path that unloads and loads again) starts from its own settled
-    set, the answer, and takes one Newton step."""
+    set, the answer, and takes one Newton step. Any other start is first corrected where
+    its Schur system alone shows Newton's first update would change it
+    (:meth:`checked_start`, with ``accelerators.start_checks``): a start one node off the
+    zone's edge otherwise costs a whole Newton step, a backward solve of the factor."""
 
     def __init__(self, system: ContactSystem, *, backend: str = "auto", initial_active: np.ndarray | None = None,
                  starts: PathStarts | None = None, linear=None, **options) -> None:
@@ -64,6 +72,11 @@ class PathSolver:
         #: first, the unloaded state when nothing starts inside the obstacle.
         self.history = [(0.0, np.zeros(len(self.gap)), -self.gap)] if (self.gap >= 0).all() else []
         self.steps = 0
+        self.tolerance = options.get("tolerance", 1e-10)
+        self.check_starts = accelerators.start_checks
+        #: Starts corrected by :meth:`checked_start` (rounds that changed a start).
+        self.start_checks = 0
+        self.edges = None if system.contact_edges is None else np.asarray(system.contact_edges, dtype=np.int64)
         #: The settled set of every factor solved, packed to a bit a node (a path has at most
         #: 1 000 factors: 12 MB at 100 000 contact nodes).
         self.settled_sets: dict[float, np.ndarray] = {}
@@ -88,6 +101,8 @@ class PathSolver:
             start = chosen if chosen is not None else expected if expected is not None else self.active
         solves_before = self.linear.column_solves
         self.linear.set_load_factor(factor)
+        if known is None:
+            start = self.checked_start(start)
         result = solve_contact(self.system.scaled(factor), backend=self.backend, initial_active=start,
                                linear=self.linear, **self.options)
         result.column_solves = self.linear.column_solves - solves_before
@@ -101,6 +116,42 @@ class PathSolver:
             kept = self.history[:-1] if self.history and self.history[-1][0] == factor else self.history
             self.history = [*kept[-1:], state]
         return result
+
+    def checked_start(self, start: np.ndarray | None) -> np.ndarray | None:
+        """``start`` corrected where its Schur system alone shows Newton's update would
+        change it (:meth:`ActiveSetSolver.preview`): a node it adds with a negative
+        reaction leaves, a node beside the set (along ΓC) or released by it with a
+        positive slack joins, and so on for at most :data:`START_CHECKS` rounds."""
+        preview = getattr(self.linear, "preview", None)
+        if start is None or preview is None or not self.check_starts:
+            return start
+        start = np.asarray(start, dtype=bool)
+        for _ in range(START_CHECKS):
+            try:
+                seen = preview(start, self._beside(start))
+            except SolverError:
+                return start
+            if seen is None:
+                return start
+            reaction, slack = seen
+            with np.errstate(invalid="ignore"):
+                force = self.tolerance * np.nanmax(np.abs(reaction), initial=0.0)
+                length = self.tolerance * max(np.nanmax(np.abs(slack), initial=0.0), np.abs(self.gap).max(initial=0.0))
+                leave = start & (reaction < -force)
+                join = ~start & (slack > length)
+            if not (leave.any() or join.any()):
+                return start
+            start = (start & ~leave) | join
+            self.start_checks += 1
+        return start
+
+    def _beside(self, active: np.ndarray) -> np.ndarray:
+        """The contact nodes outside ``active`` next to one in it along ΓC."""
+        edges = self.edges
+        if edges is None or len(edges) == 0:
+            return np.zeros(0, dtype=np.int64)
+        first, second = active[edges[:, 0]], active[edges[:, 1]]
+        return np.unique(np.concatenate([edges[first & ~second, 1], edges[second & ~first, 0]]))
 
     def walk(self, factors: Sequence[float]) -> Iterator[KernelResult]:
         """:meth:`step` at each of ``factors`` in turn, yielding each result as it is solved;

@@ -44,12 +44,15 @@ class Accelerators:
     ``zone_fronts``: move creeping zone edges ahead (:class:`FrontsProposer`);
     ``schur_updates``: solve a changed active set by Schur-complement updates of one
     factorisation instead of factorising every set
-    (:class:`contactfem.kernel.schur.ActiveSetSolver`).
+    (:class:`contactfem.kernel.schur.ActiveSetSolver`); ``start_checks``: correct a load
+    path step's start where its Schur system alone shows Newton's update would change it
+    (:meth:`contactfem.kernel.PathSolver.checked_start`).
     """
 
     sequencing: bool = True
     zone_fronts: bool = True
     schur_updates: bool = True
+    start_checks: bool = True
 
 
 @dataclass(frozen=True, eq=False)

@@ -128,6 +128,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         """u (n,) and the reactions (F − K u) at the normal unknowns of ``active``."""
         if self.reference is None or self._refactorize_first(active):
             self._factorize(active)
+        else:
+            self.dense_spent += costs.dense_seconds(int(np.count_nonzero(active != self.reference)))
         u, reaction, accurate = self._solve_refined(active)
         if not accurate and np.any(active != self.reference):
             # The Schur update carries the errors of the reference factorisation, amplified
@@ -150,6 +152,13 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         if held > costs.COLUMN_BYTES:
             return True
         k = len(changed)
+        if self.dense_spent + costs.dense_seconds(k) > self.refactorization_seconds:
+            # The dense Schur solves since the factorisation have cost (modelled) as much as
+            # another would: it makes every later one small again. Deciding step by step
+            # alone, a zone that keeps growing away from its reference (a rough profile's,
+            # to 1 900 changed nodes) kept paying ever larger dense solves once its new
+            # columns became cheap.
+            return True
         if self.forward and callable(getattr(self.factor, "forward_seconds", None)):
             # The backend models its own routes (a converted factor's pattern solve, a
             # blocked sparse solve).
@@ -195,7 +204,9 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         with np.errstate(invalid="ignore", over="ignore"):
             absolute = self.absolute @ np.abs(u)
             target = self.gamma * (absolute + np.abs(self.load))[equations].max(initial=0.0)
-        residual = np.where(equations, self.load - internal, 0.0)
+        residual = self.load - internal
+        residual[~equations] = 0.0
+        refined = False
         # Iterative refinement down to the round-off bound of the equations, for solves that
         # are not backward stable (SuperLU without pivoting, long chains of Schur updates); it
         # corrects with the same factor and Schur structure while the residual improves (a
@@ -214,7 +225,7 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             if not np.abs(trial).max(initial=0.0) < size:
                 break
             u, residual, internal = u + correction, trial, internal + change
-            absolute = None
+            absolute, refined = None, True
         with np.errstate(invalid="ignore", over="ignore"):
             if absolute is None:
                 absolute = self.absolute @ np.abs(u)
@@ -222,7 +233,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             reaction = self.load[fixed] - internal[fixed]
             force = (np.abs(self.load).max(initial=0.0) + np.abs(internal).max(initial=0.0)
                      + np.abs(reaction).max(initial=0.0))
-            size = np.abs(self.load - internal)[equations].max(initial=0.0)
+            # Unrefined, the residual is F − K u on the equations already (zero elsewhere).
+            size = (np.abs(self.load - internal)[equations] if refined else np.abs(residual)).max(initial=0.0)
             accurate = bool(size <= max(self.tolerance * force, target))
         return u, reaction, accurate
 
@@ -273,6 +285,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
         self.factor = None  # a CHOLMOD refactorisation overwrites the previous factor
         self.factor = self.factorizer.factorize(masked, check=False)
         self.factorizations += 1
+        #: Modelled seconds of the dense Schur solves taken with this factorisation (see _refactorize_first).
+        self.dense_spent = 0.0
         # The fixed unknowns' values reach the equations through their columns of K, that is
         # (K symmetric) their rows: a few thousand rows instead of a product with all of K.
         fixed_dofs = np.flatnonzero(fixed)
@@ -343,6 +357,8 @@ class ActiveSetSolver(SchurColumns, IterateMeasures):
             self.forward_store = sp.csc_matrix((k.shape[0], 0))
             self.scaled_store = sp.csc_matrix((k.shape[0], 0))
             self.gram_store = np.empty((0, 0))
+            #: The stored scaled columns, dense over the rows they touch (see _cross_stored).
+            self.dense_rows, self.row_place, self.dense_row_count = np.zeros((0, 0)), None, 0
         elif getattr(self, "column_store", None) is None:
             self.column_store = np.empty((k.shape[0], 0), order="F")
 

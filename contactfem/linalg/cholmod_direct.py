@@ -52,6 +52,8 @@ from contactfem.linalg.cholmod_ctypes import (
 )
 from contactfem.linalg.costs import MODEL, FactorCost, cholesky_flops, estimated_flops
 from contactfem.linalg.storage import canonical_csr
+from contactfem.linalg.supernodal import _X as _SUPERNODAL_X
+from contactfem.linalg.supernodal import SupernodalFactor
 
 
 class DirectAnalysis:
@@ -96,6 +98,9 @@ class DirectAnalysis:
         #: solve), and whether a pattern solve converted it.
         self.analysed_simplicial = not supernodal
         self.simplicial, self.converted = self.analysed_simplicial, False
+        #: The supernodal factor's structure (:class:`~contactfem.linalg.supernodal.SupernodalFactor`),
+        #: read from the first numeric factor that needs it; False where it does not read back.
+        self.supernodes: SupernodalFactor | None | bool = None
         #: Forward columns solved with this pattern's factors so far, and the factor entries
         #: on the elimination-tree paths they reached (Σ over each column's rows of L's
         #: column count there): counted, so the same columns always give the same figure.
@@ -300,39 +305,90 @@ class DirectCholmodFactor:
         an LLᵀ), returned twice as (W, D⁻¹ W) with D = I.
 
         L⁻¹ P b has nonzeros only on the elimination tree's paths from b's nonzeros (about
-        600 of 418 000 on a rough profile's mesh, 3 000 of 132 000 on the square). CHOLMOD's
-        solve with a sparse right-hand side (cholmod_solve2 with its pattern, Bset) visits
-        only those, one column at a time, but converts a supernodal factor to a simplicial
-        one first; its sparse solve in dense blocks of 4 sweeps the whole factor for each
-        block and converts nothing. The route is chosen by :meth:`_route_seconds`, from
-        counts alone: the factor's entries, the k columns, the paths of the columns solved
-        before (``route`` says which was taken, ``setup_seconds`` the modelled seconds of the
-        conversion it made). The columns' paths are counted for the next choice.
+        600 of 418 000 on a rough profile's mesh, 3 000 of 132 000 on the square). Three
+        routes: the supernodal factor's own blocks on the supernodes the block reaches
+        (:mod:`~contactfem.linalg.supernodal`: nothing converted, the whole block at once);
+        CHOLMOD's solve with a sparse right-hand side's pattern (cholmod_solve2 with Bset),
+        which visits only the paths, one column at a time, but converts a supernodal factor
+        to a simplicial one first; its sparse solve in dense blocks of 4, which sweeps the
+        whole factor for each block and converts nothing. The route is chosen by
+        :meth:`_route_seconds`, from counts alone: the factor's entries, the k columns, the
+        supernodes this block reaches, the paths of the columns solved before (``route``
+        says which was taken, ``setup_seconds`` the modelled seconds of the conversion it
+        made). The columns' paths are counted for the next choice.
         """
         k = rhs.shape[1]
-        blocked, pattern = self._route_seconds(k)
+        permuted = self._permuted(rhs)
+        structure = self._supernodes()
+        reach = structure.reach(permuted.indices) if structure is not None and permuted.nnz else None
+        blocked, pattern, supernodal = self._route_seconds(k, reach)
         converting = not self.analysis.simplicial
-        if blocked < pattern:
-            self.route, self.setup_seconds = "blocked", 0.0
+        self.setup_seconds = 0.0
+        if supernodal <= min(blocked, pattern):
+            self.route = "supernodal"
+            result = self._supernodal_forward(permuted, reach)
+        elif blocked < pattern:
+            self.route = "blocked"
             result = self._blocked_forward(rhs)
         else:
             self.route = "pattern"
             self.setup_seconds = MODEL.conversion_seconds(self.cost) if converting else 0.0
-            result = self._pattern_forward(rhs)
+            result = self._pattern_forward(permuted)
         self.analysis.count_paths(result[0])
         return result
 
-    def _route_seconds(self, k: int) -> tuple[float, float]:
-        """Modelled seconds of k forward columns through the blocked sparse solve and through
-        the pattern solve (its conversion included while the factor is supernodal): the
-        factor's counted entries and the paths counted on this pattern's earlier columns
-        (until there are some, the pattern route's guess from the factor's fill), divided
-        by the rates of :mod:`contactfem.linalg.costs`."""
-        return MODEL.forward_routes(self.cost, k, converted=self.analysis.simplicial,
-                                    path_entries=self.analysis.path_entries)
+    def _supernodal_forward(self, permuted: sp.csc_matrix,
+                            reach: np.ndarray | None = None) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through the supernodal blocks the right-hand sides reach (``reach``, computed
+        when not given), for right-hand sides in the factor's order (:meth:`_permuted`)."""
+        structure = self._supernodes()
+        if structure is None:
+            raise SolverError("no supernodal factor to solve forward columns with")
+        if reach is None:
+            reach = structure.reach(permuted.indices)
+        forward = structure.forward(self._supernodal_values(), permuted, reach)
+        return forward, forward
+
+    def _supernodes(self) -> SupernodalFactor | None:
+        """The supernodal structure of this pattern's factors, when a supernodal numeric
+        factor is at hand (this one, or the copy kept when a pattern solve converted it)."""
+        address = self._supernodal_address()
+        if address is None:
+            return None
+        if self.analysis.supernodes is None:
+            self.analysis.supernodes = SupernodalFactor.read(address, self.size) or False
+        return self.analysis.supernodes or None
+
+    def _supernodal_address(self) -> int | None:
+        if self.analysis.simplicial:
+            return self.analysis.solving.value or None
+        return self.factor
+
+    def _supernodal_values(self) -> int:
+        """The address of the supernodal numeric factor's values (x)."""
+        return ctypes.c_void_p.from_address(self._supernodal_address() + _SUPERNODAL_X).value
+
+    def _route_seconds(self, k: int, reach: np.ndarray | None = None) -> tuple[float, float, float]:
+        """Modelled seconds of k forward columns through the blocked sparse solve, the
+        pattern solve (its conversion included while the factor is supernodal) and the
+        supernodal blocks (inf without a supernodal factor): the factor's counted entries,
+        the paths counted on this pattern's earlier columns (until there are some, the
+        pattern route's guess from the factor's fill), and the entries and supernodes the
+        block reaches (``reach``; until known, a leaf's path to the root), divided by the
+        rates of :mod:`contactfem.linalg.costs`."""
+        blocked, pattern = MODEL.forward_routes(self.cost, k, converted=self.analysis.simplicial,
+                                                path_entries=self.analysis.path_entries)
+        structure = self._supernodes()
+        if structure is None:
+            return blocked, pattern, np.inf
+        if reach is None:
+            entries, supernodes = structure.leaf_path_entries, structure.leaf_path_supernodes
+        else:
+            entries, supernodes = structure.reach_entries(reach), len(reach)
+        return blocked, pattern, MODEL.supernodal_forward_seconds(self.cost, k, entries, supernodes)
 
     def forward_seconds(self, k: int) -> float:
-        """Modelled seconds of k more forward columns (the cheaper route)."""
+        """Modelled seconds of k more forward columns (the cheapest route)."""
         return min(self._route_seconds(k))
 
     def _blocked_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
@@ -359,14 +415,19 @@ class DirectCholmodFactor:
         library.cholmod_free_sparse(ctypes.byref(result), common)
         return sp.csc_matrix((values, indices, indptr), shape=shape)
 
-    def _pattern_forward(self, rhs: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
-        """W through CHOLMOD's solve with each column's pattern (converting the factor once)."""
+    def _permuted(self, rhs: sp.csc_matrix) -> sp.csc_matrix:
+        """The right-hand sides in the factor's order (P b), each column's rows sorted."""
         n, k = rhs.shape
-        # The right-hand sides in the factor's order (P b), each column's rows sorted, at once.
         permuted = sp.csc_matrix(rhs)
         permuted = sp.csc_matrix((permuted.data.copy(), self._inverse_permutation()[permuted.indices].astype(np.int32),
                                   permuted.indptr.copy()), shape=(n, k))  # sorted in place next: the caller's stay
         permuted.sort_indices()
+        return permuted
+
+    def _pattern_forward(self, permuted: sp.csc_matrix) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """W through CHOLMOD's solve with each column's pattern (converting the factor once),
+        for right-hand sides already in the factor's order (:meth:`_permuted`)."""
+        n, k = permuted.shape
         starts, all_rows, all_values = permuted.indptr, permuted.indices, permuted.data
         converting = not self.analysis.simplicial
         if converting:

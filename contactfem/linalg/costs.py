@@ -128,6 +128,12 @@ class Rates:
     #: Stored entries per second of the conversion of a supernodal factor to a simplicial
     #: one (which the first pattern solve does).
     conversion_entries: float = math.nan
+    #: Reached factor entries per second of a block of forward columns through the
+    #: supernodal blocks (:mod:`contactfem.linalg.supernodal`) for its first right-hand side,
+    #: for each further one, and seconds per reached supernode (its Python and BLAS calls).
+    supernodal_entries: float = math.nan
+    supernodal_block_entries: float = math.nan
+    supernode_seconds: float = math.nan
 
 
 #: The rates of each kind of factor. Measured on a 2-core AMD EPYC with cvxopt 1.3.3's
@@ -142,9 +148,14 @@ class Rates:
 #: together per kind. Modelled against measured at the largest sizes: a full solve 0.15 s
 #: (0.15 s) on the square, 0.013 s (0.020) on the rough mesh; a pattern column 5.1 ms
 #: (7.4) and 66 µs (67); a conversion 0.14 s (0.14); an analysis 0.28 s (0.51) and 0.22 s (0.30).
+#: The supernodal blocks' forward route was measured apart, on the Hertz platen's kernel
+#: matrix at 246 902 unknowns (22.5 million factor entries): blocks of 1, 7 and 40 contact
+#: columns reaching 1.64-1.69 million entries in 31-69 supernodes took 2.1, 3.5 and 13.9 ms
+#: (modelled 2.0, 4.0 and 15.6).
 _SUPERNODAL = Rates(factor_flops=4.8e10, factor_entries=1.5e8, analysis_work=5.1e8, solve_entries=5.1e8,
                     block_solve_entries=3.7e9, blocked_forward_entries=2.7e9, pattern_entries=1.05e9,
-                    pattern_column_seconds=7.4e-6, conversion_entries=5.6e8)
+                    pattern_column_seconds=7.4e-6, conversion_entries=5.6e8,
+                    supernodal_entries=1.0e9, supernodal_block_entries=5.0e9, supernode_seconds=1.0e-5)
 RATES: dict[str, Rates] = {
     "cholmod-supernodal": _SUPERNODAL,
     # A simplicial factor's numeric factorisation is its flops alone (the entries' term fitted to 0).
@@ -258,6 +269,14 @@ class CostModel:
             return k * self.pattern_column_guess(cost)
         rates = self._rates(cost)
         return k * (path_entries / rates.pattern_entries + rates.pattern_column_seconds)
+
+    def supernodal_forward_seconds(self, cost: FactorCost, k: int, entries: float, supernodes: float) -> float:
+        """``k`` forward columns through the supernodal blocks, reaching ``entries`` stored
+        entries of the factor in ``supernodes`` supernodes (inf where not measured)."""
+        rates = self._rates(cost)
+        seconds = entries / rates.supernodal_entries + (k - 1) * entries / rates.supernodal_block_entries \
+            + supernodes * rates.supernode_seconds
+        return seconds if math.isfinite(seconds) else math.inf
 
     def forward_routes(self, cost: FactorCost, k: int, *, converted: bool,
                        path_entries: float | None) -> tuple[float, float]:
