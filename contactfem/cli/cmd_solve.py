@@ -309,6 +309,7 @@ def _write_in_pieces(case, outcome, staging: Path, progress, world):
     import numpy as np
 
     from contactfem.distributed_output import pieces_accuracy
+    from contactfem.distributed_result import _peak_rss
     from contactfem.errors import SolverError
     from contactfem.io.pieces import RootData, write_pieces
     from contactfem.io.registry import result_data
@@ -329,7 +330,12 @@ def _write_in_pieces(case, outcome, staging: Path, progress, world):
     if not world.allreduce(finite, op=_mpi_and()):
         raise SolverError(f"{case.source.name}: the solution is not finite: the data's scales overflow float64; "
                           "rescale the units of lengths, moduli and loads")
-    names, written = write_pieces(staging, fields, case.output.files, world, root, progress)
+    solve_peak = outcome.parallel["per_rank"][world.Get_rank()]["peak_rss_bytes"]
+
+    def memory() -> dict:  # the peak so far (the body's files written) beside the solve's
+        return {"solve_peak_rss_bytes": solve_peak, "peak_rss_bytes": max(solve_peak, _peak_rss())}
+
+    names, written = write_pieces(staging, fields, case.output.files, world, root, progress, per_rank=memory)
     return None if result is None else (result, written, names)
 
 

@@ -49,11 +49,14 @@ class RootData:
 
 
 def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: RootData | None,
-                 progress: Callable[[str], None] | None = None) -> tuple[list[str], dict | None]:
+                 progress: Callable[[str], None] | None = None,
+                 per_rank: Callable[[], dict] | None = None) -> tuple[list[str], dict | None]:
     """Write a result kept in pieces into ``directory`` (every rank calls it; ``root`` given on
     rank 0 only; ``fields`` this rank's :class:`~contactfem.distributed_output.PieceFields`).
 
     Returns the names written and, on rank 0, the report as written (its timings gain ``write``).
+    ``per_rank``: each rank's figures once the body's files are written (its peak memory),
+    merged into its entry of the report's ``parallel.per_rank``.
 
     Raises
     ------
@@ -73,6 +76,7 @@ def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: R
         say("writing H5 (rank after rank)")
         _write_h5(directory, fields, mpi, root)
         names.append("solution.h5")
+    figures = mpi.gather(per_rank(), root=0) if per_rank is not None else None
     if root is None:
         _agree(mpi, None)
         return names, None
@@ -80,6 +84,8 @@ def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: R
 
     data = root.data
     report = {**data.report, "timings": {**data.report.get("timings", {}), "write": time.perf_counter() - clock}}
+    if figures is not None:
+        report["parallel"] = _merged(report["parallel"], figures)
 
     def finish() -> None:
         if "csv" in formats:
@@ -90,6 +96,15 @@ def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: R
     _agree(mpi, _attempt(finish))
     names += [name for name, format in ((CONTACT_CSV, "csv"), (REPORT_JSON, "json")) if format in formats]
     return names, report
+
+
+def _merged(parallel: dict, figures: list[dict]) -> dict:
+    """``parallel`` with each rank's ``figures`` in its ``per_rank`` entry, the largest peak anew."""
+    per_rank = [{**entry, **extra} for entry, extra in zip(parallel["per_rank"], figures)]
+    merged = {**parallel, "per_rank": per_rank}
+    if all("peak_rss_bytes" in entry for entry in per_rank):
+        merged["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in per_rank)
+    return merged
 
 
 def _write_vtu_piece(directory: Path, fields, metadata: dict, rank: int, ranks: int, root: RootData | None) -> None:
