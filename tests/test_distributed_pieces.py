@@ -199,6 +199,28 @@ def test_the_pvtu_and_its_pieces_read_back_as_the_serial_vtu(runs):
 
 
 @needs_mpi
+@pytest.mark.skipif(shutil.which("pvpython") is None, reason="pvpython not installed (apt-get install python3-paraview)")
+def test_paraview_reads_the_pvtu_and_the_pvd(runs, tmp_path):
+    """ParaView's own readers (tests/pvpython_probe.py): the PVTU as one grid of the serial
+    triangles and arrays, and the PVD's two parts, body and contact."""
+    import pyvista
+
+    out = tmp_path / "probe.json"
+    probe = Path(__file__).with_name("pvpython_probe.py")
+    files = [str(runs["pieces"] / "solution.pvtu"), str(runs["pieces"] / "solution.pvd")]
+    done = subprocess.run([shutil.which("pvpython"), str(probe), str(out), *files], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    found = json.loads(out.read_text(encoding="utf-8"))
+    serial = pyvista.read(runs["serial"] / "solution.vtu")
+    (grid,) = found[files[0]]["XMLPartitionedUnstructuredGridReader"]["steps"]["none"]
+    assert grid["cells"] == serial.n_cells and grid["cell_types"] == [5]
+    assert set(grid["point_data"]) == set(serial.point_data) and set(grid["cell_data"]) == set(serial.cell_data)
+    body, contact = found[files[1]]["PVDReader"]["steps"]["0.0"]
+    assert body["cells"] == serial.n_cells and contact["cell_types"] == [3]
+
+
+@needs_mpi
 def test_plot_reads_the_pieces_archive(runs, tmp_path):
     from contactfem.cli import main as cli
 
