@@ -10,14 +10,15 @@ No rank gathers the whole iterate. After the solve, every rank
   them at every boundary node: the supports' reactions, the contact fields);
 - reduces with the others what the report needs of the whole mesh (:class:`BodyFigures`):
   counts, the extreme triangle sizes, the nodes' centroid and span, the body force's resultant,
-  the energy a(u, u) and, for a case with an exact solution, the squared errors of its triangles.
+  the energy a(u, u), the residual estimator's terms and, for a case with an exact solution,
+  the squared errors of its triangles.
 
 Rank 0's :class:`~contactfem.solve.SolveResult` has the boundary mesh for its mesh: the report
 and the contact files are built from it, the body's files from the pieces
-(:mod:`contactfem.io.pieces`). What needs the whole mesh at once is not computed: the residual
-estimator (its jump terms cross the pieces' cuts, its stress on the far side is another rank's)
-and the H^{-1/2} norm of an exact multiplier error (a solve with the whole mesh's Gram matrix);
-the report says so where they would be.
+(:mod:`contactfem.io.pieces`); the residual estimator is summed over the pieces
+(:mod:`contactfem.distributed_estimator`). What needs the whole mesh at once is not computed:
+the H^{-1/2} norm of an exact multiplier error (a solve with the whole mesh's Gram matrix); the
+report says so where it would be.
 """
 
 from __future__ import annotations
@@ -29,10 +30,6 @@ import numpy as np
 from contactfem.assembly import stresses, von_mises
 from contactfem.report import BodyFigures
 
-#: Why the residual estimator is not evaluated on a distributed mesh.
-NO_ESTIMATOR = ("the residual estimator is not evaluated on a distributed mesh: its jump terms cross the "
-                "pieces' cuts, where no rank holds both triangles; solve on one process (or with a mesh "
-                "file) for it")
 #: Why the H^{-1/2} norm of an exact multiplier error is not.
 NO_DUAL_NORM = ("errors.multiplier_h_minus_half is null: on a distributed mesh no rank holds the whole "
                 "mesh's H1 Gram matrix that norm solves with")
@@ -84,6 +81,7 @@ def piece_outcome(linear, level, case, problem, method_name: str, solver: str, t
     :class:`~contactfem.solve.SolveResult` over the boundary mesh with :class:`BodyFigures`."""
     import time
 
+    from contactfem.distributed_estimator import piece_energy_estimate
     from contactfem.distributed_result import DistributedResult, SolutionProduct, _peak_rss, parallel_figures
     from contactfem.solve import SolveResult, _solution
 
@@ -99,6 +97,7 @@ def piece_outcome(linear, level, case, problem, method_name: str, solver: str, t
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
     if mpi.Get_rank() != 0:
+        piece_energy_estimate(problem, fields, mpi)
         return DistributedResult(result=None, parallel=parallel, rank=mpi.Get_rank(), pieces=fields)
     clock = time.perf_counter()
     u_rotated, internal, load = boundary
@@ -111,12 +110,13 @@ def piece_outcome(linear, level, case, problem, method_name: str, solver: str, t
     if problem.exact is not None:
         body = replace(body, errors={**body.errors, "multiplier_l2": _multiplier_l2(solution, problem)},
                        warnings=(NO_DUAL_NORM,))
+    estimate = piece_energy_estimate(problem, fields, mpi, solution, energy)
     timings["postprocess"] = time.perf_counter() - clock
     parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     parallel["per_rank"][0]["peak_rss_bytes"] = max(parallel["per_rank"][0]["peak_rss_bytes"], _peak_rss())
     result = SolveResult(method=method_name, problem=boundary_problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
-    return DistributedResult(result=result, parallel=parallel, rank=0, pieces=fields, body=body, energy=float(energy))
+    return DistributedResult(result=result, parallel=parallel, rank=0, pieces=fields, body=body, estimate=estimate)
 
 
 def _piece_fields(linear, system, problem, mpi) -> PieceFields:
@@ -247,17 +247,15 @@ def _multiplier_l2(solution, problem) -> float:
     return float(np.sqrt(total))
 
 
-def pieces_accuracy(case, result, energy: float) -> dict:
-    """report.json's ``accuracy`` of a solve on pieces: the contact quantities (from the
-    boundary, whole on rank 0) with what sequencing left to compare them with, no energy
-    estimate (:data:`NO_ESTIMATOR`), the energy norm of the solution a(u, u)^{1/2} beside it."""
-    from contactfem.accuracy import ENERGY_METHOD, quantities, quantity_estimates
+def pieces_accuracy(case, result, energy: dict) -> dict:
+    """report.json's ``accuracy`` of a solve kept in pieces: the energy estimate reduced over the
+    pieces (:mod:`contactfem.distributed_estimator`) and the contact quantities (from the
+    boundary, whole on rank 0) with no coarser level to compare them with (none is kept)."""
+    from contactfem.accuracy import quantities, quantity_estimates
 
     fine = quantities(result.problem, result.solution.contact)
     reason = ("no coarser level is kept on a distributed mesh; the contact quantities' estimates need a "
               "solve in one process (solver.accuracy.levels)")
-    figures = {"energy": {"estimate": None, "relative": None, "method": ENERGY_METHOD, "guaranteed": False,
-                          "reason": NO_ESTIMATOR, "energy_norm": float(np.sqrt(max(energy, 0.0)))},
-               "quantities": quantity_estimates(fine, [], reason), "levels": [],
-               "cost": {"unknowns": 0, "share_of_unknowns": 0.0, "seconds": 0.0, "share_of_seconds": 0.0}}
-    return figures
+    return {"energy": energy, "quantities": quantity_estimates(fine, [], reason), "levels": [],
+            "cost": {"unknowns": 0, "share_of_unknowns": 0.0, "seconds": float(energy.get("seconds", 0.0)),
+                     "share_of_seconds": None}}

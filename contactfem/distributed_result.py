@@ -36,11 +36,11 @@ class DistributedResult:
     parallel: dict
     rank: int = 0
     #: A solve left in pieces (``gather=False`` on a distributed mesh): this rank's fields, and on
-    #: rank 0 the whole mesh's reduced figures and the energy a(u, u) (see
+    #: rank 0 the whole mesh's reduced figures and report.json's ``accuracy.energy`` (see
     #: :mod:`contactfem.distributed_output`); ``result`` then holds the boundary mesh only.
     pieces: "PieceFields | None" = None
     body: "BodyFigures | None" = None
-    energy: float | None = None
+    estimate: dict | None = None
 
 
 class SolutionProduct:

@@ -318,7 +318,7 @@ def _write_in_pieces(case, outcome, staging: Path, progress, world):
     fields, result, root = outcome.pieces, outcome.result, None
     finite = all(np.isfinite(values).all() for values in (fields.displacement, fields.stress, fields.von_mises))
     if result is not None:
-        extras = {"parallel": outcome.parallel, "accuracy": pieces_accuracy(case, result, outcome.energy)}
+        extras = {"parallel": outcome.parallel, "accuracy": pieces_accuracy(case, result, outcome.estimate)}
         report = build_report(case, result, extras, body=outcome.body)
         contact = result.solution.contact
         try:
