@@ -10,9 +10,9 @@ O(cut + boundary) size.
   of its boundary edges (by the edge's row in the serial mesh) to rank 0, which holds the
   whole boundary, its loads, multipliers and displacement, and evaluates them there.
 
-The sums agree with the serial estimator's up to the order of the additions (1e-12 relative
-on the tests' meshes); what is lost is the per-triangle indicator, which no file of a
-distributed run holds.
+The sums agree with the serial estimator's up to the order of the additions (see
+tests/test_distributed_pieces.py); what is lost is the per-triangle indicator, which no file
+of a distributed run holds.
 """
 
 from __future__ import annotations

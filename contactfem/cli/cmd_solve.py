@@ -327,7 +327,7 @@ def _write_in_pieces(case, outcome, staging: Path, progress, world):
             finite = False
         finite = finite and all(np.isfinite(v).all() for v in (contact.multiplier, contact.nodal_force))
         root = RootData(result_data(case, result, report), result.problem.boundary_numbers)
-    if not world.allreduce(finite, op=_mpi_and()):
+    if not all(world.allgather(finite)):  # every rank stops alike
         raise SolverError(f"{case.source.name}: the solution is not finite: the data's scales overflow float64; "
                           "rescale the units of lengths, moduli and loads")
     solve_peak = outcome.parallel["per_rank"][world.Get_rank()]["peak_rss_bytes"]
@@ -337,12 +337,6 @@ def _write_in_pieces(case, outcome, staging: Path, progress, world):
 
     names, written = write_pieces(staging, fields, case.output.files, world, root, progress, per_rank=memory)
     return None if result is None else (result, written, names)
-
-
-def _mpi_and():
-    from mpi4py import MPI
-
-    return MPI.LAND
 
 
 def _refuse_uncertified(case, result, directory: Path) -> None:
