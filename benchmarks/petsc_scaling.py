@@ -6,6 +6,7 @@ Usage:
     python benchmarks/petsc_scaling.py --refine 4 --ranks 1 2   # choose sizes and rank counts
     python benchmarks/petsc_scaling.py --solvers mumps gamg     # also CG + GAMG
     mpiexec -n 2 python benchmarks/petsc_scaling.py --single 4 --solver mumps   # one run: a JSON record on stdout
+    python benchmarks/petsc_scaling.py --refine 5 --ranks 4 --write   # through `contactfem solve`, files written
 
 Each (refine, ranks, solver) runs as its own ``mpiexec -n P`` job, so that each rank's peak
 RSS (getrusage maxrss) is that run's. A run records, per rank: seconds of mesh (its piece,
@@ -16,7 +17,10 @@ refines only its piece of the coarse mesh and rank 0 meshes the case whole for t
 after the solve, a memory peak its figure includes); the factorisation seconds of each Newton
 step, the iterations of each linear solve (1 for MUMPS) and what MUMPS reports of its
 factors (entries, flops, megabytes per rank); its peak RSS; and the totals: Newton steps,
-factorisations, wall time. BLAS threads are pinned
+factorisations, wall time. With ``--write`` a run is ``contactfem solve`` itself, its files
+written into a temporary directory (on the pieces mesh, every rank its share, see
+docs/outputs.md), and each rank's peak RSS includes the writing (``solve_peak_rss_gb`` is the
+peak at the end of the solve); the record comes from its report.json. BLAS threads are pinned
 to one per rank (OMP_NUM_THREADS=1) so that 1 and 2 ranks use the same cores' worth.
 
 Writes JSON (--out, default benchmarks/results/petsc_scaling.json, rewritten after every
@@ -89,6 +93,57 @@ def single(refine: int, solver: str, method: str, mesh: str = "pieces") -> None:
     print(RECORD_PREFIX + json.dumps(record), flush=True)
 
 
+def single_written(refine: int, solver: str, method: str, mesh: str = "pieces") -> None:
+    """One run of ``contactfem solve`` on the ranks of this mpiexec job, its files written into a
+    temporary directory; rank 0 prints the record (from report.json and the files' sizes)."""
+    import tempfile
+
+    from mpi4py import MPI
+
+    from contactfem.cli.cmd_solve import solve
+
+    if mesh != "pieces":
+        raise SystemExit("--write measures the solve command, whose mesh is in pieces when the case allows")
+    world = MPI.COMM_WORLD
+    directory = world.bcast(tempfile.mkdtemp(prefix="petsc-scaling-") if world.Get_rank() == 0 else None, root=0)
+    out = Path(directory) / "result"
+    started = time.perf_counter()
+    try:
+        solve.main([str(CASE_FILE), "--backend", "petsc", "--petsc-solver", solver, "--method", method,
+                    "--refine", str(refine), "--out", str(out), "--quiet"], standalone_mode=False)
+    except SystemExit as stop:  # exit 1: not certified, the files written all the same
+        if stop.code not in (0, 1, None):
+            raise
+    wall = time.perf_counter() - started
+    world.Barrier()
+    if world.Get_rank() != 0:
+        return
+    report = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    parallel = report["parallel"]
+    files = {path.name: path.stat().st_size for path in sorted(out.iterdir())}
+    shutil.rmtree(directory)
+    record = {
+        "refine": refine, "divisions": 32 * 2**refine, "ranks": parallel["ranks"], "mesh": parallel["mesh"],
+        "solver": solver, "method": method, "written": True, "unknowns": report["unknowns"]["displacement"],
+        "contact_nodes": report["mesh"]["contact_nodes"], "status": report["solver"]["status"],
+        "newton_steps": report["solver"]["iterations"], "factorizations": report["solver"]["factorizations"],
+        "active_nodes": report["contact_zone"]["active_nodes"], "contact_force": report["contact_force"]["normal"],
+        "wall_s": wall,
+        "stages_s": {stage: max(rank["seconds"].get(stage, 0.0) for rank in parallel["per_rank"])
+                     for stage in ("mesh", "assemble", "solve", "gather")},
+        "write_s": report["timings"].get("write", 0.0),
+        "files_bytes": files,
+        "per_rank": [{"rank": rank["rank"], "owned_unknowns": rank["owned_unknowns"],
+                      "owned_triangles": rank["owned_triangles"], "peak_rss_gb": rank["peak_rss_bytes"] / GB,
+                      "solve_peak_rss_gb": rank.get("solve_peak_rss_bytes", rank["peak_rss_bytes"]) / GB,
+                      "factor_s": rank["factor_seconds"], "linear_iterations": rank["linear_iterations"],
+                      "factor": rank["factor"], "seconds": rank["seconds"]} for rank in parallel["per_rank"]],
+        "max_peak_rss_gb": parallel["max_peak_rss_bytes"] / GB,
+        "blas_libraries": blas_libraries(),
+    }
+    print(RECORD_PREFIX + json.dumps(record), flush=True)
+
+
 def blas_libraries() -> list[str]:
     """The BLAS and LAPACK shared objects this process mapped (which of Debian's alternatives
     PETSc and MUMPS run on: the reference one or OpenBLAS), from /proc/self/maps."""
@@ -112,14 +167,14 @@ def _environment(extra: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def run(refine: int, ranks: int, solver: str, method: str, timeout: float, mesh: str = "pieces",
-        environment: dict[str, str] | None = None) -> dict:
+        environment: dict[str, str] | None = None, write: bool = False) -> dict:
     """One ``mpiexec -n ranks`` job; ``environment`` adds to its variables (PETSC_OPTIONS, a
     library path)."""
     mpiexec = shutil.which("mpiexec")
     if mpiexec is None:
         return {"refine": refine, "ranks": ranks, "solver": solver, "mesh": mesh, "error": "no mpiexec on the PATH"}
     command = [mpiexec, "-n", str(ranks), sys.executable, str(Path(__file__).resolve()), "--single", str(refine),
-               "--solver", solver, "--method", method, "--mesh", mesh]
+               "--solver", solver, "--method", method, "--mesh", mesh, *(["--write"] if write else [])]
     started = time.perf_counter()
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=_environment(environment))
@@ -165,12 +220,14 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     parser.add_argument("--mesh", default="pieces", choices=["pieces", "replicated"],
                         help="each rank refines its piece of the coarse mesh, or meshes the whole case")
+    parser.add_argument("--write", action="store_true",
+                        help="run `contactfem solve` with its files written (peak memory includes the writing)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--single", type=int, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--solver", default="mumps", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.single is not None:
-        single(args.single, args.solver, args.method, args.mesh)
+        (single_written if args.write else single)(args.single, args.solver, args.method, args.mesh)
         return
 
     document = {"benchmark": "distributed", "case": str(CASE_FILE.relative_to(ROOT)),
@@ -181,14 +238,14 @@ def main() -> None:
     # Runs of other sizes, rank counts, solvers or meshes stay: each (refine, ranks, solver,
     # mesh) has one record, the latest (records before the mesh option were replicated).
     kept = json.loads(args.out.read_text(encoding="utf-8"))["records"] if args.out.exists() else []
-    planned = {(r, p, s, args.mesh) for r in args.refine for p in args.ranks for s in args.solvers}
+    planned = {(r, p, s, args.mesh, args.write) for r in args.refine for p in args.ranks for s in args.solvers}
     document["records"] = [r for r in kept if (r.get("refine"), r.get("ranks"), r.get("solver"),
-                                               r.get("mesh", "replicated")) not in planned]
+                                               r.get("mesh", "replicated"), r.get("written", False)) not in planned]
     for refine in args.refine:
         for solver in args.solvers:
             for ranks in args.ranks:
                 print(f"refine {refine}, {ranks} rank(s), {solver} ...", flush=True)
-                record = run(refine, ranks, solver, args.method, args.timeout, args.mesh)
+                record = run(refine, ranks, solver, args.method, args.timeout, args.mesh, write=args.write)
                 document["records"].append(record)
                 args.out.parent.mkdir(parents=True, exist_ok=True)
                 args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")

@@ -40,7 +40,6 @@ analysis, or GAMG's coarse spaces) carried across the steps.
 from __future__ import annotations
 
 import itertools
-import resource
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
@@ -59,6 +58,17 @@ from contactfem.distributed_assembly import (  # noqa: F401
     node_order,
 )
 from contactfem.distributed_mumps import mumps_figures, mumps_ordering
+# The result and its way to the writers (re-exported: they lived here).
+from contactfem.distributed_result import (  # noqa: F401
+    DistributedResult,
+    SolutionProduct,
+    _peak_rss,
+    _with_stiffness,
+    distributed_report,
+    gather_iterate,
+    parallel_figures,
+    step_solution,
+)
 from contactfem.errors import CaseError, SolverError
 from contactfem.kernel import (
     EPS,
@@ -122,45 +132,9 @@ def _petsc():
     return PETSc, MPI
 
 
-@dataclass(frozen=True, eq=False)
-class DistributedResult:
-    """What :func:`solve_distributed` returns on every rank.
-
-    ``result`` is the :class:`~contactfem.solve.SolveResult` on rank 0 (None elsewhere);
-    ``parallel`` the figures of the run, the same on every rank: ranks, solver, per rank
-    its owned unknowns and triangles, peak resident memory (bytes) and seconds per stage.
-    """
-
-    result: "SolveResult | None"
-    parallel: dict
-    rank: int = 0
-
-
-class SolutionProduct:
-    """Stands for the global stiffness on rank 0, which no rank holds: it knows K u for the
-    solution u only (computed distributedly), which is all that
-    :func:`contactfem.report.contact_and_reactions` asks of ``problem.stiffness``.
-
-    Any other product raises :class:`SolverError`: estimators or energy norms that need the
-    matrix itself cannot run on a distributed result.
-    """
-
-    def __init__(self, displacement: np.ndarray, internal_force: np.ndarray) -> None:
-        self._displacement = np.asarray(displacement, dtype=float).ravel()
-        self._internal = np.asarray(internal_force, dtype=float).ravel()
-        self.shape = (len(self._internal), len(self._internal))
-
-    def __matmul__(self, vector: np.ndarray) -> np.ndarray:
-        vector = np.asarray(vector, dtype=float)
-        if vector.shape == self._displacement.shape and np.array_equal(vector, self._displacement):
-            return self._internal.copy()
-        raise SolverError("the stiffness of a distributed solve is held by no rank: only K u of its "
-                          "solution is known on rank 0")
-
-
 def solve_distributed(case: Case, method: str | None = None, refine: int | None = None, solver: str = "mumps",
                       progress: Progress | None = None, accept_uncertified: bool = False,
-                      sequencing: bool = True, distributed_mesh: bool = True) -> DistributedResult:
+                      sequencing: bool = True, distributed_mesh: bool = True, gather: bool = True) -> DistributedResult:
     """Mesh, assemble and solve ``case`` on all the ranks of MPI_COMM_WORLD (call it on every rank).
 
     Parameters
@@ -178,6 +152,10 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     distributed_mesh : bool
         Let each rank refine only its piece of the coarse mesh when the case allows it (see
         :mod:`contactfem.distributed_problem`); False meshes the whole case on every rank.
+    gather : bool
+        On a distributed mesh: gather the solution to rank 0 and mesh the whole case there for
+        a whole :class:`~contactfem.solve.SolveResult` (True), or leave it in pieces, each rank
+        with its share (False, :mod:`contactfem.distributed_output`: no rank holds the whole mesh).
 
     Raises
     ------
@@ -221,6 +199,10 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         linear.destroy()
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
+    if isinstance(problem, PieceProblem) and not gather:
+        from contactfem.distributed_output import piece_outcome
+
+        return piece_outcome(linear, level, case, problem, method_name, solver, timings)
     clock = time.perf_counter()
     linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
@@ -245,51 +227,6 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     result = SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel,
                          backend=f"petsc-{solver}", timings=timings, sequencing=level.sequencing)
     return DistributedResult(result=result, parallel=parallel, rank=rank)
-
-
-def gather_iterate(linear: "_DistributedSolver") -> tuple[np.ndarray, np.ndarray] | None:
-    """The kept iterate and its K u (see :meth:`_DistributedSolver.keep`), whole on rank 0 in
-    PETSc order (None elsewhere); every rank calls it."""
-    slots = linear.gather_to_zero(linear.solution)
-    internal = linear.gather_to_zero(linear.internal_force)
-    return None if slots is None else (slots, internal)
-
-
-def parallel_figures(linear: "_DistributedSolver", solver: str, timings: dict, factorizations: int) -> dict:
-    """The run's figures, the same on every rank (a collective step): per rank its owned
-    unknowns and triangles, factorisations, linear iterations, peak memory and seconds."""
-    mpi, system = linear.mpi, linear.system
-    per_rank = mpi.gather({"rank": mpi.Get_rank(), "owned_unknowns": (linear.last - linear.first),
-                           "owned_triangles": system.owned_triangles,
-                           "factor_seconds": linear.factor_seconds, "linear_iterations": linear.linear_iterations,
-                           "factor": linear.factor_figures,
-                           "peak_rss_bytes": _peak_rss(),
-                           "seconds": dict(timings)}, root=0)
-    per_rank = mpi.bcast(per_rank, root=0)
-    mesh = "replicated" if hasattr(system.layout, "order") else "pieces"
-    return {"ranks": mpi.Get_size(), "solver": solver, "mesh": mesh, "per_rank": per_rank,
-            "max_peak_rss_bytes": max(entry["peak_rss_bytes"] for entry in per_rank),
-            "factorizations": factorizations}
-
-
-def step_solution(gathered: tuple[np.ndarray, np.ndarray], system: "_DistributedSystem", problem: DiscreteProblem,
-                  method_name: str, kernel: KernelResult):
-    """On rank 0: ``problem`` with its :class:`SolutionProduct` and the solution's fields,
-    from the gathered iterate; ``kernel.displacement`` becomes the whole rotated unknowns."""
-    from contactfem.solve import _solution
-
-    slots, internal = gathered
-    layout = system.layout
-    kernel.displacement = layout.to_mesh(slots)
-    pushed = getattr(system, "pushed", None)
-    if pushed is not None:  # the pushed obstacle at the advance found
-        problem = problem.advanced(pushed.advance(kernel.displacement, problem.dirichlet_values))
-    displacement = system.mesh_vector(kernel.displacement)
-    force = system.mesh_force(layout.to_mesh(internal))
-    # A moving obstacle's field is moved back by its advance (a rigid translation: K u stays).
-    moved = displacement if problem.drive is None else problem.drive.moved(displacement.reshape(-1, 2)).ravel()
-    problem = _with_stiffness(problem, SolutionProduct(moved, force))
-    return problem, _solution(method_name, problem, displacement.reshape(-1, 2), kernel)
 
 
 @dataclass(eq=False)
@@ -384,32 +321,12 @@ def _predict_from_coarser(PETSc, MPI, comm, case: Case, problem: DiscreteProblem
     return predict_from_coarser(problem, lambda: c, say, prepare_coarse, solve_coarse)
 
 
-def distributed_report(case: Case, outcome: DistributedResult, extras: dict | None = None) -> dict:
-    """report.json's content for a distributed result (rank 0), with the run's figures under ``parallel``."""
-    from contactfem.report import build_report
-
-    if outcome.result is None:
-        raise ValueError("the report of a distributed solve is built on rank 0")
-    return build_report(case, outcome.result, extras={"parallel": outcome.parallel, **(extras or {})})
-
-
-def _peak_rss() -> int:
-    """This process's peak resident memory in bytes (Linux reports kilobytes)."""
-    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
-
-
 def _problem_without_stiffness(case: Case, mesh, refinements: int, request: MeshRequest | None = None) -> DiscreteProblem:
     """The discrete problem but for the stiffness, which no rank assembles whole (``stiffness``
     is None until rank 0 gets a :class:`SolutionProduct`)."""
     from contactfem.discretize import build_problem
 
     return build_problem(case, mesh, refinements=refinements, assemble_stiffness=False, request=request)
-
-
-def _with_stiffness(problem: DiscreteProblem, stiffness) -> DiscreteProblem:
-    from dataclasses import replace
-
-    return replace(problem, stiffness=stiffness)
 
 
 class _DistributedSolver:

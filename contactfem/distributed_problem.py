@@ -13,7 +13,8 @@ The route is taken when the fine mesh comes from uniform refinement (``--refine 
 replicated mesh of :mod:`contactfem.distributed`. A coarser level of mesh sequencing made of
 fewer refinements of the same mesh is in pieces too; a rectangle's (fewer divisions) is meshed
 whole on every rank (a sixteenth of the unknowns). After the solve, rank 0 meshes the whole
-case once more for the writers, when the solver's memory is freed.
+case once more for the writers, when the solver's memory is freed; the solve command instead
+keeps the result in pieces (:mod:`contactfem.distributed_output`), each rank writing its own share.
 """
 
 from __future__ import annotations
@@ -87,14 +88,8 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
     """This rank's :class:`PieceProblem` of ``case``, or None when the case keeps the replicated
     mesh (no refinement, platens, a pushed obstacle, or a body only contact holds). Collective over ``mpi``."""
     times = case.mesh.refine if refine is None else refine
-    if not times:
-        return None
-    coarse = build_mesh(case, refine=0)
-    # The coarse problem runs every check of the case (held, loaded, contact facing) and tells
-    # whether the fine one has platens or free rigid motions.
-    checked = build_problem(case, coarse, assemble_stiffness=False)
-    pushed = checked.drive is not None and checked.drive.pushed
-    if checked.platens or checked.free_modes is not None or pushed or coarse.n_triangles < mpi.Get_size():
+    coarse = _coarse_for_pieces(case, times, mpi.Get_size())
+    if coarse is None:
         return None
     _refuse_oversized(case, coarse.n_triangles * 4**times, times, mpi)
     piece = mesh_piece(coarse, times, mpi.Get_size(), mpi.Get_rank())
@@ -134,6 +129,26 @@ def piece_problem(case: Case, mpi, refine: int | None = None) -> PieceProblem | 
         node_range=(first, last),
         boundary_ids=ids, boundary_numbers=boundary_numbers, n_points_total=int(piece.global_counts[0]),
         body_load=body, preallocation=preallocation)
+
+
+def takes_pieces(case: Case, refine: int | None, ranks: int) -> bool:
+    """Whether :func:`piece_problem` meshes ``case`` in pieces on ``ranks`` ranks (no message:
+    every rank decides alike), for what must be refused before the solve."""
+    return _coarse_for_pieces(case, case.mesh.refine if refine is None else refine, ranks) is not None
+
+
+def _coarse_for_pieces(case: Case, times: int, ranks: int) -> Mesh | None:
+    """The coarse mesh the pieces refine ``times`` times, or None when the case keeps the replicated mesh."""
+    if not times:
+        return None
+    coarse = build_mesh(case, refine=0)
+    # The coarse problem runs every check of the case (held, loaded, contact facing) and tells
+    # whether the fine one has platens or free rigid motions.
+    checked = build_problem(case, coarse, assemble_stiffness=False)
+    pushed = checked.drive is not None and checked.drive.pushed
+    if checked.platens or checked.free_modes is not None or pushed or coarse.n_triangles < ranks:
+        return None
+    return coarse
 
 
 def _refuse_oversized(case: Case, triangles: int, times: int, mpi) -> None:

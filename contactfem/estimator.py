@@ -113,81 +113,111 @@ def estimate(problem: DiscreteProblem, solution: Solution) -> Estimate:
     points, triangles = mesh.points, mesh.triangles
     n_tri = len(triangles)
     scale = 1.0 / (2.0 * problem.law.mu)
-    sxx, syy, sxy = solution.stress[:, 0], solution.stress[:, 1], solution.stress[:, 2]
-    sigma = np.empty((n_tri, 2, 2))
-    sigma[:, 0, 0], sigma[:, 1, 1] = sxx, syy
-    sigma[:, 0, 1] = sigma[:, 1, 0] = sxy
+    sigma = stress_tensors(solution.stress)
     terms = {name: np.zeros(n_tri) for name in TERM_NAMES}
 
     # Volume: h_T² ‖f‖²_T (div σ(u_h) = 0 for P1).
     force = problem.loads.body_force
     if force is not None:
-        h = mesh.triangle_diameters()
-        area = mesh.triangle_areas()
-        corners = points[triangles]
-        total = np.zeros(n_tri)
-        for weight, bary in zip(TRIANGLE_WEIGHTS, TRIANGLE_POINTS):
-            q = np.einsum("i,tia->ta", bary, corners)
-            f = force(q[:, 0], q[:, 1])
-            total += weight * np.sum(f * f, axis=1)
-        terms["volume"] = scale * h**2 * area * total
+        terms["volume"] = volume_terms(points, triangles, force, scale, mesh.triangle_diameters(),
+                                       mesh.triangle_areas())
 
     # Interior edges: t1 has the edge running lo → hi (its outward normal is edge_geometry's).
     topology = mesh.topology
     interior = (topology.edge_triangles >= 0).all(axis=1)
     t1, t2 = topology.edge_triangles[interior].T
     length, normal = edge_geometry(points, topology.edges[interior])
-    jump = np.einsum("eab,eb->ea", sigma[t1] - sigma[t2], normal)
-    share = scale * 0.5 * length**2 * np.sum(jump * jump, axis=1)
+    share = jump_shares(sigma[t1], sigma[t2], length, normal, scale)
     terms["jump"] = np.bincount(t1, share, minlength=n_tri) + np.bincount(t2, share, minlength=n_tri)
 
     # Natural boundary: ‖P (g − σ_T ν)‖² with P the directions the supports leave free.
     natural = problem.loads.natural
     if len(natural.edges):
         tri = _edge_triangle(mesh, natural.edges)
-        own = np.einsum("eab,eb->ea", sigma[tri], natural.normal)  # σ_T ν, constant on each edge
-        residual2 = np.zeros(len(natural.edges))
-        for weight, g in zip(EDGE_RULE_WEIGHTS, natural.traction):
-            r = np.einsum("eab,eb->ea", natural.free, g - own)
-            residual2 += weight * np.sum(r * r, axis=1)
-        terms["neumann"] = np.bincount(tri, scale * natural.length**2 * residual2, minlength=n_tri)
+        terms["neumann"] = np.bincount(tri, natural_terms(natural, sigma[tri], scale), minlength=n_tri)
 
     # Contact edges: σ_T ν + λ_h n along n and t, and ∫ λ_h (g0 − u_hn).
     contact = problem.contact
     if len(contact.edges):
-        n, t, node_normal = _contact_directions(contact, points)
+        tri = _edge_triangle(mesh, contact.edges)
         lam = np.zeros(mesh.n_points)
         lam[solution.contact.nodes] = solution.contact.multiplier
-        e = contact.edges
-        tri = _edge_triangle(mesh, e)
-        L, edge_normal = edge_geometry(points, e)
-        traction = np.einsum("eab,eb->ea", sigma[tri], edge_normal)
-        l0, l1 = lam[e[:, 0]], lam[e[:, 1]]
-        if n is None:  # a curved obstacle: each edge along the mean of its nodes' normals
-            n = node_normal[e[:, 0]] + node_normal[e[:, 1]]
-            n = n / np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-300)[:, None]
-            t = np.stack([-n[:, 1], n[:, 0]], axis=1)
-            along_n, along_t = np.einsum("ea,ea->e", traction, n), np.einsum("ea,ea->e", traction, t)
-        else:
-            along_n, along_t = traction @ n, traction @ t
-        r0, r1 = along_n + l0, along_n + l1
-        normal_part = L / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
-        tangential_part = L * along_t ** 2
-        terms["contact_normal"] = np.bincount(tri, scale * L * normal_part, minlength=n_tri)
-        terms["contact_tangential"] = np.bincount(tri, scale * L * tangential_part, minlength=n_tri)
-        ends = np.unique(e)
-        slack = np.zeros(mesh.n_points)
-        if node_normal is None:
-            slack[ends] = contact.obstacle.gap(points[ends]) - solution.displacement[ends] @ n
-        else:
-            slack[ends] = contact.obstacle.gap(points[ends]) - np.einsum("ea,ea->e", solution.displacement[ends],
-                                                                         node_normal[ends])
-        s0, s1 = slack[e[:, 0]], slack[e[:, 1]]
-        complementarity = np.maximum(L / 6.0 * (2 * l0 * s0 + l0 * s1 + l1 * s0 + 2 * l1 * s1), 0.0)
-        terms["complementarity"] = np.bincount(tri, complementarity, minlength=n_tri)
+        parts = contact_terms(contact, points, sigma[tri], lam, solution.displacement, scale)
+        for name, values in zip(("contact_normal", "contact_tangential", "complementarity"), parts):
+            terms[name] = np.bincount(tri, values, minlength=n_tri)
 
     squared = sum(terms.values())
     return Estimate(indicators=np.sqrt(squared), terms=terms, total=float(np.sqrt(squared.sum())))
+
+
+def stress_tensors(stress: np.ndarray) -> np.ndarray:
+    """The symmetric 2×2 tensors (t, 2, 2) of stresses (t, 4), columns xx yy xy zz."""
+    sigma = np.empty((len(stress), 2, 2))
+    sigma[:, 0, 0], sigma[:, 1, 1] = stress[:, 0], stress[:, 1]
+    sigma[:, 0, 1] = sigma[:, 1, 0] = stress[:, 2]
+    return sigma
+
+
+def volume_terms(points: np.ndarray, triangles: np.ndarray, force, scale: float, h: np.ndarray,
+                 area: np.ndarray) -> np.ndarray:
+    """h_T² ‖f‖²_T / (2μ) of each triangle (t,), by the degree-5 rule."""
+    corners = points[triangles]
+    total = np.zeros(len(triangles))
+    for weight, bary in zip(TRIANGLE_WEIGHTS, TRIANGLE_POINTS):
+        q = np.einsum("i,tia->ta", bary, corners)
+        f = force(q[:, 0], q[:, 1])
+        total += weight * np.sum(f * f, axis=1)
+    return scale * h**2 * area * total
+
+
+def jump_shares(sigma_1: np.ndarray, sigma_2: np.ndarray, length: np.ndarray, normal: np.ndarray,
+                scale: float) -> np.ndarray:
+    """Each side's half of h_E ‖[σν]‖²_E / (2μ) of interior edges (e,): σ of the triangle the
+    normal leaves (e, 2, 2), of the other, the edges' lengths and unit normals."""
+    jump = np.einsum("eab,eb->ea", sigma_1 - sigma_2, normal)
+    return scale * 0.5 * length**2 * np.sum(jump * jump, axis=1)
+
+
+def natural_terms(natural, sigma: np.ndarray, scale: float) -> np.ndarray:
+    """h_E ‖P (g − σ_T ν)‖²_E / (2μ) of each natural edge (k,), σ_T (k, 2, 2) its triangle's."""
+    own = np.einsum("eab,eb->ea", sigma, natural.normal)  # σ_T ν, constant on each edge
+    residual2 = np.zeros(len(natural.edges))
+    for weight, g in zip(EDGE_RULE_WEIGHTS, natural.traction):
+        r = np.einsum("eab,eb->ea", natural.free, g - own)
+        residual2 += weight * np.sum(r * r, axis=1)
+    return scale * natural.length**2 * residual2
+
+
+def contact_terms(contact, points: np.ndarray, sigma: np.ndarray, lam: np.ndarray, displacement: np.ndarray,
+                  scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The normal, tangential and complementarity terms of each contact edge (k,): σ_T
+    (k, 2, 2) its triangle's, ``lam`` the multiplier and ``displacement`` (n, 2) at the mesh's
+    nodes (read at the contact edges' ends only)."""
+    n, t, node_normal = _contact_directions(contact, points)
+    e = contact.edges
+    L, edge_normal = edge_geometry(points, e)
+    traction = np.einsum("eab,eb->ea", sigma, edge_normal)
+    l0, l1 = lam[e[:, 0]], lam[e[:, 1]]
+    if n is None:  # a curved obstacle: each edge along the mean of its nodes' normals
+        n = node_normal[e[:, 0]] + node_normal[e[:, 1]]
+        n = n / np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-300)[:, None]
+        t = np.stack([-n[:, 1], n[:, 0]], axis=1)
+        along_n, along_t = np.einsum("ea,ea->e", traction, n), np.einsum("ea,ea->e", traction, t)
+    else:
+        along_n, along_t = traction @ n, traction @ t
+    r0, r1 = along_n + l0, along_n + l1
+    normal_part = L / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
+    tangential_part = L * along_t ** 2
+    ends = np.unique(e)
+    slack = np.zeros(len(points))
+    if node_normal is None:
+        slack[ends] = contact.obstacle.gap(points[ends]) - displacement[ends] @ n
+    else:
+        slack[ends] = contact.obstacle.gap(points[ends]) - np.einsum("ea,ea->e", displacement[ends],
+                                                                     node_normal[ends])
+    s0, s1 = slack[e[:, 0]], slack[e[:, 1]]
+    complementarity = np.maximum(L / 6.0 * (2 * l0 * s0 + l0 * s1 + l1 * s0 + 2 * l1 * s1), 0.0)
+    return scale * L * normal_part, scale * L * tangential_part, complementarity
 
 
 def _edge_triangle(mesh, edges: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import platform
 import time
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Collection, Mapping
 
 import numpy as np
@@ -32,6 +33,29 @@ SCHEMA_VERSION = 1
 LOCKING_WARNING_RATIO = 1e3
 
 
+@dataclass(frozen=True, eq=False)
+class BodyFigures:
+    """What the report needs of the whole mesh when no process holds it (a distributed mesh,
+    each rank holding its piece): counts and sizes, the nodes' centroid and largest coordinate
+    span, and the body force's resultant about that centroid, each reduced over the pieces
+    (sums and extremes); ``errors`` the exact errors when the case has an exact solution.
+
+    The problem handed to :func:`build_report` with it then has the boundary for its mesh, and
+    for its load the whole load at the boundary nodes (what the reactions need).
+    """
+
+    nodes: int
+    triangles: int
+    h_min: float
+    h_max: float
+    centre: np.ndarray
+    length: float
+    body_force: dict
+    errors: dict | None = None
+    #: What the report could not compute without the whole mesh, for report["warnings"].
+    warnings: tuple[str, ...] = ()
+
+
 def case_record(case: Case) -> dict:
     """What every result file says of the case it solved: the file, its title, the SHA-256
     of its text and the data files it reads, and those files (a profile, an outline, a
@@ -40,12 +64,14 @@ def case_record(case: Case) -> dict:
             "data_files": [str(path) for path in case.data_files]}
 
 
-def build_report(case: Case, result: "SolveResult", extras: Mapping | None = None) -> dict:
+def build_report(case: Case, result: "SolveResult", extras: Mapping | None = None,
+                 body: BodyFigures | None = None) -> dict:
     """The report.json content: deterministic but for the timings and the machine.
 
     ``extras`` are further top-level entries (e.g. ``estimator``). The seconds spent here,
     the exact error norms included, are the ``report`` timing; the ``accuracy`` section
-    (:func:`accuracy_section`), unless ``extras`` gives one, has its own.
+    (:func:`accuracy_section`), unless ``extras`` gives one, has its own. ``body``: the whole
+    mesh's figures when ``result`` holds only its boundary (see :class:`BodyFigures`).
     """
     extras = dict(extras or {})
     if "accuracy" not in extras:
@@ -55,7 +81,12 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     mesh = problem.mesh
     contact = solution.contact
     method = get_method(solution.method)
-    diameters = mesh.triangle_diameters()
+    if body is None:
+        diameters = mesh.triangle_diameters()
+        sizes = {"nodes": mesh.n_points, "triangles": mesh.n_triangles, "h_min": float(diameters.min()),
+                 "h_max": float(diameters.max())}
+    else:
+        sizes = {"nodes": body.nodes, "triangles": body.triangles, "h_min": body.h_min, "h_max": body.h_max}
     # The push and the reactions (one product K u) serve both balances below.
     forces = contact_and_reactions(problem, solution.displacement, contact.nodal_force)
     certificate_force = kernel.certificate.scales.get("force", 0.0) if kernel.certificate is not None else 0.0
@@ -71,10 +102,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
                      "mu": material.lame_mu, "plane": material.plane},
         "units": case.units.to_dict(),
         "mesh": {
-            "nodes": mesh.n_points,
-            "triangles": mesh.n_triangles,
-            "h_min": float(diameters.min()),
-            "h_max": float(diameters.max()),
+            **sizes,
             "contact_nodes": int(len(contact.nodes)),
             "contact_edges": int(len(contact.edges)),
         },
@@ -109,12 +137,14 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
             "normal": float(contact.nodal_force.sum()),
             "vector": (-(problem.contact.normals * contact.nodal_force[:, None]).sum(axis=0)).tolist(),
         },
-        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces, force_unit),
+        "equilibrium": equilibrium(problem, solution.displacement, contact.nodal_force, forces, force_unit, body),
         "boundary_forces": boundary_forces(problem, solution.displacement, contact.nodal_force,
-                                           {part.name: part.label for part in case.parts}, forces, force_unit),
+                                           {part.name: part.label for part in case.parts}, forces, force_unit,
+                                           body),
         "platens": platen_figures(problem, solution.displacement, forces[1]),
-        "errors": exact_errors(problem, solution),
-        "warnings": material_warnings(case.material) + contact_warnings(problem, contact),
+        "errors": exact_errors(problem, solution) if body is None else body.errors,
+        "warnings": (material_warnings(case.material) + contact_warnings(problem, contact)
+                     + list(body.warnings if body is not None else ())),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
         **extras,
     }
@@ -249,7 +279,8 @@ def contact_zone(problem: DiscreteProblem, active: np.ndarray) -> dict:
 
 
 def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
-                forces: tuple[np.ndarray, np.ndarray] | None = None, force_unit: float = 0.0) -> dict:
+                forces: tuple[np.ndarray, np.ndarray] | None = None, force_unit: float = 0.0,
+                body: BodyFigures | None = None) -> dict:
     """Force and moment balance: applied loads + contact force + support reactions = 0.
 
     The reactions are what the supports must add for K u to balance: R = K u − F − f_c
@@ -257,18 +288,24 @@ def equilibrium(problem: DiscreteProblem, displacement: np.ndarray, nodal_force:
     obstacle's push on each contact node. The residuals are relative to the resultants'
     magnitudes, and to ``force_unit`` at least (the certificate's force scale): a body
     that nothing loads or touches has round-off for forces, which are no scale of their own.
+    ``body``: the whole mesh's figures when ``problem`` holds only its boundary.
     """
     points = problem.mesh.points
     contact_force, reactions = forces or contact_and_reactions(problem, displacement, nodal_force)
-    centre = points.mean(axis=0)
+    centre = points.mean(axis=0) if body is None else body.centre
 
     def resultant(force: np.ndarray) -> list[float]:
         total = _resultant(points, centre, force)
         return [*total["force"], total["moment"]]
 
-    applied, contact, support = (resultant(v) for v in (problem.load, contact_force, reactions))
+    if body is None:
+        applied = resultant(problem.load)
+    else:  # the surface loads at the boundary, and the body force's resultant over the pieces
+        surface = resultant(problem.loads.natural.load_vector(problem.mesh.n_points))
+        applied = [*np.add(surface[:2], body.body_force["force"]).tolist(), surface[2] + body.body_force["moment"]]
+    contact, support = (resultant(v) for v in (contact_force, reactions))
     total = np.add(np.add(applied, contact), support)
-    length = coordinate_span(points).max()
+    length = coordinate_span(points).max() if body is None else body.length
     scale = np.abs(applied) + np.abs(contact) + np.abs(support)
     force_scale = max(scale[0], scale[1], scale[2] / length, force_unit, np.finfo(float).tiny)
     return {
@@ -376,7 +413,7 @@ def _resultant(points: np.ndarray, centre: np.ndarray, force: np.ndarray, nodes:
 
 def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_force: np.ndarray,
                     labels: Mapping[str, str], forces: tuple[np.ndarray, np.ndarray] | None = None,
-                    force_unit: float = 0.0) -> dict:
+                    force_unit: float = 0.0, body: BodyFigures | None = None) -> dict:
     """Force and moment of every boundary part on the body, and of the body force.
 
     Applied surface forces on the natural parts, reactions on the supports (clamped,
@@ -384,13 +421,14 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
     along the directions it holds, :func:`booked_reactions`) and the obstacle's push on the
     contact parts (−n Λ). Moments are about ``equilibrium``'s point (the nodes' centroid).
     The entries sum to zero up to the solve's residual: ``total`` is that sum, relative
-    to the parts' forces and to ``force_unit`` at least (see :func:`equilibrium`).
+    to the parts' forces and to ``force_unit`` at least (see :func:`equilibrium`). ``body``:
+    the whole mesh's figures when ``problem`` holds only its boundary.
     """
     mesh = problem.mesh
     points = mesh.points
     push, reaction = forces or contact_and_reactions(problem, displacement, nodal_force)
     natural = problem.loads.natural
-    centre = points.mean(axis=0)
+    centre = points.mean(axis=0) if body is None else body.centre
 
     def resultant(force: np.ndarray, nodes: np.ndarray | None = None) -> dict:
         return _resultant(points, centre, force, nodes)
@@ -407,7 +445,7 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
                 owner[np.unique(mesh.boundary_edges[mesh.edge_parts == index])] = index
         return owner
 
-    booked = booked_reactions(problem, reaction)
+    booked = booked_reactions(problem, reaction, centre)
     contact_owner = owners({PartKind.CONTACT})
     entries: dict[str, dict] = {}
     for index, name in enumerate(mesh.part_names):
@@ -417,13 +455,16 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
         entries[name] = {"condition": labels.get(name, PartKind.FREE),
                          "force": [sum(p["force"][k] for p in pieces) for k in range(2)],
                          "moment": sum(p["moment"] for p in pieces)}
-    body = problem.load - natural.load_vector(mesh.n_points)
-    entries["body force"] = {"condition": "volume", **resultant(body)}
+    if body is None:
+        entries["body force"] = {"condition": "volume", **resultant(problem.load - natural.load_vector(mesh.n_points))}
+    else:
+        entries["body force"] = {"condition": "volume", "force": list(body.body_force["force"]),
+                                 "moment": body.body_force["moment"]}
     force = np.sum([entry["force"] for entry in entries.values()], axis=0)
     moment = float(sum(entry["moment"] for entry in entries.values()))
     scale = max(sum(float(np.hypot(*entry["force"])) for entry in entries.values()), force_unit,
                 np.finfo(float).tiny)
-    length = float(coordinate_span(points).max())
+    length = float(coordinate_span(points).max()) if body is None else body.length
     return {"moment_about": centre.tolist(), "parts": entries,
             "total": {"force": force.tolist(), "moment": moment,
                       "relative_force_residual": float(np.hypot(*force) / scale),
@@ -435,9 +476,10 @@ def boundary_forces(problem: DiscreteProblem, displacement: np.ndarray, nodal_fo
 PARALLEL_DIRECTIONS = 1e-9
 
 
-def booked_reactions(problem: DiscreteProblem, reaction: np.ndarray) -> dict[str, dict]:
+def booked_reactions(problem: DiscreteProblem, reaction: np.ndarray,
+                     centre: np.ndarray | None = None) -> dict[str, dict]:
     """Each support part's share of the reactions (2n,): its force and moment about the nodes'
-    centroid (as :func:`boundary_forces`), by part name.
+    centroid (as :func:`boundary_forces`; ``centre`` when the mesh is only the boundary), by part name.
 
     A node held along two directions (a clamped or prescribed node, a platen's corner on a
     symmetry line, a node on two symmetry lines) has its reaction R split as R = a d1 + b d2
@@ -450,7 +492,7 @@ def booked_reactions(problem: DiscreteProblem, reaction: np.ndarray) -> dict[str
     mesh = problem.mesh
     holds = problem.holds
     points = mesh.points
-    centre = points.mean(axis=0)
+    centre = points.mean(axis=0) if centre is None else centre
     r = reaction.reshape(-1, 2)
     if holds is None or len(holds.nodes) == 0:
         return {}

@@ -1,7 +1,7 @@
 """Run by ParaView's own Python (``pvpython pvpython_probe.py OUT.json FILE...``), not by pytest.
 
 Opens each file with the reader ParaView uses for it (.vtu: XMLUnstructuredGridReader,
-.pvd: PVDReader, .xdmf: Xdmf3ReaderS and the XDMF 2 reader XDMFReader), and writes to
+.pvtu: XMLPartitionedUnstructuredGridReader, .pvd: PVDReader, .xdmf: Xdmf3ReaderS and the XDMF 2 reader XDMFReader), and writes to
 OUT.json, per file and reader, the time steps and every leaf data set: its block name,
 point and cell counts, points, and each array's name, association (point, cell or field
 data), number of components, VTK type and values. Prints a short account on stdout.
@@ -64,6 +64,9 @@ def leaves(data, name=""):
 def probe(path):
     if path.endswith(".vtu"):
         readers = {"XMLUnstructuredGridReader": lambda: simple.XMLUnstructuredGridReader(FileName=[path])}
+    elif path.endswith(".pvtu"):
+        readers = {"XMLPartitionedUnstructuredGridReader":
+                   lambda: simple.XMLPartitionedUnstructuredGridReader(FileName=[path])}
     elif path.endswith(".pvd"):
         readers = {"PVDReader": lambda: simple.PVDReader(FileName=path)}
     else:

@@ -185,10 +185,12 @@ def _report_solve(case, result, report: dict, written: list[Path], directory: Pa
 def _solve_distributed(case, method: str | None, refine: int | None, petsc_solver: str, directory: Path,
                        quiet: bool, as_json: bool, overwrite: bool, make_plot: bool, progress) -> None:
     """``solve`` under mpiexec: every rank solves its share; rank 0 alone claims the output
-    directory, writes and prints (a load path's steps as they are solved). Its verdict on the
-    directory is shared before the solve, so that a refusal stops every rank (the others
-    would otherwise wait in a collective step)."""
+    directory and prints. Its verdict on the directory is shared before the solve, so that a
+    refusal stops every rank (the others would otherwise wait in a collective step). On a
+    distributed mesh every rank writes its share into rank 0's staging directory
+    (:mod:`contactfem.io.pieces`); otherwise rank 0 writes (a load path's steps as they are solved)."""
     import contextlib
+    import os
 
     from contactfem.distributed import mpi_world
     from contactfem.io.atomic import claimed_directory
@@ -196,12 +198,17 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
     world = mpi_world()
     root = world.Get_rank() == 0
     with contextlib.ExitStack() as stack:
-        refusal = staging = None
+        refusal = staged = None
+        try:  # decided alike on every rank, before anything is written
+            pieces = case.load_path is None and _refuse_in_pieces(case, refine, world.Get_size(), make_plot)
+        except ContactFemError as error:
+            if root:
+                _fail(error)
+            sys.exit(_exit_code(error))
         if root:
             try:
                 claim = stack.enter_context(claimed_directory(directory, markers=RESULT_MARKERS, overwrite=overwrite))
                 staged = stack.enter_context(claim.stage(replaces=RESULT_FILES, last=REPORT_JSON))
-                staging = stack.enter_context(_writable_by_vtk(staged))
             except ContactFemError as error:
                 refusal = error
         code = world.bcast(_exit_code(refusal) if refusal is not None else 0, root=0)
@@ -209,8 +216,12 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
             if root:
                 _fail(refusal)
             sys.exit(code)
+        # Every rank writes into the staging directory when the result stays in pieces.
+        staged = world.bcast(os.fsencode(staged) if root else None, root=0) if pieces else staged
+        staging = None if staged is None else stack.enter_context(_writable_by_vtk(Path(os.fsdecode(staged))))
         try:
-            solved = _distributed_files(case, method, refine, petsc_solver, staging, progress if root else None)
+            solved = _distributed_files(case, method, refine, petsc_solver, staging, progress if root else None,
+                                        world)
         except ContactFemError as error:  # raised on every rank alike: decisions use shared data
             if root:
                 _fail(error)
@@ -223,10 +234,31 @@ def _solve_distributed(case, method: str | None, refine: int | None, petsc_solve
     _report_solve(case, result, report, [Path(directory) / name for name in names], directory, quiet, as_json)
 
 
+def _refuse_in_pieces(case, refine: int | None, ranks: int, make_plot: bool) -> bool:
+    """Whether the solve runs on a distributed mesh (each rank refining its piece), whose
+    result stays in pieces; what needs the whole mesh in one process is refused first."""
+    from contactfem.distributed_problem import takes_pieces
+    from contactfem.io.pieces import PIECE_FORMATS
+
+    if not takes_pieces(case, refine, ranks):
+        return False
+    name = case.source.name
+    if make_plot:
+        raise CaseError(f"{name}: --plot: the pictures draw the whole mesh in one process, which a distributed mesh "
+                        f"({ranks} ranks each refining a piece) never holds; drop --plot and run `contactfem plot` "
+                        "on the result afterwards")
+    refused = [format for format in case.output.files if format not in PIECE_FORMATS]
+    if refused:
+        raise CaseError(f"{name}: output.files: {', '.join(refused)} is not written on a distributed mesh "
+                        f"({ranks} ranks each refining a piece); expected only {', '.join(PIECE_FORMATS)}")
+    return True
+
+
 def _distributed_files(case, method: str | None, refine: int | None, petsc_solver: str, staging: Path | None,
-                       progress):
+                       progress, world):
     """The distributed solve (a load path's steps written into ``staging`` as they come) and,
-    on rank 0 (``staging`` given), its files: (result, report, file names); None elsewhere."""
+    on rank 0, its files: (result, report, file names); None elsewhere. ``staging`` is given on
+    rank 0, and on every rank when the result stays in pieces."""
     from contactfem.distributed import distributed_report, solve_distributed
     from contactfem.distributed_path import solve_distributed_path
     from contactfem.io.path import PathWriter
@@ -234,10 +266,14 @@ def _distributed_files(case, method: str | None, refine: int | None, petsc_solve
     from contactfem.plots import plot_load_path
     from contactfem.report import build_report, load_path_figures, path_step_figures
 
+    root = world.Get_rank() == 0
     if case.load_path is None:
         outcome = solve_distributed(case, method=method, refine=refine, solver=petsc_solver, progress=progress,
-                                    accept_uncertified=True, sequencing=case.solver.accelerators.sequencing)
-        if staging is None:
+                                    accept_uncertified=True, sequencing=case.solver.accelerators.sequencing,
+                                    gather=False)
+        if outcome.pieces is not None:
+            return _write_in_pieces(case, outcome, staging, progress, world)
+        if not root:
             return None
         report = _write_solution(staging, case, outcome.result, distributed_report(case, outcome), progress)
         return outcome.result, report, _files_of(case.output.files)
@@ -265,6 +301,42 @@ def _distributed_files(case, method: str | None, refine: int | None, petsc_solve
     names.append(plot_load_path(staging / PATH_PNG, report["load_path"]["curves"], case.units.to_dict(),
                                 title=case.title).name)
     return result, report, names
+
+
+def _write_in_pieces(case, outcome, staging: Path, progress, world):
+    """Every rank's share of a result kept in pieces into ``staging`` (:mod:`contactfem.io.pieces`);
+    on rank 0 (result, report, file names), None elsewhere."""
+    import numpy as np
+
+    from contactfem.distributed_output import pieces_accuracy
+    from contactfem.distributed_result import _peak_rss
+    from contactfem.errors import SolverError
+    from contactfem.io.pieces import RootData, write_pieces
+    from contactfem.io.registry import result_data
+    from contactfem.report import build_report
+
+    fields, result, root = outcome.pieces, outcome.result, None
+    finite = all(np.isfinite(values).all() for values in (fields.displacement, fields.stress, fields.von_mises))
+    if result is not None:
+        extras = {"parallel": outcome.parallel, "accuracy": pieces_accuracy(case, result, outcome.estimate)}
+        report = build_report(case, result, extras, body=outcome.body)
+        contact = result.solution.contact
+        try:
+            to_json(report)
+        except ValueError:
+            finite = False
+        finite = finite and all(np.isfinite(v).all() for v in (contact.multiplier, contact.nodal_force))
+        root = RootData(result_data(case, result, report), result.problem.boundary_numbers)
+    if not all(world.allgather(finite)):  # every rank stops alike
+        raise SolverError(f"{case.source.name}: the solution is not finite: the data's scales overflow float64; "
+                          "rescale the units of lengths, moduli and loads")
+    solve_peak = outcome.parallel["per_rank"][world.Get_rank()]["peak_rss_bytes"]
+
+    def memory() -> dict:  # the peak so far (the body's files written) beside the solve's
+        return {"solve_peak_rss_bytes": solve_peak, "peak_rss_bytes": max(solve_peak, _peak_rss())}
+
+    names, written = write_pieces(staging, fields, case.output.files, world, root, progress, per_rank=memory)
+    return None if result is None else (result, written, names)
 
 
 def _refuse_uncertified(case, result, directory: Path) -> None:

@@ -52,13 +52,18 @@ obstacle)::
 
 Every dataset is stored contiguous and uncompressed: writing and reading then cost no
 more than the copy itself (gzip level 1 took several seconds for a 2 M triangle mesh),
-and any HDF5 reader can open the file without filter plugins. Readers must check
+and any HDF5 reader can open the file without filter plugins. A solve on a distributed mesh
+writes the same layout rank after rank (:func:`create_piece_archive`,
+:func:`write_piece_slices`): its nodes are then in PETSc's order (each rank's owned nodes one
+block of rows) and its triangles in rank order, the same mesh as a serial run's up to those
+two permutations. Readers must check
 ``format`` and ``schema_version``; :func:`read_hdf5` checks everything else as well
 (:data:`SOLUTION_LAYOUT`), since a results directory is untrusted input.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -68,8 +73,8 @@ from contactfem.io.archive import Array, Attribute, Layout, Series, TextData, re
 from contactfem.io.atomic import atomic_path, ensure_directory
 from contactfem.result import Solution
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "SOLUTION_H5", "SOLUTION_LAYOUT", "STRESS_COMPONENTS", "read_hdf5", "vtk_stress",
-           "write_hdf5"]
+__all__ = ["FORMAT", "SCHEMA_VERSION", "SOLUTION_H5", "SOLUTION_LAYOUT", "STRESS_COMPONENTS", "PieceShapes",
+           "create_piece_archive", "read_hdf5", "vtk_stress", "write_hdf5", "write_piece_slices"]
 
 #: The archive's file name in a result directory.
 SOLUTION_H5 = "solution.h5"
@@ -162,69 +167,132 @@ def write_hdf5(
             # "attrs" would collide with the attribute entry of read_hdf5's dicts.
             raise ValueError(f"Newton history key {key!r} cannot be an HDF5 dataset name")
     ensure_directory(path.parent)
+    with atomic_path(path) as temp:
+        with h5py.File(temp, "w") as f:
+            _write_archive(f, solution, case_text=case_text, case_hash=case_hash, attributes=attributes,
+                           exact_pressure=exact_pressure)
+    return path
+
+
+@dataclass(frozen=True, eq=False)
+class PieceShapes:
+    """A result kept in pieces, for :func:`create_piece_archive`: the whole mesh's counts and
+    the whole mesh's number (row of /mesh/points) of each node of the boundary mesh."""
+
+    n_points: int
+    n_triangles: int
+    numbers: np.ndarray
+
+
+def create_piece_archive(solution: Solution, path: Path | str, pieces: PieceShapes, *, case_text: str,
+                         case_hash: str, attributes: dict[str, str | int | float],
+                         exact_pressure: np.ndarray | None = None) -> Path:
+    """The archive of a result kept in pieces, but for the body: the layout of :func:`write_hdf5`
+    with /mesh/points, /mesh/triangles and /fields/* created at the whole mesh's shapes, to be
+    filled by :func:`write_piece_slices` (rank after rank: no parallel HDF5). ``solution`` holds
+    the boundary mesh (its nodes numbered by ``pieces.numbers`` in the file) and the contact
+    fields. Written in place: the caller's staging directory makes the result appear whole or not."""
+    import h5py
+
+    path = Path(path)
+    _check_attributes(attributes)
+    with h5py.File(path, "w") as f:
+        _write_archive(f, solution, case_text=case_text, case_hash=case_hash, attributes=attributes,
+                       exact_pressure=exact_pressure, pieces=pieces)
+    return path
+
+
+def write_piece_slices(path: Path | str, nodes: tuple[int, int], points: np.ndarray, displacement: np.ndarray,
+                       triangles_from: int, triangles: np.ndarray, stress: np.ndarray, von_mises: np.ndarray) -> None:
+    """One piece's rows of an archive made by :func:`create_piece_archive`: its owned nodes'
+    points and displacements at rows [nodes[0], nodes[1]), its triangles (whole-mesh node
+    numbers), stresses (n_tri, 4: xx yy xy zz) and von Mises from row ``triangles_from``."""
+    import h5py
+
+    first, last = nodes
+    end = triangles_from + len(triangles)
+    with h5py.File(Path(path), "r+") as f:
+        f["mesh/points"][first:last] = np.asarray(points, dtype=np.float64)
+        f["fields/displacement"][first:last] = np.asarray(displacement, dtype=np.float64)
+        f["mesh/triangles"][triangles_from:end] = np.asarray(triangles, dtype=np.int64)
+        f["fields/stress"][triangles_from:end] = vtk_stress(stress)
+        f["fields/von_mises"][triangles_from:end] = np.asarray(von_mises, dtype=np.float64)
+
+
+def _write_archive(f: Any, solution: Solution, *, case_text: str, case_hash: str, attributes: dict,
+                   exact_pressure: np.ndarray | None, pieces: "PieceShapes | None" = None) -> None:
+    """Everything :func:`write_hdf5` stores, into the open file ``f``; with ``pieces``, the
+    body's datasets (points, triangles and their fields) are created at the whole mesh's shapes
+    and left for the ranks to fill (:func:`write_piece_slices`), and ``solution`` holds the
+    boundary mesh, whose node indices become the whole mesh's (``pieces.numbers``)."""
+    import h5py
 
     mesh = solution.mesh
     contact = solution.contact
     curves = np.array(
         [[c.center[0], c.center[1], c.radius] for c in mesh.curves], dtype=np.float64
     ).reshape(-1, 3)
+    numbers = (lambda nodes: np.asarray(nodes)) if pieces is None else (lambda nodes: pieces.numbers[nodes])
 
-    with atomic_path(path) as temp:
-        with h5py.File(temp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["schema_version"] = np.int64(SCHEMA_VERSION)
-            f.attrs["method"] = solution.method
-            f.attrs["case_hash"] = case_hash
-            for key, value in attributes.items():
-                f.attrs[key] = value
+    def body(group: Any, name: str, data: Any, dtype: Any, shape: tuple[int, ...]) -> Any:
+        if pieces is None:
+            return _dataset(group, name, data() if callable(data) else data, dtype)
+        return group.create_dataset(name, shape=shape, dtype=dtype)
 
-            f.create_dataset("case", data=case_text, dtype=h5py.string_dtype("utf-8"))
+    f.attrs["format"] = FORMAT
+    f.attrs["schema_version"] = np.int64(SCHEMA_VERSION)
+    f.attrs["method"] = solution.method
+    f.attrs["case_hash"] = case_hash
+    for key, value in attributes.items():
+        f.attrs[key] = value
 
-            g = f.create_group("mesh")
-            _dataset(g, "points", mesh.points, np.float64)
-            _dataset(g, "triangles", mesh.triangles, np.int64)
-            _dataset(g, "boundary_edges", np.reshape(mesh.boundary_edges, (-1, 2)), np.int64)
-            _dataset(g, "edge_parts", mesh.edge_parts, np.int64)
-            _dataset(g, "edge_curves", mesh.edge_curves, np.int64)
-            _dataset(g, "curves", curves, np.float64)
-            g.attrs.create(
-                "part_names", list(mesh.part_names), dtype=h5py.string_dtype("utf-8")
-            )
+    f.create_dataset("case", data=case_text, dtype=h5py.string_dtype("utf-8"))
 
-            g = f.create_group("fields")
-            _dataset(g, "displacement", solution.displacement, np.float64)
-            _dataset(g, "stress", vtk_stress(solution.stress), np.float64).attrs["components"] = (
-                " ".join(STRESS_COMPONENTS)
-            )
-            _dataset(g, "von_mises", solution.von_mises, np.float64)
+    g = f.create_group("mesh")
+    body(g, "points", mesh.points, np.float64, (pieces and pieces.n_points, 2))
+    body(g, "triangles", mesh.triangles, np.int64, (pieces and pieces.n_triangles, 3))
+    _dataset(g, "boundary_edges", numbers(np.reshape(mesh.boundary_edges, (-1, 2))), np.int64)
+    _dataset(g, "edge_parts", mesh.edge_parts, np.int64)
+    _dataset(g, "edge_curves", mesh.edge_curves, np.int64)
+    _dataset(g, "curves", curves, np.float64)
+    g.attrs.create(
+        "part_names", list(mesh.part_names), dtype=h5py.string_dtype("utf-8")
+    )
 
-            g = f.create_group("contact")
-            _dataset(g, "nodes", contact.nodes, np.int64)
-            _dataset(g, "edges", np.reshape(contact.edges, (-1, 2)), np.int64)
-            _dataset(g, "multiplier", contact.multiplier, np.float64)
-            _dataset(g, "nodal_force", contact.nodal_force, np.float64)
-            _dataset(g, "normal_displacement", contact.normal_displacement, np.float64)
-            _dataset(g, "gap", contact.gap, np.float64)
-            _dataset(g, "active", np.asarray(contact.active, dtype=bool), np.uint8)
-            _dataset(g, "abscissa", contact.abscissa, np.float64)
-            if exact_pressure is not None:
-                _dataset(g, "exact_pressure", exact_pressure, np.float64)
-            if contact.normals is not None:
-                _dataset(g, "normals", np.reshape(contact.normals, (-1, 2)), np.float64)
-                _dataset(g, "obstacle_points", np.reshape(contact.obstacle_points, (-1, 2)), np.float64)
-                _dataset(g, "obstacle_vertices", np.reshape(contact.obstacle_outline, (-1, 2)), np.float64)
-            g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
-            g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
-            if contact.obstacle_ends is not None:
-                g.attrs["obstacle_ends"] = np.asarray(contact.obstacle_ends, dtype=np.float64)
-            if contact.obstacle_shift is not None:
-                g.attrs["obstacle_shift"] = np.asarray(contact.obstacle_shift, dtype=np.float64)
+    g = f.create_group("fields")
+    body(g, "displacement", solution.displacement, np.float64, (pieces and pieces.n_points, 2))
+    stress_shape = (pieces and pieces.n_triangles, len(STRESS_COMPONENTS))
+    body(g, "stress", lambda: vtk_stress(solution.stress), np.float64, stress_shape).attrs["components"] = (
+        " ".join(STRESS_COMPONENTS)
+    )
+    body(g, "von_mises", solution.von_mises, np.float64, (pieces and pieces.n_triangles,))
 
-            g = f.create_group("newton")
-            for key, values in solution.newton.items():
-                # The history keeps its own dtypes (counts are integers, residuals floats).
-                _dataset(g, key, values, None)
-    return path
+    g = f.create_group("contact")
+    _dataset(g, "nodes", numbers(contact.nodes), np.int64)
+    _dataset(g, "edges", numbers(np.reshape(contact.edges, (-1, 2))), np.int64)
+    _dataset(g, "multiplier", contact.multiplier, np.float64)
+    _dataset(g, "nodal_force", contact.nodal_force, np.float64)
+    _dataset(g, "normal_displacement", contact.normal_displacement, np.float64)
+    _dataset(g, "gap", contact.gap, np.float64)
+    _dataset(g, "active", np.asarray(contact.active, dtype=bool), np.uint8)
+    _dataset(g, "abscissa", contact.abscissa, np.float64)
+    if exact_pressure is not None:
+        _dataset(g, "exact_pressure", exact_pressure, np.float64)
+    if contact.normals is not None:
+        _dataset(g, "normals", np.reshape(contact.normals, (-1, 2)), np.float64)
+        _dataset(g, "obstacle_points", np.reshape(contact.obstacle_points, (-1, 2)), np.float64)
+        _dataset(g, "obstacle_vertices", np.reshape(contact.obstacle_outline, (-1, 2)), np.float64)
+    g.attrs["obstacle_point"] = np.asarray(contact.obstacle_point, dtype=np.float64)
+    g.attrs["obstacle_normal"] = np.asarray(contact.obstacle_normal, dtype=np.float64)
+    if contact.obstacle_ends is not None:
+        g.attrs["obstacle_ends"] = np.asarray(contact.obstacle_ends, dtype=np.float64)
+    if contact.obstacle_shift is not None:
+        g.attrs["obstacle_shift"] = np.asarray(contact.obstacle_shift, dtype=np.float64)
+
+    g = f.create_group("newton")
+    for key, values in solution.newton.items():
+        # The history keeps its own dtypes (counts are integers, residuals floats).
+        _dataset(g, key, values, None)
 
 
 def _triangles_turn_left(data: dict) -> tuple[str, str] | None:

@@ -31,7 +31,7 @@ TOKEN = re.compile(r"[0-9]{1,10}-[0-9a-f]{8}")
 #: varies). Only such names are moved in or deleted on the word of a journal read from disk.
 OUTPUT_NAMES = (
     "report.json", "contact.csv",
-    "solution.vtu", "contact.vtu", "solution.pvd", "solution.h5", "solution.xdmf", "solution-xdmf.h5",
+    "solution.vtu", "contact.vtu", "solution.pvd", "solution.pvtu", "solution_*.vtu", "solution.h5", "solution.xdmf", "solution-xdmf.h5",
     "path.pvd", "path.h5", "path.csv", "path.png", "path-*.vtu",
     "deformed.png", "contact_profile.png",
     "compare.json", "compare.png", "compare.pvd", "compare-*.vtu",

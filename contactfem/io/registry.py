@@ -22,7 +22,7 @@ from contactfem.io.atomic import atomic_write_text
 from contactfem.io.hdf5 import SOLUTION_H5, write_hdf5
 from contactfem.io.path import PATH_CSV, PATH_H5, PATH_PVD, PATH_STEP_FILES, PathWriter
 from contactfem.io.table import csv_table
-from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, SOLUTION_VTU, write_vtu
+from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, PIECE_VTU_PATTERN, SOLUTION_PVTU, SOLUTION_VTU, write_vtu
 from contactfem.io.xdmf import COMPANION_H5, XDMF_FILE, write_xdmf
 from contactfem.result import Solution
 
@@ -235,10 +235,11 @@ FORMATS: dict[str, OutputFormat] = {
 FORMAT_NAMES = tuple(FORMATS)
 #: Written unless the case lists its own; xdmf is an extra a case asks for.
 DEFAULT_FORMATS = ("vtu", "h5", "csv", "json")
-#: Every file a solve can leave in its directory (formats and pictures), and the XDMF companion
-#: earlier versions wrote, so that replacing such a result removes it.
+#: Every file a solve can leave in its directory (formats and pictures; a distributed mesh's
+#: pieces and their index, :mod:`contactfem.io.pieces`), and the XDMF companion earlier versions
+#: wrote, so that replacing such a result removes it.
 RESULT_FILES = (tuple(name for format in FORMATS.values() for name in format.files) + PICTURES
-                + (PATH_PNG, COMPANION_H5))
+                + (PATH_PNG, COMPANION_H5, SOLUTION_PVTU, PIECE_VTU_PATTERN))
 #: Files whose presence marks a directory as holding a finished result.
 RESULT_MARKERS = (REPORT_JSON, SOLUTION_H5)
 

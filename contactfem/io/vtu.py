@@ -25,6 +25,8 @@ from contactfem.result import Solution
 __all__ = [
     "COLLECTION_PVD",
     "CONTACT_VTU",
+    "PIECE_VTU_PATTERN",
+    "SOLUTION_PVTU",
     "SOLUTION_VTU",
     "VTK_LINE",
     "VTK_TRIANGLE",
@@ -37,6 +39,10 @@ __all__ = [
 SOLUTION_VTU = "solution.vtu"
 CONTACT_VTU = "contact.vtu"
 COLLECTION_PVD = "solution.pvd"
+#: A body kept in pieces (a distributed mesh, :mod:`contactfem.io.pieces`): the index of the
+#: pieces, and the name pattern of the pieces themselves.
+SOLUTION_PVTU = "solution.pvtu"
+PIECE_VTU_PATTERN = "solution_*.vtu"
 
 #: VTK cell types of the grids written here.
 VTK_TRIANGLE, VTK_LINE = 5, 3
@@ -82,8 +88,17 @@ def _with_zero_z(xy: np.ndarray) -> np.ndarray:
 
 def _body_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
     """The triangulation with displacement, stresses and ``solution.cell_fields``."""
-    mesh = solution.mesh
-    stress = np.asarray(solution.stress, dtype=np.float64)
+    return body_grid(solution.mesh.points, solution.mesh.triangles, solution.displacement, solution.stress,
+                     solution.von_mises, metadata, solution.cell_fields)
+
+
+def body_grid(points: np.ndarray, triangles: np.ndarray, displacement: np.ndarray, stress: np.ndarray,
+              von_mises: np.ndarray, metadata: Mapping[str, str],
+              cell_fields: Mapping[str, np.ndarray] | None = None) -> Grid:
+    """The body's grid as ``solution.vtu`` holds it, of a whole mesh or of one rank's piece:
+    triangles with the displacement (n, 2) as a 3-vector, the stress (n_tri, 4: xx yy xy zz)
+    as VTK's symmetric tensor and its components, von Mises and the extra cell fields."""
+    stress = np.asarray(stress, dtype=np.float64)
     n_triangles = len(stress)
     # VTK's symmetric tensor order is XX, YY, ZZ, XY, YZ, XZ; ParaView shows a
     # 6-component array as a symmetric tensor (eigenvalues, Tensor Glyph...).
@@ -95,9 +110,9 @@ def _body_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
         "stress_yy": stress[:, 1],
         "stress_xy": stress[:, 2],
         "stress_zz": stress[:, 3],
-        "von_mises": np.asarray(solution.von_mises, dtype=np.float64),
+        "von_mises": np.asarray(von_mises, dtype=np.float64),
     }
-    for name, values in solution.cell_fields.items():
+    for name, values in (cell_fields or {}).items():
         if name in cell_data:
             raise ValueError(f"cell field {name!r} would replace the {SOLUTION_VTU} array of that name")
         values = np.asarray(values)
@@ -108,18 +123,20 @@ def _body_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
         if not isinstance(value, str):
             raise ValueError(f"metadata {name!r} is {type(value).__name__}, not str")
     return Grid(
-        points=mesh.points,
-        cells=mesh.triangles,
+        points=points,
+        cells=triangles,
         cell_type=VTK_TRIANGLE,
-        point_data={"displacement": _with_zero_z(solution.displacement)},
+        point_data={"displacement": _with_zero_z(displacement)},
         cell_data=cell_data,
         field_data=dict(metadata),
     )
 
 
-def _contact_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
+def _contact_grid(solution: Solution, metadata: Mapping[str, str], numbers: np.ndarray | None = None) -> Grid:
     """ΓC as line cells over its own, renumbered nodes, with the contact fields and the same
-    metadata as the body (a contact.vtu opened alone still says its case, method and units)."""
+    metadata as the body (a contact.vtu opened alone still says its case, method and units).
+    ``numbers``: each mesh node's number in the body's files, when ``solution.mesh`` is only
+    the boundary of a mesh kept in pieces."""
     contact = solution.contact
     edges = np.asarray(contact.edges, dtype=np.int64).reshape(-1, 2)
     nodes = np.asarray(contact.nodes, dtype=np.int64)
@@ -141,7 +158,7 @@ def _contact_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
         return full
 
     point_data = {
-        "mesh_node": mesh_node,
+        "mesh_node": mesh_node if numbers is None else np.asarray(numbers, dtype=np.int64)[mesh_node],
         "contact_pressure": on_boundary(contact.multiplier, np.float64),
         "nodal_force": on_boundary(contact.nodal_force, np.float64),
         "normal_displacement": on_boundary(contact.normal_displacement, np.float64),
@@ -157,6 +174,12 @@ def _contact_grid(solution: Solution, metadata: Mapping[str, str]) -> Grid:
         point_data=point_data,
         field_data=dict(metadata),
     )
+
+
+def contact_grid(solution: Solution, metadata: Mapping[str, str], numbers: np.ndarray | None = None) -> Grid:
+    """``contact.vtu``'s grid (:func:`write_vtu`); ``numbers``: each node of ``solution.mesh``
+    (then the boundary of a mesh kept in pieces) by its number in the body's files."""
+    return _contact_grid(solution, metadata, numbers)
 
 
 def solution_grids(solution: Solution, metadata: Mapping[str, str] | None = None) -> tuple[Grid, Grid]:
@@ -193,6 +216,40 @@ def _collection_xml(parts: list[tuple[str, str]]) -> str:
         )
     ET.indent(root)
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+#: VTK's names of the dtypes a VTU file stores.
+_VTK_TYPES = {("f", 4): "Float32", ("f", 8): "Float64"} | {
+    (kind, size): f"{'U' if kind == 'u' else ''}Int{8 * size}" for kind in "iu" for size in (1, 2, 4, 8)}
+
+
+def pvtu_text(grid: Grid, sources: list[str]) -> str:
+    """A ``.pvtu`` index (VTK's PUnstructuredGrid, ParaView's parallel format) naming the piece
+    files ``sources``, each written by :func:`write_grid` with the point and cell arrays of
+    ``grid`` (one piece's grid: the index declares their names, types and components)."""
+    arrays = _checked(grid)
+    root = ET.Element("VTKFile", type="PUnstructuredGrid", version="1.0", byte_order="LittleEndian",
+                      header_type="UInt64")
+    body = ET.SubElement(root, "PUnstructuredGrid", GhostLevel="0")
+
+    def declare(parent: ET.Element, name: str, values: np.ndarray) -> None:
+        ET.SubElement(parent, "PDataArray", type=_VTK_TYPES[(values.dtype.kind, values.dtype.itemsize)], Name=name,
+                      NumberOfComponents=str(1 if values.ndim == 1 else values.shape[1]))
+
+    for tag, where in (("PPointData", "point_data"), ("PCellData", "cell_data")):
+        parent = ET.SubElement(body, tag)
+        for name, values in arrays[where].items():
+            declare(parent, name, values)
+    declare(ET.SubElement(body, "PPoints"), "Points", arrays["points"])
+    for source in sources:
+        ET.SubElement(body, "Piece", Source=source)
+    ET.indent(root)
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def collection_text(parts: list[tuple[str, str]]) -> str:
+    """A PVD collection of ``(name, file)`` pairs as the parts of time step 0 (as ``solution.pvd``)."""
+    return _collection_xml(parts)
 
 
 # ----------------------------------------------------------------- the one VTU writer
