@@ -210,6 +210,6 @@ def _levels_below(history: list[Level], unknowns: int) -> list[Level]:
 def _memory_unknowns(case: Case) -> int:
     """The most unknowns whose solve the memory model fits in what this process may use."""
     from contactfem.discretize.meshing import _backend
-    from contactfem.estimate import largest_mesh_points, memory_limit
+    from contactfem.estimate import guarded_bytes, largest_mesh_points, memory_limit
 
-    return 2 * largest_mesh_points(_backend(case), memory_limit().bytes)
+    return 2 * largest_mesh_points(_backend(case), guarded_bytes(memory_limit()))

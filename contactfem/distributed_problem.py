@@ -157,7 +157,7 @@ def _refuse_oversized(case: Case, triangles: int, times: int, mpi) -> None:
     from mpi4py import MPI
 
     from contactfem.errors import CaseError
-    from contactfem.estimate import estimate_cost, memory_limit, unknowns_of_triangles
+    from contactfem.estimate import estimate_cost, guard_text, guarded_bytes, memory_limit, unknowns_of_triangles
 
     ranks = mpi.Get_size()
     unknowns = unknowns_of_triangles(triangles)
@@ -167,12 +167,12 @@ def _refuse_oversized(case: Case, triangles: int, times: int, mpi) -> None:
     here.Free()
     limit = memory_limit()
     needed = per_rank * local
-    refused = mpi.allreduce(bool(needed > limit.bytes), op=MPI.LOR)
+    refused = mpi.allreduce(bool(needed > guarded_bytes(limit)), op=MPI.LOR)
     if refused:
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
             f"{unknowns:.3g} unknowns, whose solve needs about {per_rank / 2**30:.3g} GiB on each of {ranks} ranks "
-            f"with petsc, {local} of them sharing {limit.source}; use more machines, or "
+            f"with petsc, {local} of them sharing what {guard_text(limit)}; use more machines, or "
             f"fewer refinements (--refine or mesh.refine, now {times}; each multiplies the triangles by four)")
 
 

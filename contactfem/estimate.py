@@ -41,6 +41,21 @@ RANK_OVERHEAD = 0.18
 #: the square's measured peaks in benchmarks/amg.py) and room for whatever else the machine
 #: runs. A larger share keeps factorising closer to the limit, at more risk of running out.
 DIRECT_MEMORY_SHARE = 0.75
+#: The size guard refuses a solve whose modelled peak exceeds this share of the memory the
+#: process may use. The model errs by up to a quarter between meshes of one kind, so a peak
+#: modelled at the whole limit may well pass it, and the kernel's out-of-memory killer ends
+#: the process without a word: refusing at 1/1.25 of the limit keeps the margin.
+GUARD_SHARE = 0.8
+
+
+def guarded_bytes(limit: "MemoryLimit") -> float:
+    """What the size guard lets a solve's modelled peak reach: :data:`GUARD_SHARE` of ``limit``."""
+    return GUARD_SHARE * limit.bytes
+
+
+def guard_text(limit: "MemoryLimit") -> str:
+    """How refusals name the bound: the limit, and the share of it the guard allows."""
+    return f"{limit.source} allows ({GUARD_SHARE:.0%} of it, the cost model's margin)"
 
 
 def estimate_cost(unknowns: int, backend: str, ranks: int = 1) -> dict[str, float]:

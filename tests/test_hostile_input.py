@@ -595,18 +595,18 @@ def test_the_size_guard_and_the_printed_estimate_are_one_model(tmp_path, monkeyp
     path = tmp_path / CASE_NAME
     path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32"), encoding="utf-8")
     result = invoke("check", path, "--refine", refine, "--json")
-    from contactfem.estimate import MemoryLimit, choose_backend, estimate_cost
+    from contactfem.estimate import GUARD_SHARE, MemoryLimit, choose_backend, estimate_cost
 
     unknowns = 2 * 32 * 32 * 4**refine
     backend = choose_backend(unknowns, "auto", MemoryLimit(memory, "a machine of 4 GiB")).name
     expected = estimate_cost(unknowns, backend)["bytes"]
-    if expected > memory:
-        assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB")
+    if expected > GUARD_SHARE * memory:
+        assert_one_line(result, CASE_NAME, "GiB", "more than this machine's 4 GiB allows (80% of it")
     else:
         assert result.exit_code == 0, result.stderr
         estimate = json.loads(result.stdout)["estimate"]
         assert estimate["backend"] == backend and estimate["bytes"] == pytest.approx(expected, rel=1e-2)
-        assert estimate["bytes"] <= memory == estimate["limit_bytes"]
+        assert estimate["bytes"] <= GUARD_SHARE * memory and memory == estimate["limit_bytes"]
         assert estimate["limit"] == "this machine's 4 GiB"
 
 
@@ -656,6 +656,30 @@ def test_the_memory_limit_is_the_tightest_of_the_machine_and_its_cgroups(tmp_pat
         (cgroups / "job" / "memory.max").write_text("-1\n", encoding="ascii")
         assert estimate.memory_limit(proc, cgroups).source == "this machine's 64 GiB"
     assert estimate.memory_limit(tmp_path / "no_proc", tmp_path / "no_cgroups").source == "this machine's 64 GiB"
+
+
+@pytest.mark.parametrize("share, refused", [(0.7, False), (0.9, True), (0.99, True)])
+def test_a_load_path_modelled_near_the_memory_is_refused_not_killed(tmp_path, monkeypatch, share, refused):
+    """A load path factorises whatever its size (it cannot solve iteratively), so nothing
+    but the guard stands between a peak modelled near the machine's memory and the kernel's
+    out-of-memory killer. The model errs by up to a quarter: a path modelled above 80% of
+    the memory is refused in one line before anything is written, one below it solves."""
+    from contactfem.estimate import estimate_cost
+    from contactfem.linalg import resolve_backend
+
+    unknowns = 2 * 33 * 33
+    memory = int(estimate_cost(unknowns, resolve_backend("auto"))["bytes"] / share)
+    a_machine_of(monkeypatch, memory)
+    path = tmp_path / CASE_NAME
+    path.write_text(SQUARE_TEXT.replace("divisions: 4", "divisions: 32") + "load_path: {steps: 3}\n",
+                    encoding="utf-8")
+    out = tmp_path / "out"
+    result = invoke("solve", path, "--out", out, "--quiet")
+    if refused:
+        assert_one_line(result, CASE_NAME, "allows (80% of it, the cost model's margin)")
+        assert not out.exists()
+    else:
+        assert result.exit_code == 0, result.stderr
 
 
 def test_a_cgroup_limit_refuses_a_mesh_the_machine_could_hold(tmp_path, monkeypatch):
@@ -714,7 +738,7 @@ def test_an_adapt_budget_beyond_memory_is_refused_before_anything_starts(tmp_pat
     --max-unknowns must fit the memory this process may use. On a machine of 2 GiB, 5
     million unknowns (about 11 GiB estimated) are refused in one line naming the option, the
     limit and the most that fit, and nothing is written."""
-    from contactfem.estimate import estimate_cost
+    from contactfem.estimate import GUARD_SHARE, estimate_cost
     from contactfem.linalg import resolve_backend
 
     a_machine_of(monkeypatch, 2 * 2**30)
@@ -723,7 +747,8 @@ def test_an_adapt_budget_beyond_memory_is_refused_before_anything_starts(tmp_pat
                                   "--out", out), "--max-unknowns 5000000", "more than this machine's 2 GiB")
     fit = int(line.rsplit("at most ", 1)[1].split()[0])
     backend = resolve_backend("auto")
-    assert estimate_cost(fit, backend)["bytes"] <= 2 * 2**30 < estimate_cost(fit + 1000, backend)["bytes"]
+    allowed = GUARD_SHARE * 2 * 2**30  # the guard keeps the cost model's margin
+    assert estimate_cost(fit, backend)["bytes"] <= allowed < estimate_cost(fit + 1000, backend)["bytes"]
     assert not out.exists()
 
 

@@ -95,16 +95,17 @@ def adapt(case_file: Path, target: float | None, max_unknowns: int, max_seconds:
 def _refuse_unknowns_beyond_memory(case, max_unknowns: int) -> None:
     """adapt grows its mesh up to --max-unknowns, meshes the size guard never sees: the budget
     itself must fit the memory this process may use, or nothing starts."""
-    from contactfem.estimate import backend_refusal, estimate_cost, largest_mesh_points, memory_limit
+    from contactfem.estimate import (backend_refusal, estimate_cost, guard_text, guarded_bytes, largest_mesh_points,
+                                     memory_limit)
     from contactfem.linalg import resolve_backend
 
     backend = resolve_backend(case.solver.backend)
     needed = estimate_cost(max_unknowns, backend)["bytes"]
     limit = memory_limit()
-    if needed > limit.bytes:
+    if needed > guarded_bytes(limit):
         raise CaseError(f"--max-unknowns {max_unknowns}: a mesh of that many unknowns needs about "
-                        f"{needed / 2**30:.3g} GiB with {backend}, more than {limit.source}; at most "
-                        f"{2 * largest_mesh_points(backend, limit.bytes)} fit")
+                        f"{needed / 2**30:.3g} GiB with {backend}, more than {guard_text(limit)}; at most "
+                        f"{2 * largest_mesh_points(backend, guarded_bytes(limit))} fit")
     refusal = backend_refusal(max_unknowns, backend)
     if refusal is not None:
         raise CaseError(f"--max-unknowns {max_unknowns}: {refusal}")

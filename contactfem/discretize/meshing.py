@@ -8,7 +8,7 @@ import numpy as np
 
 from contactfem.case import Case, MeshFileGeometry, MeshSettings, Obstacle, PolygonGeometry, RectangleGeometry
 from contactfem.errors import CaseError, MeshCapError, MeshError
-from contactfem.estimate import MemoryLimit, largest_mesh_points, memory_limit
+from contactfem.estimate import MemoryLimit, guarded_bytes, largest_mesh_points, memory_limit
 from contactfem.mesh import (
     Mesh,
     check_mesh,
@@ -17,7 +17,6 @@ from contactfem.mesh import (
     structured_rectangle,
     triangulate_domain,
 )
-from contactfem.mesh.core import coordinate_span
 from contactfem.mesh.polygon import loop_signed_area
 
 
@@ -336,7 +335,7 @@ def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit:
     refining, a mesh whose solve the cost model (:mod:`contactfem.estimate`, the figures
     ``contactfem check`` prints) says the memory this process may use, ``limit``, cannot hold
     (:func:`~contactfem.estimate.memory_limit`: the machine's, a cgroup's, ``ulimit -v``)."""
-    from contactfem.estimate import backend_refusal, estimate_cost, unknowns_of_triangles
+    from contactfem.estimate import backend_refusal, estimate_cost, guard_text, unknowns_of_triangles
 
     if base is None:
         triangles = estimate_triangles(shape, refine)
@@ -345,11 +344,11 @@ def _refuse_oversized(case: Case, shape: MeshRequest, refine: int | None, limit:
     unknowns = unknowns_of_triangles(triangles)
     backend = _backend(case, unknowns, limit)
     needed = estimate_cost(unknowns, backend)["bytes"]
-    if needed > limit.bytes:
+    if needed > guarded_bytes(limit):
         raise CaseError(
             f"{case.source.name}: mesh: about {triangles:.3g} triangles requested (with the refinements), "
             f"{unknowns:.3g} unknowns, whose solve needs about {needed / 2**30:.3g} GiB with {backend}, more than "
-            f"{limit.source}; {_knobs(shape, refine)}"
+            f"{guard_text(limit)}; {_knobs(shape, refine)}"
         )
     refusal = backend_refusal(unknowns, backend)
     if refusal is not None:
@@ -394,7 +393,7 @@ def _mesh_geometry(case: Case, shape: MeshRequest, limit: MemoryLimit) -> Mesh:
         mesh = triangulate_domain(
             geometry.outer, list(geometry.holes), max_edge=settings.size, min_angle=settings.min_angle,
             size=_contact_grading(shape) if settings.contact_size is not None else None,
-            max_points=largest_mesh_points(_backend(case), limit.bytes),
+            max_points=largest_mesh_points(_backend(case), guarded_bytes(limit)),
         )
     else:
         assert isinstance(geometry, MeshFileGeometry)
