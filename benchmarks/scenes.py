@@ -192,11 +192,12 @@ def indenter_scene(seed: int) -> dict:
     height = width * _log_uniform(rng, 0.2, 5)
     half = width / 2
     data["geometry"] = {"polygon": {"vertices": [[-half, -height], [half, -height], [half, 0], [-half, 0]],
-                                    "edges": ["base", "side", "surface", "side"]}}
+                                    "edges": ["base", "right", "surface", "left"]}}
     contact = width / rng.choice([100, 400, 1600])
     data["mesh"] = ({"size": contact} if rng.random() < 0.3 else
                     {"size": min(width, height) / rng.choice([4, 8, 16]), "contact_size": contact})
-    data["boundary"] = {"base": "clamped", "side": rng.choice(["free", "free", "symmetry"]), "surface": "contact"}
+    data["boundary"] = {"base": "clamped", "left": rng.choice(["free", "free", "symmetry"]), "right": "free",
+                        "surface": "contact"}
     zone = width * _log_uniform(rng, 0.02, 0.3)  # the contact half-width aimed at
     centre = rng.uniform(-0.3, 0.3) * width
     tilt = math.radians(rng.choice([0.0, 0.0, rng.uniform(-10, 10)]))
