@@ -54,9 +54,8 @@ _COMMON_PRINT, _COMMON_SUPERNODAL, _COMMON_FINAL_ASIS, _COMMON_FINAL_LL = 144, 4
 #: on, a simplicial factor is an LLᵀ too (the default simplicial LDLᵀ passes a negative
 #: pivot silently), so that W = L⁻¹ P B gives Bᵀ A⁻¹ B = Wᵀ W either way. The meshes here
 #: have little fill, and CHOLMOD picks simplicial on graded and small ones, whose full
-#: solves it runs 2-3x faster (15 ms against 36 ms at 418 000 unknowns under a rough
-#: profile), whose analysis skips the supernodal one, and whose solves with a sparse
-#: right-hand side need no conversion.
+#: solves it runs two to three times faster, whose analysis skips the supernodal one, and
+#: whose solves with a sparse right-hand side need no conversion.
 _CHOLMOD_AUTO, _CHOLMOD_SUPERNODAL = 1, 2
 _FACTOR_SWITCH = _CHOLMOD_AUTO
 #: cholmod_factor starts with n, minor (the column where a non-positive pivot stopped it),
@@ -82,10 +81,8 @@ class CholmodLibrary:
     right-hand sides one column at a time. Called directly, CHOLMOD reads the kernel's CSR
     arrays in place as the upper triangle of a symmetric matrix (stype = 1: the entries
     below the diagonal are ignored, and the CSR matrix of a symmetric matrix is its own CSC
-    one) and solves blocks at once. Measured at 526 338 unknowns (square N = 512, 2 cores,
-    benchmarks/results/solvers.json): 0.69 GB added at the peak instead of 0.83
-    (scikit-sparse's CHOLMOD: 0.70), a first factorisation of 1.29 s instead of 1.75, a
-    block of 4 right-hand sides in 0.047 s per column instead of 0.097.
+    one) and solves blocks at once: a lower peak, a faster first factorisation and about
+    twice as fast block solves (benchmarks/results/solvers.json; docs/performance.md).
     """
 
     def __init__(self, library: ctypes.CDLL) -> None:

@@ -103,11 +103,10 @@ class CvxoptCholmodFactor:
     directly (see :mod:`contactfem.linalg.cholmod_direct`).
 
     cvxopt takes its own sparse matrix of one triangle, built from triplets in its column
-    order: the upper one, which CHOLMOD's supernodal factorisation takes 2x faster than
-    the lower one (the numeric factorisation took 1.1 s against 2.2-2.4 s at 526 000
-    unknowns, and 48 MB less at its peak). A refactorisation of the same pattern (the
+    order: the upper one, which CHOLMOD's supernodal factorisation takes about twice as
+    fast as the lower one, with a lower peak. A refactorisation of the same pattern (the
     kernel's, masked differently for each active set) only gathers the new values into
-    that matrix: rebuilding it took 0.5 s of each refactorisation at 694 000 unknowns. Keeping it costs no peak memory: it
+    that matrix rather than rebuilding it. Keeping it costs no peak memory: it
     exists during every numeric factorisation anyway. A non-positive pivot raises
     ArithmeticError, reported as a SolverError.
     """
@@ -196,8 +195,8 @@ class CvxoptCholmodFactor:
         return csc(forward), csc(scaled)
 
     #: Columns per call of CHOLMOD's sparse solve: cvxopt's dense solve takes a block one
-    #: column at a time, its sparse one in small dense blocks, measured 2x faster per column
-    #: at 4 (247k unknowns: 26 against 51 ms); more columns cost more to convert back.
+    #: column at a time, its sparse one in small dense blocks, about twice as fast per column
+    #: at 4; more columns cost more to convert back (docs/performance.md#measured-design-choices).
     SPARSE_BLOCK = 4
 
     def solve_sparse(self, rhs: sp.csc_matrix) -> np.ndarray:

@@ -146,9 +146,8 @@ class DirectAnalysis:
 
     def keep_supernodal(self) -> None:
         """Keep a copy of the supernodal numeric factor that a pattern solve is about to
-        convert, for the dense solves, where it fits in :data:`SUPERNODAL_COPY_BYTES`: at
-        247 000 unknowns a backward solve took 49 ms with it against 56-63 ms with the
-        converted factor."""
+        convert, for the dense solves, where it fits in :data:`SUPERNODAL_COPY_BYTES`: a
+        backward solve on the supernodal factor runs faster than on the converted one."""
         if self.simplicial or self.solving.value or not self.numeric.value \
                 or 8 * self.cost.entries > SUPERNODAL_COPY_BYTES:
             return
@@ -436,8 +435,8 @@ class DirectCholmodFactor:
         dense = np.zeros(n)
         right = _DenseStruct(n, 1, n, n, dense.ctypes.data, None, _XTYPE_REAL, _DTYPE_DOUBLE)
         solution, pattern, work_y, work_e = _DENSE_P(), _SPARSE_P(), _DENSE_P(), _DENSE_P()
-        # One cholmod_sparse for every column's pattern (Bset), pointed at each in turn; the
-        # per-column Python work is most of a column's cost on a graded mesh (26 µs in CHOLMOD).
+        # One cholmod_sparse for every column's pattern (Bset), pointed at each in turn: on a
+        # graded mesh the per-column Python work weighs more than CHOLMOD's own.
         set_pointers = np.zeros(2, dtype=np.int32)
         ones = np.ones(max(int(np.diff(starts).max(initial=0)), 1))
         given = CholmodLibrary.sparse(set_pointers, all_rows, ones, n, 0)

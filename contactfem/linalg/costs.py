@@ -145,13 +145,9 @@ class Rates:
 #: least squares on relative errors; 0.64 + 0.52 s of 1.32 s at 526 000 unknowns); solves,
 #: blocked forward columns, conversion and analysis: the median of counted work / seconds
 #: over the matrices; pattern solve: reached entries and a fixed cost per column fitted
-#: together per kind. Modelled against measured at the largest sizes: a full solve 0.15 s
-#: (0.15 s) on the square, 0.013 s (0.020) on the rough mesh; a pattern column 5.1 ms
-#: (7.4) and 66 µs (67); a conversion 0.14 s (0.14); an analysis 0.28 s (0.51) and 0.22 s (0.30).
-#: The supernodal blocks' forward route was measured apart, on the Hertz platen's kernel
-#: matrix at 246 902 unknowns (22.5 million factor entries): blocks of 1, 7 and 40 contact
-#: columns reaching 1.64-1.69 million entries in 31-69 supernodes took 2.1, 3.5 and 13.9 ms
-#: (modelled 2.0, 4.0 and 15.6).
+#: together per kind. The supernodal blocks' forward route was fitted apart, on the Hertz
+#: platen's kernel matrix. How the model compares with the measured seconds at the largest
+#: sizes: docs/performance.md#measured-design-choices.
 _SUPERNODAL = Rates(factor_flops=4.8e10, factor_entries=1.5e8, analysis_work=5.1e8, solve_entries=5.1e8,
                     block_solve_entries=3.7e9, blocked_forward_entries=2.7e9, pattern_entries=1.05e9,
                     pattern_column_seconds=7.4e-6, conversion_entries=5.6e8,

@@ -29,9 +29,9 @@ class PardisoFactor:
 
         self._solver = pypardiso.PyPardisoSolver(mtype=2)
         # MKL keeps a factor in its own memory until it is released (phase -1), which the
-        # solver object does not do when collected: every factorisation stayed resident to the
-        # end of the process (0.3 GB each at 490 000 unknowns; a convergence study peaked at
-        # 13.7 GB against 8.2 for one solve of its finest mesh). Released with this object.
+        # solver object does not do when collected: every factorisation would stay resident
+        # to the end of the process, and a convergence study would hold all of its levels'.
+        # Released with this object.
         weakref.finalize(self, self._solver.free_memory, True)
         # mtype=2 (real SPD) reads the upper triangle only.
         self._matrix = sp.triu(matrix, format="csr")
