@@ -500,3 +500,22 @@ def test_a_sweep_solves_a_damaged_stored_point_again(tmp_path, monkeypatch):
         assert read_point_record(path)["status"] == "ok"
     reused = sweeps.finished_points(out / "points", sweeps.load_sweep(plan), read=read_point_record)
     assert reused.keys() == {p.stem for p in stored}
+
+
+@pytest.mark.parametrize("payload", [b'{"a": 1}', b'{"a": '])
+def test_a_json_file_that_cannot_be_read_is_one_line_naming_it(tmp_path, monkeypatch, payload):
+    """An I/O error while a record is read (a disk or network file system failing) is an
+    ArchiveError naming the file and the system's reason, whatever the file holds; once it
+    was an UnboundLocalError, as the function's own later name shadowed the helper's."""
+    import contactfem.io.json_layout as json_layout
+    from contactfem.errors import ArchiveError
+
+    path = tmp_path / "record.json"
+    path.write_bytes(payload)
+
+    def failing(*args, **kwargs):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(json_layout, "read_all", failing)
+    with pytest.raises(ArchiveError, match=r"record\.json.*cannot be read \(.*Input/output error"):
+        json_layout.read_json_file(path, json_layout.Object({}), "a record", 1 << 20)

@@ -339,7 +339,7 @@ def _contact_on_curved(data: dict) -> tuple[str, str] | None:
     for name in ("normals", "obstacle_points", "obstacle_vertices"):
         if name not in contact:
             return f"/contact/{name}", "missing; expected normals, obstacle_points and obstacle_vertices together"
-    normals, q = contact["normals"], contact["obstacle_points"]
+    normals = contact["normals"]
     length = np.hypot(normals[:, 0], normals[:, 1])
     off = np.abs(length - 1.0) > 1e-9
     if off.any():

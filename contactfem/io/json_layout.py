@@ -304,6 +304,6 @@ def read_json_file(path: Path | str, node: Node, what: str, max_bytes: int) -> A
     try:
         value = json.loads(text, parse_constant=_no_constant)
     except (ValueError, RecursionError) as error:
-        reason = shortened(str(error).splitlines()[0] if str(error) else type(error).__name__, 160)
-        raise where.fail("", f"is not valid JSON ({reason}); expected {what}") from None
+        problem = shortened(str(error).splitlines()[0] if str(error) else type(error).__name__, 160)
+        raise where.fail("", f"is not valid JSON ({problem}); expected {what}") from None
     return node.check(value, "", _JSON(where))
