@@ -103,6 +103,8 @@ class SchurColumns:
         platen's 123 columns along its path: 420 000 entries, over 3 300 rows a block). The
         copy goes while it would pass :data:`contactfem.kernel.costs.DENSE_ROWS_BYTES`."""
         k, total = forward.shape[1], count + forward.shape[1]
+        if self.dense_rows is not None and not dense_pays(forward, self.scaled_store):
+            self.dense_rows = self.row_place = None  # sparse blocks: the copy would not pay again
         if self.dense_rows is None:
             return cross(forward, self.scaled_store)
         if self.row_place is None:
@@ -295,29 +297,43 @@ class SchurColumns:
 
 
 def cross(left: sp.csc_matrix, right: sp.csc_matrix) -> np.ndarray:
-    """leftᵀ right for sparse forward columns (canonical CSC, as CHOLMOD and ``sp.hstack``
-    give them), dense (k_left, k_right).
+    """leftᵀ right for sparse forward columns, dense (k_left, k_right).
 
-    Only the rows that ``left`` touches count: a few thousand for contact nodes' columns (the
-    elimination tree's paths from them, through the separators they share). Both are gathered
-    densely over those rows (``right``'s entries found among them through a map of every
-    row to its place) and multiplied through BLAS: one pass over ``right``'s entries, no
-    sparse row indexing. Dense blocks past :data:`contactfem.kernel.costs.COLUMN_BYTES` give way to
-    a sparse product.
+    The columns share the rows near the elimination tree's root and little else: the rows
+    that an eighth of the right-hand columns or more touch go through BLAS as dense blocks,
+    the others through a sparse product. A row in the sparse product costs about its two
+    counts' product, in the dense block the two column counts.
     """
-    rows = np.unique(left.indices)
-    k_left, k_right = left.shape[1], right.shape[1]
-    if 8 * len(rows) * (k_left + k_right) > costs.COLUMN_BYTES:
-        return (left.T @ right).toarray()
-    place = np.full(left.shape[0], -1, dtype=np.int64)
-    place[rows] = np.arange(len(rows))
-    dense_left = np.zeros((len(rows), k_left))
-    dense_left[place[left.indices], _entry_columns(left)] = left.data
-    at = place[right.indices]
-    hit = at >= 0
-    dense_right = np.zeros((len(rows), k_right))
-    dense_right[at[hit], _entry_columns(right)[hit]] = right.data[hit]
-    return dense_left.T @ dense_right
+    k = right.shape[1]
+    if left.shape[1] * (left.shape[0] + right.nnz) <= costs.DENSE_CROSS_ENTRIES:
+        # A few new columns: rightᵀ times them made dense, one pass over right's entries
+        # per column.
+        return np.asarray(right.T @ left.toarray()).T
+    counts = np.bincount(right.indices, minlength=right.shape[0])
+    shared = counts >= max(1, k // 8)
+    if 8 * int(shared.sum()) * (k + left.shape[1]) > costs.COLUMN_BYTES:
+        shared[:] = False
+    heavy = np.flatnonzero(shared)
+    product = left[heavy].toarray().T @ right[heavy].toarray()
+    if len(heavy) < int(np.count_nonzero(counts)):
+        # left without the shared rows' entries, selected from its arrays (cheaper than a
+        # product with a diagonal mask).
+        light_entries = ~shared[left.indices]
+        kept_before = np.concatenate([[0], np.cumsum(light_entries)])
+        light = sp.csc_matrix((left.data[light_entries], left.indices[light_entries], kept_before[left.indptr]),
+                              shape=left.shape)
+        product += (light.T @ right).toarray()
+    return product
+
+
+def dense_pays(left: sp.csc_matrix, right: sp.csc_matrix, rows: int | None = None) -> bool:
+    """Whether leftᵀ right is cheaper densely over the ``rows`` left touches than as a sparse
+    product, by counts: the dense flops against the sparse product's pairs of entries that
+    share a row, weighed by :data:`contactfem.kernel.costs.DENSE_PRODUCT_SHARE`."""
+    n = left.shape[0]
+    rows = len(np.unique(left.indices)) if rows is None else rows
+    pairs = float(np.bincount(left.indices, minlength=n).astype(float) @ np.bincount(right.indices, minlength=n))
+    return 2.0 * rows * left.shape[1] * right.shape[1] <= costs.DENSE_PRODUCT_SHARE * pairs
 
 
 def _entry_columns(matrix: sp.csc_matrix) -> np.ndarray:

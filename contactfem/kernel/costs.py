@@ -35,6 +35,9 @@ SIMPLICIAL_FORWARD_COLUMNS_FROM = 5_000
 #: long.
 FORWARD_PATH_SHARE = 0.1
 PATH_SAMPLES = 8
+#: Up to this many dense entries and products the Schur blocks of new forward columns are
+#: taken with those columns made dense (see :func:`contactfem.kernel.columns.cross`).
+DENSE_CROSS_ENTRIES = 2**19
 #: What a factorisation step costs beyond the numeric factorisation, in full solves: the
 #: masking of the changed rows, the singularity probe and the first block of solves.
 FACTORIZATION_EXTRA_SOLVES = 3.0
@@ -42,6 +45,15 @@ FACTORIZATION_EXTRA_SOLVES = 3.0
 #: hold (:meth:`contactfem.kernel.schur.ActiveSetSolver._cross_stored`); beyond it the
 #: Schur blocks come from the sparse columns themselves.
 DENSE_ROWS_BYTES = 2**27
+#: A Schur block Wᵀ S of sparse forward columns is taken densely (both gathered over the
+#: rows W touches, one BLAS product) while its flops, 2 · rows · k_W · k_S, are at most this
+#: many times the multiply-adds of the sparse product (pairs of entries sharing a row).
+#: Columns that share their rows (a contact zone's nodes, whose paths meet in the same
+#: separators) have nearly as many pairs as flops, and BLAS runs them faster; columns spread
+#: over many patches (a rough profile's) touch rows they mostly do not share, and the dense
+#: product multiplies zeros. Measured by the crossover of the two on both kinds of block
+#: (docs/performance.md#measured-design-choices).
+DENSE_PRODUCT_SHARE = 8.0
 #: The most a start check's round (:meth:`contactfem.kernel.schur.ActiveSetSolver.preview`)
 #: may cost, modelled, as a share of the backward solve a Newton step pays for its
 #: displacement: its new forward columns, their Schur blocks and its dense Schur solve.
