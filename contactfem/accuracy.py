@@ -36,7 +36,6 @@ unknowns — ``cost`` in the report counts them. A run refined towards a target
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -46,6 +45,7 @@ from contactfem.case import Case
 from contactfem.discretize import DiscreteProblem
 from contactfem.errors import ContactFemError
 from contactfem.result import ContactFields
+from contactfem.timings import clock
 
 if TYPE_CHECKING:
     from contactfem.solve import SolveResult
@@ -119,9 +119,9 @@ def energy_estimate(result: "SolveResult") -> dict:
     if result.solution.method != "positive":
         return {"estimate": None, "method": ENERGY_METHOD, "guaranteed": False,
                 "reason": f"the residual estimator is defined for method (4) positive, not {result.solution.method}"}
-    clock = time.perf_counter()
+    started = clock()
     estimated = estimate(result.problem, result.solution)
-    seconds = time.perf_counter() - clock
+    seconds = clock() - started
     norm = _energy_norm(result.problem, result.solution.displacement)
     summary = estimated.summary()
     return {"estimate": summary["eta"], "relative": summary["eta"] / norm if norm > 0 else None,
@@ -181,7 +181,7 @@ def accuracy_figures(case: Case, result: "SolveResult", load_factor: float | Non
     :func:`coarser_levels`) or "none" (a mesh that is not the case's own, as ``adapt`` makes:
     the quantities get no estimate). ``history``: the coarser levels to compare with instead
     (the earlier meshes of a refinement towards a target, finest first)."""
-    clock = time.perf_counter()
+    started = clock()
     fine = quantities(result.problem, result.solution.contact)
     figures: dict = {"energy": energy_estimate(result)}
     if history is not None:
@@ -205,7 +205,7 @@ def accuracy_figures(case: Case, result: "SolveResult", load_factor: float | Non
     solve_seconds = float(sum(result.timings.values()))  # meshing and assembly too, as the levels'
 
     figures["levels"] = [level.record() for level in found]
-    seconds = time.perf_counter() - clock
+    seconds = clock() - started
     figures["cost"] = {"unknowns": extra, "share_of_unknowns": extra / fine_unknowns if fine_unknowns else 0.0,
                        "seconds": seconds,
                        "share_of_seconds": seconds / solve_seconds if solve_seconds > 0 else None}
@@ -314,7 +314,7 @@ def _solve_level(case: Case, result: "SolveResult", request, refine: int, base_s
     level its own sequencing solved on the way (reused), if any."""
     from contactfem.solve import prepare, solve_case
 
-    clock = time.perf_counter()
+    started = clock()
     try:
         coarse_problem = prepare(case, refine=refine, request=request)
     except ContactFemError:
@@ -332,7 +332,7 @@ def _solve_level(case: Case, result: "SolveResult", request, refine: int, base_s
     except ContactFemError:
         return None, None
     level = Level(_ratio(coarse_problem, base_size), coarse_problem.n_unknowns, "solved",
-                  quantities(coarse_problem, solved.solution.contact), time.perf_counter() - clock)
+                  quantities(coarse_problem, solved.solution.contact), clock() - started)
     # Its own sequencing level was solved at the full load: of no use on a load path.
     below = None if load_factor is not None else _kept_level(kept, result.method, base_size, FURTHEST_RATIO)
     return level, below

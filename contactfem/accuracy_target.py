@@ -22,7 +22,6 @@ counts and estimates, never the clock; the seconds are reported.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -31,6 +30,7 @@ import numpy as np
 from contactfem.accuracy import EXPECTED_ORDERS, MIN_RATIO, Level, accuracy_figures, quantities, richardson
 from contactfem.case import Case
 from contactfem.errors import CaseError
+from contactfem.timings import clock
 
 if TYPE_CHECKING:
     from contactfem.solve import Progress, SolveResult
@@ -82,7 +82,7 @@ def solve_to_accuracy(case: Case, *, target: float, quantity: str = "energy", ma
         raise CaseError(f"{case.source.name}: solver.accuracy.quantity = {quantity}: expected one of energy, "
                         f"{', '.join(EXPECTED_ORDERS)}")
     say = progress or (lambda message: None)
-    started = time.perf_counter()
+    started = clock()
     history: list[Level] = []
     records: list[dict] = []
 
@@ -131,7 +131,7 @@ def solve_to_accuracy(case: Case, *, target: float, quantity: str = "energy", ma
     reached = records[-1]["estimate"] if records else None
     met = run.stop_reason == "target"
     return TargetRun(result=result, accuracy=accuracy, steps=records, target=target, quantity=quantity,
-                     reached=reached, met=met, stop_reason=run.stop_reason, seconds=time.perf_counter() - started)
+                     reached=reached, met=met, stop_reason=run.stop_reason, seconds=clock() - started)
 
 
 def _zone_ends(problem, active: np.ndarray) -> list[tuple[int, int]]:

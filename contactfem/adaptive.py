@@ -11,7 +11,6 @@ Nothing here prints or writes; the command line renders :class:`AdaptiveRun`.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -28,6 +27,7 @@ from contactfem.norms import exact_errors
 from contactfem.report import case_record
 from contactfem.result import Solution
 from contactfem.solve import Progress, SolveResult, solve_case
+from contactfem.timings import clock
 
 #: Version of adapt.json's layout (contactfem/schemas/adapt.schema.json).
 ADAPT_SCHEMA_VERSION = 1
@@ -99,18 +99,18 @@ def adapt(
     say = progress or (lambda message: None)
     if not 0.0 < theta <= 1.0:
         raise ValueError(f"theta must be in (0, 1], got {theta!r}")
-    started = time.perf_counter()
-    clock = time.perf_counter()
+    started = clock()
+    stage_started = clock()
     current = label_longest_edge(mesh if mesh is not None else build_mesh(case))
     problem = build_problem(case, current)
-    pending = time.perf_counter() - clock  # meshing/refining/assembling charged to the next step
+    pending = clock() - stage_started  # meshing/refining/assembling charged to the next step
     steps: list[dict] = []
     stop = "max_steps"
     for step in range(max_steps):
-        clock = time.perf_counter()
+        stage_started = clock()
         outcome = solve_case(case, method="positive", problem=problem)
         estimated = estimate(problem, outcome.solution)
-        seconds = pending + time.perf_counter() - clock
+        seconds = pending + clock() - stage_started
         errors = _errors(outcome, error_of)
         energy = errors.get("displacement_energy") if errors else None
         mesh_now = problem.mesh
@@ -127,7 +127,7 @@ def adapt(
             "eta": estimated.total,
             "eta_terms": estimated.summary()["terms"],
             "seconds": seconds,
-            "cumulative_seconds": time.perf_counter() - started,
+            "cumulative_seconds": clock() - started,
             "errors": errors,
             "effectivity": (estimated.total / energy) if energy else None,
         }
@@ -140,12 +140,12 @@ def adapt(
         if (target is not None and estimated.total <= target) or (converged is not None and converged(row)):
             stop = "target"
             break
-        if max_seconds is not None and time.perf_counter() - started >= max_seconds:
+        if max_seconds is not None and clock() - started >= max_seconds:
             stop = "max_seconds"
             break
         if step == max_steps - 1:
             break
-        clock = time.perf_counter()
+        stage_started = clock()
         # A run towards another quantity's target may mark a share of η² that depends on
         # where it stands (its row, after on_step): ``theta_of``.
         marked = dorfler_mark(estimated.indicators**2, theta if theta_of is None else theta_of(row))
@@ -158,7 +158,7 @@ def adapt(
             break
         row["marked"] = int(marked.sum())
         problem = next_problem
-        pending = time.perf_counter() - clock
+        pending = clock() - stage_started
     settings = {"theta": theta, "target": target, "max_unknowns": max_unknowns,
                 "max_seconds": max_seconds, "max_steps": max_steps}
     return AdaptiveRun(case=case, steps=steps, result=with_estimator(outcome, estimated), estimate=estimated,

@@ -9,7 +9,6 @@ solve (:mod:`contactfem.solve`) and one across MPI ranks (:mod:`contactfem.distr
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
@@ -34,6 +33,7 @@ from contactfem.sequencing import (
     predict_active_set,
     worth_sequencing,
 )
+from contactfem.timings import clock
 
 Progress = Callable[[str], None]
 
@@ -65,7 +65,7 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
     :func:`contactfem.sequencing.layer_depth` of ΓC, every unknown outside fixed at the
     coarse displacement; its active set is the fine prediction.
     """
-    started = time.perf_counter()
+    started = clock()
     problem = reduced.problem
     fine_unknowns = problem.n_unknowns
     patches = patch_count(active)
@@ -108,7 +108,7 @@ def correct_in_layer(reduced: ReducedSystem, coarse: CoarseSolve, active: np.nda
         "layer_iterations": result.iterations,
         "layer_factorizations": result.factorizations,
         "layer_changes": int(np.count_nonzero(result.active != active)),
-        "layer_seconds": time.perf_counter() - started,
+        "layer_seconds": clock() - started,
     }
 
 
@@ -173,7 +173,7 @@ def predict_from_coarser(problem: DiscreteProblem, c: Callable[[], float], say: 
     fails: a prediction is only a starting point, and without one the kernel starts cold.
     ``coarse``: the coarser mesh request and its refinements, when already made (:func:`coarser`).
     """
-    started = time.perf_counter()
+    started = clock()
     coarse_problem = coarser_level(problem, prepare_coarse, forced, coarse)
     if coarse_problem is None:
         return None, {}
@@ -207,5 +207,5 @@ def predict_from_coarser(problem: DiscreteProblem, c: Callable[[], float], say: 
         **({} if settled else {"coarse_status": coarse_kernel.status.value}),
         **({"coarse_reused": True} if coarse_result.reused else {}),
         **corrected,
-        "seconds": time.perf_counter() - started,
+        "seconds": clock() - started,
     }

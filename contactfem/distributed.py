@@ -40,7 +40,6 @@ analysis, or GAMG's coarse spaces) carried across the steps.
 from __future__ import annotations
 
 import itertools
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
@@ -87,6 +86,7 @@ from contactfem.kernel import (
 from contactfem.linalg import SINGULARITY_LIMIT, FactorCheck, probe_vector
 from contactfem.methods import get_method
 from contactfem.sequencing import starting_set
+from contactfem.timings import clock
 
 if TYPE_CHECKING:
     from contactfem.solve import SolveResult
@@ -176,7 +176,7 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
 
     from contactfem.distributed_problem import PieceProblem, gather_coordinates, piece_problem, whole_problem
 
-    clock = time.perf_counter()
+    started = clock()
     refinements = case.mesh.refine if refine is None else refine
     # Each rank refines its own piece of the coarse mesh when the case allows it, else meshes it whole.
     problem = piece_problem(case, mpi, refine) if distributed_mesh else None
@@ -184,12 +184,12 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
     problem_seconds = 0.0
     if problem is None:
         mesh = build_mesh(case, refine=refine)
-        timings["mesh"] = time.perf_counter() - clock
-        clock = time.perf_counter()
+        timings["mesh"] = clock() - started
+        started = clock()
         problem = _problem_without_stiffness(case, mesh, refinements)
-        problem_seconds = time.perf_counter() - clock
+        problem_seconds = clock() - started
     else:  # the piece, its boundary, loads, supports and contact
-        timings["mesh"] = time.perf_counter() - clock
+        timings["mesh"] = clock() - started
 
     level = _solve_level(PETSc, MPI, comm, case, problem, method_name, solver, say, sequencing, timings)
     timings["assemble"] += problem_seconds  # loads, supports and contact, as the serial stage counts them
@@ -203,23 +203,23 @@ def solve_distributed(case: Case, method: str | None = None, refine: int | None 
         from contactfem.distributed_output import piece_outcome
 
         return piece_outcome(linear, level, case, problem, method_name, solver, timings)
-    clock = time.perf_counter()
+    started = clock()
     linear.ksp.reset()  # the factors go before rank 0 gathers whole vectors
     gathered = gather_iterate(linear)
     coordinates = gather_coordinates(linear, problem) if isinstance(problem, PieceProblem) else None
-    timings["gather"] = time.perf_counter() - clock
+    timings["gather"] = clock() - started
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
     if rank != 0:
         return DistributedResult(result=None, parallel=parallel, rank=rank)
 
-    clock = time.perf_counter()
+    started = clock()
     from contactfem.solve import SolveResult
 
     if coordinates is not None:  # the mesh for the writers, now that the solver's memory is freed
         problem, system = whole_problem(case, refinements, coordinates)
     problem, solution = step_solution(gathered, system, problem, method_name, kernel)
-    timings["postprocess"] = time.perf_counter() - clock
+    timings["postprocess"] = clock() - started
     first = parallel["per_rank"][0]
     first["solve_peak_rss_bytes"] = first["peak_rss_bytes"]
     first["peak_rss_bytes"] = _peak_rss()  # the mesh rank 0 built for the writers included
@@ -248,7 +248,7 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     active set a coarser level predicts when that pays (as :func:`contactfem.solve.solve_case`)."""
     mpi = comm.tompi4py()
     contact_method = get_method(method_name)
-    clock = time.perf_counter()
+    started = clock()
     say("assembling")
     from contactfem.distributed_problem import PieceProblem, assemble_piece_system
 
@@ -258,11 +258,11 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     else:
         layout = _Layout.build(problem.mesh.points, mpi.Get_size(), mpi.Get_rank())
         system = _DistributedSystem.assemble(PETSc, comm, problem, contact_method, layout)
-    timings["assemble"] = time.perf_counter() - clock
+    timings["assemble"] = clock() - started
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes, "
         f"{mpi.Get_size()} ranks ({timings['assemble']:.2f} s)")
 
-    clock = time.perf_counter()
+    started = clock()
     say(f"solving with method {contact_method.equation} ({method_name}), petsc {solver}")
     c = case.solver.c if case.solver.c is not None else system.default_c()
     # Every rank takes the same decision: the gaps are whole on every rank, and the coarse
@@ -280,7 +280,7 @@ def _solve_level(PETSc, MPI, comm, case: Case, problem: DiscreteProblem, method_
     kernel, normal_displacement = _active_set_iteration(
         linear, c=c, tolerance=case.solver.tolerance, max_iterations=case.solver.max_iterations,
         initial_active=initial_active, on_iteration=on_iteration, second_guess=second_guess)
-    timings["solve"] = time.perf_counter() - clock
+    timings["solve"] = clock() - started
     return _Level(kernel=kernel, normal_displacement=normal_displacement, linear=linear, layout=layout,
                   system=system, sequencing=predicted)
 
@@ -503,10 +503,10 @@ class _DistributedSolver:
         self.work.zeroRowsColumns(rows, diag=1.0, x=self.scratch, b=self.rhs)
         self.work.setOption(PETSc.Mat.Option.SPD, True)
         base_rhs = self.rhs.getArray().copy()
-        started = time.perf_counter()
+        started = clock()
         self.ksp.setOperators(self.work)
         self.ksp.setUp()
-        self.factor_seconds.append(time.perf_counter() - started)
+        self.factor_seconds.append(clock() - started)
         self.factorizations += 1
         if self.solver_name == "mumps":
             self.factor_figures = mumps_figures(self.ksp.getPC().getFactorMatrix())

@@ -29,6 +29,7 @@ import numpy as np
 
 from contactfem.assembly import stresses, von_mises
 from contactfem.report import BodyFigures
+from contactfem.timings import clock
 
 #: Why the H^{-1/2} norm of an exact multiplier error is not.
 NO_DUAL_NORM = ("errors.multiplier_h_minus_half is null: on a distributed mesh no rank holds the whole "
@@ -79,27 +80,25 @@ def piece_outcome(linear, level, case, problem, method_name: str, solver: str, t
     """:class:`contactfem.distributed.DistributedResult` of a solve on pieces (every rank calls
     it, once the kernel is done): every rank's :class:`PieceFields`, and on rank 0 a
     :class:`~contactfem.solve.SolveResult` over the boundary mesh with :class:`BodyFigures`."""
-    import time
-
     from contactfem.distributed_estimator import piece_energy_estimate
     from contactfem.distributed_result import DistributedResult, SolutionProduct, _peak_rss, parallel_figures
     from contactfem.solve import SolveResult, _solution
 
     kernel, system = level.kernel, level.system
     mpi = linear.mpi
-    clock = time.perf_counter()
+    started = clock()
     linear.ksp.reset()  # the factors go before the fields are made
     fields = _piece_fields(linear, system, problem, mpi)
     boundary = _boundary_vectors(linear, system, problem, mpi)
     energy = mpi.allreduce(float(linear.solution.getArray() @ linear.internal_force.getArray()))
     body = _body_figures(problem, fields, mpi)
-    timings["gather"] = time.perf_counter() - clock
+    timings["gather"] = clock() - started
     parallel = parallel_figures(linear, solver, timings, kernel.factorizations)
     linear.destroy()
     if mpi.Get_rank() != 0:
         piece_energy_estimate(problem, fields, mpi)
         return DistributedResult(result=None, parallel=parallel, rank=mpi.Get_rank(), pieces=fields)
-    clock = time.perf_counter()
+    started = clock()
     u_rotated, internal, load = boundary
     displacement = system.mesh_vector(u_rotated).reshape(-1, 2)
     moved = displacement if problem.drive is None else problem.drive.moved(displacement)
@@ -111,7 +110,7 @@ def piece_outcome(linear, level, case, problem, method_name: str, solver: str, t
         body = replace(body, errors={**body.errors, "multiplier_l2": _multiplier_l2(solution, problem)},
                        warnings=(NO_DUAL_NORM,))
     estimate = piece_energy_estimate(problem, fields, mpi, solution, energy)
-    timings["postprocess"] = time.perf_counter() - clock
+    timings["postprocess"] = clock() - started
     parallel["max_peak_rss_bytes"] = max(entry["peak_rss_bytes"] for entry in parallel["per_rank"])
     parallel["per_rank"][0]["peak_rss_bytes"] = max(parallel["per_rank"][0]["peak_rss_bytes"], _peak_rss())
     result = SolveResult(method=method_name, problem=boundary_problem, solution=solution, kernel=kernel,

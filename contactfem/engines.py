@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 from collections.abc import Callable, Iterator
 from contextlib import closing, contextmanager, nullcontext
 from typing import Any
@@ -24,6 +23,7 @@ from typing import Any
 from contactfem.case import shortened
 from contactfem.errors import CaseError, SolverError
 from contactfem.estimate import MemoryLimit, memory_budget
+from contactfem.timings import clock
 
 #: Dask re-runs a task that raised this many times (a worker that dies is handled by the
 #: scheduler itself: it reschedules the task on another worker, up to
@@ -192,11 +192,11 @@ def open_engine(scheduler: str | None = None, workers: int | None = None,
         return
     import logging
 
-    clock = time.perf_counter()
+    started = clock()
     if scheduler is not None:
         client = _connect(distributed, scheduler)
         try:
-            yield DaskEngine(client, scheduler=scheduler, startup_seconds=time.perf_counter() - clock)
+            yield DaskEngine(client, scheduler=scheduler, startup_seconds=clock() - started)
         finally:
             client.close()
         return
@@ -214,7 +214,7 @@ def open_engine(scheduler: str | None = None, workers: int | None = None,
     try:
         client = distributed.Client(cluster, set_as_default=False)
         try:
-            yield DaskEngine(client, startup_seconds=time.perf_counter() - clock)
+            yield DaskEngine(client, startup_seconds=clock() - started)
         finally:
             client.close()
     finally:

@@ -6,7 +6,6 @@ case has an exact solution, and any extras (the estimator's figures). Nothing he
 from __future__ import annotations
 
 import platform
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Collection, Mapping
 
@@ -19,6 +18,7 @@ from contactfem.discretize.contact import contact_patches
 from contactfem.mesh.core import coordinate_span
 from contactfem.methods import get_method
 from contactfem.result import Solution
+from contactfem.timings import clock
 
 if TYPE_CHECKING:
     from contactfem.solve import PathResult, SolveResult
@@ -76,7 +76,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     extras = dict(extras or {})
     if "accuracy" not in extras:
         extras["accuracy"] = accuracy_section(case, result, adapted="estimator" in extras)
-    clock = time.perf_counter()
+    started = clock()
     problem, solution, kernel = result.problem, result.solution, result.kernel
     mesh = problem.mesh
     contact = solution.contact
@@ -150,7 +150,7 @@ def build_report(case: Case, result: "SolveResult", extras: Mapping | None = Non
     }
     accuracy_seconds = (extras["accuracy"] or {}).get("cost", {}).get("seconds")
     report["timings"] = {**result.timings, **({} if accuracy_seconds is None else {"accuracy": accuracy_seconds}),
-                         "report": time.perf_counter() - clock}
+                         "report": clock() - started}
     return report
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
-import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
@@ -48,6 +47,7 @@ from contactfem.sequencing import (
     starting_set,
     worth_sequencing,
 )
+from contactfem.timings import clock
 
 Progress = Callable[[str], None]
 
@@ -119,15 +119,15 @@ def prepare(
     say = progress or (lambda message: None)
     timings = {} if timings is None else timings
     refinements = (case.mesh if request is None else request.mesh).refine if refine is None else refine
-    clock = time.perf_counter()
+    started = clock()
     say("meshing")
     mesh = build_mesh(case, refine=refine, request=request)
-    timings["mesh"] = time.perf_counter() - clock
+    timings["mesh"] = clock() - started
     say(f"  {mesh.n_points} nodes, {mesh.n_triangles} triangles ({timings['mesh']:.2f} s)")
-    clock = time.perf_counter()
+    started = clock()
     say("assembling")
     problem = build_problem(case, mesh, refinements=refinements, request=request)
-    timings["assemble"] = time.perf_counter() - clock
+    timings["assemble"] = clock() - started
     say(f"  {problem.n_unknowns} unknowns, {len(problem.contact.nodes)} contact nodes ({timings['assemble']:.2f} s)")
     return problem
 
@@ -191,22 +191,22 @@ def solve_case(
         problem = prepare(case, refine=refine, progress=say, timings=timings)
     choice = choose_backend(problem.n_unknowns, case.solver.backend, memory_limit())
     backend = choice.name
-    clock = time.perf_counter()
+    started = clock()
     say(f"solving with method {contact_method.equation} ({method_name}), backend {backend}")
     if backend in ITERATIVE_BACKENDS:
         say(f"  {choice.reason}")
     linear: dict = {}
     reduced, kernel, sequencing = _contact_solve(case, problem, contact_method, backend, say, kept, accelerators,
                                                  linear)
-    timings["solve"] = time.perf_counter() - clock
+    timings["solve"] = clock() - started
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if kernel.status not in accepted:
         raise SolverError(f"{case.source.name}: method {method_name}: {kernel.message}")
 
-    clock = time.perf_counter()
+    started = clock()
     problem = reduced.settled(problem, kernel.displacement)  # a pushed obstacle at the advance found
     solution = _solution(method_name, problem, reduced.displacement(kernel.displacement), kernel)
-    timings["postprocess"] = time.perf_counter() - clock
+    timings["postprocess"] = clock() - started
     return SolveResult(method=method_name, problem=problem, solution=solution, kernel=kernel, backend=backend,
                        timings=timings, sequencing=sequencing, coarse_levels=kept, backend_reason=choice.reason,
                        linear=linear)
@@ -393,7 +393,7 @@ def solve_load_path(
     problem = prepare(case, refine=refine, progress=say, timings=timings)
     if keep_steps:
         _refuse_oversized_path(case, problem)
-    clock = time.perf_counter()
+    path_started = clock()
     say(f"solving {len(factors)} load steps with method {contact_method.equation} ({method_name}), "
         f"backend {backend}")
     reduced = problem.contact_system(contact_method)
@@ -422,25 +422,25 @@ def solve_load_path(
     # What the caller's on_step took (writing each step's files) is its own, not the solve's.
     postprocess = handed_over = 0.0
     last: KernelResult | None = None
-    started = clock
+    started = path_started
     for index, (factor, kernel) in enumerate(zip(factors, path.walk(factors))):
-        seconds = time.perf_counter() - started
+        seconds = clock() - started
         solved, factorizations, last = index + 1, factorizations + kernel.factorizations, kernel
         say(f"  step {index + 1}/{len(factors)}, factor {factor:.4g}: {int(kernel.active.sum())} active, "
             f"{kernel.iterations} Newton, {kernel.factorizations} factorisations, {seconds:.2f} s")
         scaled = reduced.settled(problem.scaled(factor), kernel.displacement)
-        post = time.perf_counter()
+        post = clock()
         solution = _solution(method_name, scaled, reduced.displacement(kernel.displacement), kernel, gradients)
         step = SolveResult(method=method_name, problem=scaled, solution=solution, kernel=kernel, backend=backend,
-                           timings={"solve": seconds, "postprocess": time.perf_counter() - post})
+                           timings={"solve": seconds, "postprocess": clock() - post})
         postprocess += step.timings["postprocess"]
         if on_step is not None:
-            handed = time.perf_counter()
+            handed = clock()
             on_step(index, factor, step)
-            handed_over += time.perf_counter() - handed
+            handed_over += clock() - handed
         steps = [*steps, step] if keep_steps else [step]
-        started = time.perf_counter()
-    seconds = time.perf_counter() - clock - handed_over
+        started = clock()
+    seconds = clock() - path_started - handed_over
     accepted = (Status.CONVERGED, Status.NOT_CERTIFIED) if accept_uncertified else (Status.CONVERGED,)
     if solved < len(factors) or last.status not in accepted:
         raise SolverError(f"{case.source.name}: method {method_name}: load step {solved} of {len(factors)} "
@@ -470,7 +470,7 @@ class CoarsePath:
         once a step of this level has failed (the finer path then extrapolates)."""
         if self.failed:
             return None
-        started = time.perf_counter()
+        started = clock()
         try:
             kernel = self.path.step(factor)
         except SolverError:
@@ -483,7 +483,7 @@ class CoarsePath:
             self.factorizations += kernel.factorizations
             fields = _contact_fields(self.problem, self.reduced.displacement(kernel.displacement), kernel)
             active = predict_active_set(self.fine.contact, fields, self.c, self.fine.law)
-        self.seconds += time.perf_counter() - started
+        self.seconds += clock() - started
         return active
 
     def record(self) -> dict:
@@ -499,7 +499,7 @@ def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: floa
     """The coarser levels of a load path on ``problem`` (its contact indicator weighted by
     ``c``), or None where a single solve would not sequence either: a small problem, no
     coarser mesh, a level that does not pay for itself, one the mesher refuses."""
-    started = time.perf_counter()
+    started = clock()
     coarse_problem = coarser_level(problem, lambda request, refine: prepare(case, refine=refine, request=request))
     if coarse_problem is None:
         return None
@@ -508,7 +508,7 @@ def _coarse_path(case: Case, problem: DiscreteProblem, c: float, tolerance: floa
     below = _coarse_path(case, coarse_problem, coarse_c, tolerance, max_iterations)
     path = PathSolver(reduced.system, backend=_serial_backend(case), c=coarse_c, tolerance=tolerance,
                       max_iterations=max_iterations, starts=None if below is None else PredictedStarts(below.predict))
-    return CoarsePath(problem, coarse_problem, reduced, path, c, below, time.perf_counter() - started)
+    return CoarsePath(problem, coarse_problem, reduced, path, c, below, clock() - started)
 
 
 #: The share of this machine's memory the steps of a load path kept whole may hold.

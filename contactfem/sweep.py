@@ -41,7 +41,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import time
 import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -87,6 +86,7 @@ from contactfem.sweep_table import (  # noqa: F401
     pareto_series,
     table_csv,
 )
+from contactfem.timings import clock
 
 SCHEMA_VERSION = 1
 #: The version of one stored point's JSON (points/<sha256>.json).
@@ -114,7 +114,7 @@ def solve_point(task: Mapping[str, Any]) -> dict:
     Runs wherever the engine sends it (a Dask worker or this process) and never raises for a
     refused case or a failed solve: those are records with a status and a one-line message.
     """
-    clock = time.perf_counter()
+    started = clock()
     record = {"schema_version": POINT_SCHEMA_VERSION, "contactfem_version": __version__,
               "digest": task["digest"], "case_text": task["text"]}
     with warnings.catch_warnings():
@@ -142,7 +142,7 @@ def solve_point(task: Mapping[str, Any]) -> dict:
         except MemoryError:
             record.update(failure("error", f"{Path(task['source']).name}: out of memory while solving this "
                                            "point; give each worker more memory or use a coarser mesh"))
-    record["seconds"] = {**record.get("seconds", {}), "total": time.perf_counter() - clock}
+    record["seconds"] = {**record.get("seconds", {}), "total": clock() - started}
     return _finite(record)
 
 
@@ -265,7 +265,7 @@ def run_sweep(
     storable one: see :data:`STORED_STATUSES`); ``progress(row, done, total)`` each
     finished row of the table, reused and invalid points first.
     """
-    clock = time.perf_counter()
+    started = clock()
     finished = dict(finished or {})
     records: dict[str, dict] = {}
     rows_of: dict[str, list[SweepPoint]] = {}
@@ -318,6 +318,6 @@ def run_sweep(
                    "startup_seconds": engine.startup_seconds},
         "counts": {"points": total, "solved": len(records), "reused": sum(row["reused"] for row in table_rows),
                    **counts},
-        "wall_seconds": time.perf_counter() - clock,
+        "wall_seconds": clock() - started,
         "points": table_rows,
     }

@@ -81,3 +81,15 @@ def test_the_solver_never_reads_the_clock(package):
     files = sorted(root.rglob("*.py")) if root.is_dir() else [PACKAGE / f"{package}.py"]
     reads = [read for path in files for read in _clock_reads(path)]
     assert reads == []
+
+
+#: The two modules that read the clock: the reported seconds and the progress lines' times.
+CLOCK_READERS = ("timings.py", "progress.py")
+
+
+def test_the_clock_is_read_only_for_reported_seconds_and_progress():
+    """Every other module of the package takes its seconds from contactfem.timings.clock, so
+    that a read of the clock is visible where it is made and nothing else depends on it."""
+    files = [path for path in sorted(PACKAGE.rglob("*.py")) if str(path.relative_to(PACKAGE)) not in CLOCK_READERS]
+    reads = [read for path in files for read in _clock_reads(path)]
+    assert reads == []

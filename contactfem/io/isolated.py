@@ -18,12 +18,12 @@ import pickle
 import select
 import signal
 import threading
-import time
 import warnings
 from collections.abc import Callable
 from typing import Any
 
 from contactfem.errors import ArchiveError
+from contactfem.timings import clock
 
 __all__ = ["can_isolate", "run_isolated"]
 
@@ -82,9 +82,9 @@ def run_isolated(work: Callable[[], Any], seconds: float, shown: str) -> Any:
     received = bytearray()
     status = None
     try:
-        deadline = time.monotonic() + seconds
+        deadline = clock() + seconds
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - clock()
             if left <= 0:
                 raise ArchiveError(f"{shown}: HDF5 did not finish reading it within {seconds:.3g} s; "
                                    "the file is damaged")

@@ -18,7 +18,6 @@ staging directory then goes, and the previous result stays.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -28,6 +27,7 @@ import numpy as np
 from contactfem.errors import OutputError
 from contactfem.io.atomic import atomic_write_text
 from contactfem.io.vtu import SOLUTION_PVTU
+from contactfem.timings import clock
 
 #: The formats a result in pieces can be written in.
 PIECE_FORMATS = ("vtu", "h5", "csv", "json")
@@ -65,7 +65,7 @@ def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: R
     """
     say = progress or (lambda message: None)
     rank, ranks = mpi.Get_rank(), mpi.Get_size()
-    clock = time.perf_counter()
+    started = clock()
     metadata = mpi.bcast(None if root is None else root.data.attributes, root=0)
     names: list[str] = []
     if "vtu" in formats:
@@ -83,7 +83,7 @@ def write_pieces(directory: Path, fields, formats: tuple[str, ...], mpi, root: R
     from contactfem.io.registry import CONTACT_CSV, REPORT_JSON, contact_table, to_json
 
     data = root.data
-    report = {**data.report, "timings": {**data.report.get("timings", {}), "write": time.perf_counter() - clock}}
+    report = {**data.report, "timings": {**data.report.get("timings", {}), "write": clock() - started}}
     if figures is not None:
         report["parallel"] = _merged(report["parallel"], figures)
 

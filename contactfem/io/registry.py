@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -25,6 +24,7 @@ from contactfem.io.table import csv_table
 from contactfem.io.vtu import COLLECTION_PVD, CONTACT_VTU, PIECE_VTU_PATTERN, SOLUTION_PVTU, SOLUTION_VTU, write_vtu
 from contactfem.io.xdmf import COMPANION_H5, XDMF_FILE, write_xdmf
 from contactfem.result import Solution
+from contactfem.timings import clock
 
 #: The report, a solve's only JSON file.
 REPORT_JSON = "report.json"
@@ -252,13 +252,13 @@ def write_result(data: ResultData, directory: Path, formats: tuple[str, ...],
     (the seconds of the other writers).
     """
     say = progress or (lambda message: None)
-    clock = time.perf_counter()
+    started = clock()
     written: list[Path] = []
     for name, format in FORMATS.items():
         if name in formats and name != "json":
             say(f"writing {name.upper()}")
             written += format.write(data, Path(directory))
-    report = {**data.report, "timings": {**data.report.get("timings", {}), "write": time.perf_counter() - clock}}
+    report = {**data.report, "timings": {**data.report.get("timings", {}), "write": clock() - started}}
     if "json" in formats:
         written += FORMATS["json"].write(ResultData(data.solution, report, data.case_text, data.attributes),
                                          Path(directory))
