@@ -230,14 +230,12 @@ def indenter_scene(seed: int) -> dict:
         obstacle["motion"] = {"direction": direction, "displacement": advance}
     elif mode == "force":
         obstacle["motion"] = {"direction": direction, "force": force}
-    else:  # overlapping the block from the start: an imposed indentation, nothing moves
-        for key in ("circle", "polyline", "profile"):
-            if key == "circle" and key in obstacle:
-                obstacle[key]["center"][1] -= advance
-            elif key == "polyline" and key in obstacle:
-                obstacle[key] = [[x, y - advance] for x, y in obstacle[key]]
-            elif key == "profile" and key in obstacle:
-                obstacle[key]["origin"][1] -= advance
+    elif "circle" in obstacle:  # placed overlapping the block: an imposed indentation
+        obstacle["circle"]["center"][1] -= advance
+    elif "polyline" in obstacle:
+        obstacle["polyline"] = [[x, y - advance] for x, y in obstacle["polyline"]]
+    else:
+        obstacle["profile"]["origin"][1] -= advance
     data["obstacle"] = obstacle
     if rng.random() < 0.15:
         data["load_path"] = {"steps": rng.randint(2, 6)}
